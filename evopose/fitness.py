@@ -1,0 +1,172 @@
+"""Fitness of candidate poses: eq. (1) per view, eq. (4) over views, and a robust variant.
+
+``paper``  — the paper's eq. (1): ``d = sum_i min_j |p_i - m_j(s)|`` over every model
+             point in front of the camera. Unbounded: one false image point far from
+             the target can move its global minimum.
+``robust`` — a bounded, two-sided version of the same distance: each image point
+             contributes ``min(min_j |p_i - m_j(s)|, tau)`` and each visible model point
+             ``min(min_i |m_j(s) - p_i|, tau)``; the two means are averaged (pixels).
+             False image points and missing marks then add a constant that does not
+             depend on the pose, and a grid shifted by one row pays for the unmatched
+             row in both directions. Visibility uses the model normals when given.
+
+Eq. (4): ``d = sum_k W_k d^(k)``; :func:`step_weights` is the paper's step-function rule.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from .kernels import chamfer_sums
+from .pose import rotation_from_euler
+from .problem import Model, PoseProblem, View
+
+FitnessKind = Literal["robust", "paper"]
+#: Bounds of the automatic truncation distance (pixels).
+TAU_MIN_PX, TAU_MAX_PX = 4.0, 30.0
+
+
+def auto_tau(points: np.ndarray) -> float:
+    """Truncation distance for a view: half the median nearest-neighbour spacing of its points, in pixels.
+
+    Half the spacing keeps a neighbouring feature from counting as a match (so a grid
+    shifted by one row is penalised) while tolerating pixel noise.
+    """
+    if len(points) < 2:
+        return 10.0
+    d, _ = cKDTree(points).query(points, k=2)
+    return float(np.clip(0.5 * np.median(d[:, 1]), TAU_MIN_PX, TAU_MAX_PX))
+
+
+@dataclass(frozen=True, eq=False)
+class ViewProjection:
+    """A population projected into one view.
+
+    Attributes
+    ----------
+    uv : array, shape (N, M, 2)
+    usable : bool array, shape (N, M)
+        In front of the camera and (with normals) facing it.
+    """
+
+    uv: np.ndarray
+    usable: np.ndarray
+
+
+def project_into_view(model: Model, view: View, poses: np.ndarray, use_normals: bool = True) -> ViewProjection:
+    """Project the model under every pose (N, 6) into ``view``."""
+    cam = view.camera
+    p_cam = cam.to_camera_frame(poses, model.points)
+    uv, usable = cam.project_camera_points(p_cam)
+    if use_normals and model.normals is not None:
+        R_cam_from_target = cam.camera_from_world[:3, :3] @ rotation_from_euler(np.atleast_2d(poses)[:, 3:])
+        n_cam = np.einsum("nij,mj->nmi", R_cam_from_target, model.normals)
+        usable &= np.einsum("nmi,nmi->nm", n_cam, p_cam) < 0.0
+    return ViewProjection(uv, usable)
+
+
+def view_term(proj: ViewProjection, points: np.ndarray, kind: FitnessKind, tau: float) -> np.ndarray:
+    """Distance term ``d^(k)`` of one view for every individual, shape (N,)."""
+    u = np.ascontiguousarray(proj.uv[..., 0])
+    v = np.ascontiguousarray(proj.uv[..., 1])
+    px = np.ascontiguousarray(points[:, 0])
+    py = np.ascontiguousarray(points[:, 1])
+    robust = kind == "robust"
+    img_sum, mod_sum, n_usable = chamfer_sums(u, v, proj.usable, px, py, float(tau), robust)
+    if not robust:
+        return img_sum  # eq. (1)
+    img_mean = img_sum / len(points)
+    mod_mean = np.where(n_usable > 0, mod_sum / np.maximum(n_usable, 1), tau)
+    return 0.5 * (img_mean + mod_mean)
+
+
+def step_weights(terms: np.ndarray, weights: np.ndarray, threshold: float | np.ndarray) -> np.ndarray:
+    """The paper's step-function rule for eq. (4): a view whose term exceeds ``threshold`` gets weight 0.
+
+    Parameters
+    ----------
+    terms : array, shape (V,)
+        Each view's distance term for the current best pose.
+    weights : array, shape (V,)
+        Base weights ``W_k``.
+    threshold : float or array (V,)
+
+    Returns
+    -------
+    array, shape (V,)
+        New weights; if every view would be dropped, the base weights are kept
+        (there is nothing better to trust).
+    """
+    keep = np.asarray(terms) <= threshold
+    if not np.any(keep & (np.asarray(weights) > 0)):
+        return np.asarray(weights, float).copy()
+    return np.where(keep, weights, 0.0)
+
+
+class PoseObjective:
+    """Eq. (4) over the problem's views for whole populations.
+
+    Parameters
+    ----------
+    problem : PoseProblem
+    kind : "robust" or "paper"
+    tau : float, optional
+        Truncation distance (pixels) for the robust kind; per view automatic when None.
+    """
+
+    def __init__(self, problem: PoseProblem, kind: FitnessKind = "robust", tau: float | None = None) -> None:
+        if kind not in ("robust", "paper"):
+            raise ValueError(f"fitness kind must be 'robust' or 'paper', got {kind!r}")
+        self.problem = problem
+        self.kind: FitnessKind = kind
+        self.taus = np.array([auto_tau(v.points) if tau is None else float(tau) for v in problem.views])
+        self.base_weights = np.array([v.weight for v in problem.views], float)
+        if not np.any(self.base_weights > 0):
+            raise ValueError("at least one view needs a weight > 0")
+        self.weights = self.base_weights.copy()
+        self.evaluations = 0
+
+    @property
+    def n_views(self) -> int:
+        return len(self.problem.views)
+
+    def project(self, k: int, poses: np.ndarray) -> ViewProjection:
+        return project_into_view(self.problem.model, self.problem.views[k], poses,
+                                 use_normals=self.kind == "robust")
+
+    def view_terms(self, poses: np.ndarray, only_weighted: bool = False) -> np.ndarray:
+        """Every view's term ``d^(k)`` for every pose, shape (N, V).
+
+        With ``only_weighted`` views of weight 0 are skipped (their column is 0).
+        """
+        poses = np.atleast_2d(poses)
+        out = np.zeros((len(poses), self.n_views))
+        for k, view in enumerate(self.problem.views):
+            if only_weighted and self.weights[k] == 0:
+                continue
+            out[:, k] = view_term(self.project(k, poses), view.points, self.kind, self.taus[k])
+        self.evaluations += len(poses)
+        return out
+
+    def __call__(self, poses: np.ndarray) -> np.ndarray:
+        """Eq. (4) ``sum_k W_k d^(k)`` with the current weights, shape (N, 6) -> (N,)."""
+        return self.view_terms(poses, only_weighted=True) @ self.weights
+
+    def normalised(self, terms: np.ndarray) -> np.ndarray:
+        """Terms divided by each view's truncation distance (robust kind), shape (..., V)."""
+        return terms / self.taus
+
+    def apply_step_rule(self, best_pose: np.ndarray, threshold: float) -> np.ndarray:
+        """Update the view weights with :func:`step_weights` at ``best_pose``.
+
+        For the robust kind ``threshold`` is a fraction of each view's ``tau``; for the
+        paper's kind it is in pixels. Returns the new weights, shape (V,).
+        """
+        terms = self.view_terms(best_pose[None], only_weighted=False)[0]
+        limit = threshold * self.taus if self.kind == "robust" else threshold
+        self.weights = step_weights(terms, self.base_weights, limit)
+        return self.weights

@@ -1,0 +1,222 @@
+"""The pose problem: a model, one or more views (eq. 4), the search box and the constraints (eq. 3), hints."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .camera import Camera
+from .pose import ANGLE_PARAMS, PARAM_NAMES, wrap_angle
+
+TWO_PI = 2 * np.pi
+
+
+@dataclass(frozen=True, eq=False)
+class Model:
+    """A target's feature points in the target frame.
+
+    Attributes
+    ----------
+    points : array, shape (M, 3)
+        Metres.
+    normals : array, shape (M, 3), optional
+        Outward surface normals; when given, a point is visible only from the side its normal faces.
+    """
+
+    points: np.ndarray
+    normals: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        pts = np.asarray(self.points, dtype=float)
+        if pts.ndim != 2 or pts.shape[1] != 3 or len(pts) == 0:
+            raise ValueError(f"model.points must have shape (M, 3) with M >= 1, got {pts.shape}")
+        if not np.all(np.isfinite(pts)):
+            raise ValueError("model.points must be finite")
+        object.__setattr__(self, "points", pts)
+        if self.normals is not None:
+            n = np.asarray(self.normals, dtype=float)
+            if n.shape != pts.shape or not np.all(np.isfinite(n)):
+                raise ValueError(f"model.normals must have shape {pts.shape}, got {n.shape}")
+            norm = np.linalg.norm(n, axis=1, keepdims=True)
+            if np.any(norm < 1e-12):
+                raise ValueError("model.normals must be non-zero vectors")
+            object.__setattr__(self, "normals", n / norm)
+
+    @property
+    def radius(self) -> float:
+        """Largest distance of a point from the centroid (metres)."""
+        c = self.points.mean(axis=0)
+        return float(np.max(np.linalg.norm(self.points - c, axis=1))) or 1e-3
+
+
+@dataclass(frozen=True, eq=False)
+class View:
+    """One camera's image feature points (unordered) and its weight in eq. (4).
+
+    Attributes
+    ----------
+    camera : Camera
+    points : array, shape (P, 2)
+        Pixels.
+    weight : float
+        ``W_k`` of eq. (4).
+    """
+
+    camera: Camera
+    points: np.ndarray
+    weight: float = 1.0
+
+    def __post_init__(self) -> None:
+        pts = np.asarray(self.points, dtype=float)
+        if pts.ndim != 2 or pts.shape[1] != 2 or len(pts) == 0:
+            raise ValueError(f"view points must have shape (P, 2) with P >= 1, got {pts.shape}")
+        if not np.all(np.isfinite(pts)):
+            raise ValueError("view points must be finite")
+        if not np.isfinite(self.weight) or self.weight < 0:
+            raise ValueError(f"view weight must be a finite number >= 0, got {self.weight}")
+        object.__setattr__(self, "points", pts)
+
+
+@dataclass(frozen=True, eq=False)
+class Bounds:
+    """Box of admissible poses ``lo <= s <= hi``, shape (6,) each.
+
+    An angle whose range spans a full turn is periodic (wrapped, not clipped).
+    A parameter with ``lo == hi`` is fixed (eq. 3 with full reliability).
+    """
+
+    lo: np.ndarray
+    hi: np.ndarray
+
+    def __post_init__(self) -> None:
+        lo = np.asarray(self.lo, dtype=float).reshape(-1)
+        hi = np.asarray(self.hi, dtype=float).reshape(-1)
+        if lo.shape != (6,) or hi.shape != (6,):
+            raise ValueError(f"bounds need 6 values each, got {lo.shape} and {hi.shape}")
+        if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))):
+            raise ValueError("bounds must be finite")
+        bad = np.nonzero(lo > hi)[0]
+        if len(bad):
+            i = int(bad[0])
+            raise ValueError(f"bounds of {PARAM_NAMES[i]}: lo {lo[i]} > hi {hi[i]}")
+        object.__setattr__(self, "lo", lo)
+        object.__setattr__(self, "hi", hi)
+
+    @classmethod
+    def from_dict(cls, ranges: dict[str, tuple[float, float]]) -> "Bounds":
+        """Bounds from ``{"x": (lo, hi), ...}``; x, y, z are required, missing angles span a full turn."""
+        missing = [n for n in PARAM_NAMES[:3] if n not in ranges]
+        if missing:
+            raise ValueError(f"search range missing for {', '.join(missing)}")
+        lo = np.array([-np.pi] * 6)
+        hi = np.array([np.pi] * 6)
+        for name, (a, b) in ranges.items():
+            if name not in PARAM_NAMES:
+                raise ValueError(f"unknown pose parameter {name!r}; expected one of {', '.join(PARAM_NAMES)}")
+            i = PARAM_NAMES.index(name)
+            lo[i], hi[i] = a, b
+        return cls(lo, hi)
+
+    @property
+    def periodic(self) -> np.ndarray:
+        """Bool mask (6,): angles searched over a full turn."""
+        mask = np.zeros(6, bool)
+        idx = list(ANGLE_PARAMS)
+        mask[idx] = (self.hi[idx] - self.lo[idx]) >= TWO_PI - 1e-9
+        return mask
+
+    @property
+    def free(self) -> np.ndarray:
+        """Bool mask (6,): parameters the search may change."""
+        return self.hi > self.lo
+
+    @property
+    def width(self) -> np.ndarray:
+        return self.hi - self.lo
+
+    def constrained(self, name: str, value: float, tolerance: float) -> "Bounds":
+        """Eq. (3): hold parameter ``name`` within ``[value - tolerance, value + tolerance]``.
+
+        The result is the intersection with the search box; angles are compared modulo a full turn.
+        """
+        if tolerance < 0 or not np.isfinite(tolerance) or not np.isfinite(value):
+            raise ValueError(f"constraint on {name}: tolerance must be finite and >= 0, value finite")
+        i = PARAM_NAMES.index(name)
+        lo, hi = self.lo.copy(), self.hi.copy()
+        c_lo, c_hi = value - tolerance, value + tolerance
+        if i in ANGLE_PARAMS:
+            if self.periodic[i]:
+                lo[i], hi[i] = c_lo, c_hi
+                return Bounds(lo, hi)
+            # shift the constraint by whole turns to overlap the box
+            shift = TWO_PI * np.round(((lo[i] + hi[i]) / 2 - value) / TWO_PI)
+            c_lo, c_hi = c_lo + shift, c_hi + shift
+        new_lo, new_hi = max(lo[i], c_lo), min(hi[i], c_hi)
+        if new_lo > new_hi:
+            raise ValueError(f"constraint on {name} ({value} +- {tolerance}) lies outside its search range "
+                             f"[{self.lo[i]}, {self.hi[i]}]")
+        lo[i], hi[i] = new_lo, new_hi
+        return Bounds(lo, hi)
+
+    def project(self, s: np.ndarray) -> np.ndarray:
+        """Bring poses into the box: wrap periodic angles, clip the rest. Shape (..., 6)."""
+        s = np.array(s, dtype=float, copy=True)
+        per = self.periodic
+        s[..., per] = self.lo[per] + (s[..., per] - self.lo[per]) % TWO_PI
+        keep = ~per
+        s[..., keep] = np.clip(s[..., keep], self.lo[keep], self.hi[keep])
+        return s
+
+    def contains(self, s: np.ndarray, atol: float = 1e-9) -> np.ndarray:
+        """Whether poses (..., 6) lie in the box (periodic angles always do)."""
+        s = np.asarray(s, float)
+        inside = (s >= self.lo - atol) & (s <= self.hi + atol)
+        inside[..., self.periodic] = True
+        return np.all(inside, axis=-1)
+
+    def uniform(self, n: int, rng: np.random.Generator) -> np.ndarray:
+        """``n`` poses uniform in the box, shape (n, 6)."""
+        return self.lo + rng.random((n, 6)) * self.width
+
+
+@dataclass(frozen=True, eq=False)
+class PoseProblem:
+    """Everything the search needs.
+
+    Attributes
+    ----------
+    model : Model
+    views : tuple of View
+        One or more cameras (eq. 4).
+    bounds : Bounds
+        Search box with the eq. (3) constraints already applied.
+    hints : array, shape (H, 6)
+        External full poses (hint individuals); may be empty.
+    """
+
+    model: Model
+    views: tuple[View, ...]
+    bounds: Bounds
+    hints: np.ndarray = field(default_factory=lambda: np.zeros((0, 6)))
+
+    def __post_init__(self) -> None:
+        views = tuple(self.views)
+        if not views:
+            raise ValueError("a pose problem needs at least one view")
+        object.__setattr__(self, "views", views)
+        h = np.asarray(self.hints, dtype=float).reshape(-1, 6) if np.size(self.hints) else np.zeros((0, 6))
+        if not np.all(np.isfinite(h)):
+            raise ValueError("hints must be finite")
+        object.__setattr__(self, "hints", h)
+
+    def with_views(self, views) -> "PoseProblem":
+        return PoseProblem(self.model, tuple(views), self.bounds, self.hints)
+
+    def with_hints(self, hints: np.ndarray) -> "PoseProblem":
+        return PoseProblem(self.model, self.views, self.bounds, hints)
+
+
+def angle_difference(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Signed difference ``a - b`` of angles, wrapped to [-pi, pi)."""
+    return wrap_angle(np.asarray(a) - np.asarray(b))

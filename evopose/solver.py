@@ -1,0 +1,136 @@
+"""Driving the search: :func:`solve` a pose problem from scratch, :func:`track` a sequence (eq. 2)."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from .fitness import PoseObjective
+from .problem import PoseProblem, View
+from .refine import refine
+from .search import GOOD_REASONS, EvoPose, EvoPoseState, SearchOptions, Solution
+
+#: Generation after which the step-function weight rule of eq. (4) is first applied.
+STEP_RULE_FROM_GENERATION = 2
+
+
+def _rng(seed: int | np.random.Generator | None) -> np.random.Generator:
+    return seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)
+
+
+def run(problem: PoseProblem, options: SearchOptions, rng: np.random.Generator,
+        initial: np.ndarray | None = None, hint_source=None, on_generation=None) -> tuple[Solution, EvoPoseState]:
+    """The generation loop: ask -> refine -> evaluate (eq. 4) -> tell, until a stop reason.
+
+    Parameters
+    ----------
+    hint_source : callable () -> array (H, 6) or None, optional
+        Polled once per generation for hints that arrived meanwhile (agents pass their inbox).
+    on_generation : callable (EvoPoseState) -> None, optional
+        Called after every generation (progress, Fig. 6 curves).
+    """
+    t0 = time.perf_counter()
+    objective = PoseObjective(problem, options.fitness, options.tau)
+    evo = EvoPose(problem, options, rng)
+    state = evo.start(initial)
+    reason = None
+    while reason is None:
+        if hint_source is not None:
+            new = hint_source()
+            if new is not None and np.size(new):
+                evo.inject(state, new)
+        candidates, origins = evo.ask(state)
+        fitness = objective(candidates)
+        if options.refine_steps:
+            candidates, fitness = refine(objective, candidates, fitness, steps=options.refine_steps)
+        evo.tell(state, candidates, fitness, origins)
+        if (options.view_reject is not None and objective.n_views > 1
+                and state.generation >= STEP_RULE_FROM_GENERATION):
+            old = objective.weights.copy()
+            new_w = objective.apply_step_rule(state.best_pose, options.view_reject)
+            if not np.array_equal(old, new_w):  # eq. (4) changed: fitness values must be recomputed
+                state.fitness = objective(state.population)
+                state.best_supporters = set()
+        if on_generation is not None:
+            on_generation(state)
+        reason = evo.stop_reason(state, objective.evaluations, time.perf_counter() - t0)
+    best = state.best_pose
+    terms = objective.view_terms(best[None])[0]
+    solution = Solution(
+        pose=best, fitness=state.best_fitness, view_terms=terms, view_weights=objective.weights.copy(),
+        generations=state.generation, evaluations=objective.evaluations,
+        seconds=time.perf_counter() - t0, converged=reason in GOOD_REASONS, stop_reason=reason,
+        history=list(state.history), from_hint=state.best_from_hint, problem=problem, options=options)
+    return solution, state
+
+
+def solve(problem: PoseProblem, options: SearchOptions | None = None,
+          seed: int | np.random.Generator | None = None, **kwargs) -> Solution:
+    """Find the pose of the model in the views (EvoPose, eq. 1-4).
+
+    Parameters
+    ----------
+    problem : PoseProblem
+    options : SearchOptions, optional
+    seed : int or numpy Generator, optional
+        The same seed reproduces the same result exactly.
+    **kwargs
+        Passed to :func:`run` (``hint_source``, ``on_generation``, ``initial``).
+    """
+    return run(problem, options or SearchOptions(), _rng(seed), **kwargs)[0]
+
+
+def match_quality(problem: PoseProblem, pose: np.ndarray, options: SearchOptions | None = None) -> float:
+    """Mean normalised view term at ``pose``: 0 is a perfect match, 1 is no match (robust fitness)."""
+    options = options or SearchOptions()
+    objective = PoseObjective(problem, "robust", options.tau)
+    terms = objective.view_terms(np.atleast_2d(pose))[0]
+    w = objective.base_weights
+    return float(np.sum(w * terms / objective.taus) / np.sum(w))
+
+
+def track(previous: Solution, new_views: list[View] | tuple[View, ...], *, problem: PoseProblem | None = None,
+          options: SearchOptions | None = None, seed: int | np.random.Generator | None = None,
+          lost_quality: float = 0.5, steps: int = 5, hints: np.ndarray | None = None) -> Solution:
+    """Warm-started pose for the next frame (eq. 2): refine the previous pose on the new views.
+
+    The previous pose is refined locally; if the match is then lost (normalised
+    robust term above ``lost_quality``), the search re-initialises from scratch with
+    the previous pose as a hint.
+
+    Parameters
+    ----------
+    previous : Solution
+        The last frame's solution (carries its problem and options).
+    new_views : sequence of View
+        This frame's image points.
+    problem : PoseProblem, optional
+        Replaces the previous problem (e.g. new bounds); its views are replaced by ``new_views``.
+    hints : array (H, 6), optional
+        Team-mates' poses; the better of previous pose and hints seeds the refinement.
+    """
+    t0 = time.perf_counter()
+    base = problem or previous.problem
+    if base is None:
+        raise ValueError("track needs the previous solution's problem or an explicit problem")
+    options = options or previous.options or SearchOptions()
+    prob = base.with_views(new_views)
+    objective = PoseObjective(prob, options.fitness, options.tau)
+    starts = np.atleast_2d(previous.pose)
+    if hints is not None and np.size(hints):
+        starts = np.concatenate([starts, np.atleast_2d(hints)])
+    fit0 = objective(starts)
+    pose, fit = refine(objective, starts, fit0, steps=steps, gate_schedule=(2.0, 1.0))
+    i = int(np.argmin(fit))
+    terms = objective.view_terms(pose[i][None])[0]
+    quality = float(np.sum(objective.base_weights * terms / objective.taus) / np.sum(objective.base_weights))
+    if options.fitness == "robust" and quality <= lost_quality:
+        return Solution(pose=pose[i], fitness=float(fit[i]), view_terms=terms,
+                        view_weights=objective.weights.copy(), generations=0,
+                        evaluations=objective.evaluations, seconds=time.perf_counter() - t0, converged=True,
+                        stop_reason="tracked", history=[float(fit[i])], from_hint=i > 0,
+                        problem=prob, options=options)
+    lost = prob.with_hints(np.concatenate([prob.hints, starts]))
+    sol = solve(lost, options, seed)
+    return sol.with_(reinitialised=True, seconds=time.perf_counter() - t0)
