@@ -103,7 +103,7 @@ class Camera:
         """
         camera_from_target = self.camera_from_world @ matrix_from_pose(np.atleast_2d(poses))
         R, t = camera_from_target[:, :3, :3], camera_from_target[:, :3, 3]
-        return np.einsum("nij,mj->nmi", R, points_target) + t[:, None, :]
+        return np.matmul(points_target, np.swapaxes(R, 1, 2)) + t[:, None, :]
 
     def project_camera_points(self, p_cam: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Project points given in the optical frame.

@@ -42,6 +42,12 @@ def auto_tau(points: np.ndarray) -> float:
     return float(np.clip(0.5 * np.median(d[:, 1]), TAU_MIN_PX, TAU_MAX_PX))
 
 
+def image_spread(points: np.ndarray) -> float:
+    """Robust size of a point set: median distance to its median centre (pixels, at least 1)."""
+    centre = np.median(points, axis=0)
+    return max(float(np.median(np.linalg.norm(points - centre, axis=1))), 1.0)
+
+
 @dataclass(frozen=True, eq=False)
 class ViewProjection:
     """A population projected into one view.
@@ -64,8 +70,8 @@ def project_into_view(model: Model, view: View, poses: np.ndarray, use_normals: 
     uv, usable = cam.project_camera_points(p_cam)
     if use_normals and model.normals is not None:
         R_cam_from_target = cam.camera_from_world[:3, :3] @ rotation_from_euler(np.atleast_2d(poses)[:, 3:])
-        n_cam = np.einsum("nij,mj->nmi", R_cam_from_target, model.normals)
-        usable &= np.einsum("nmi,nmi->nm", n_cam, p_cam) < 0.0
+        n_cam = np.matmul(model.normals, np.swapaxes(R_cam_from_target, 1, 2))  # (N, M, 3)
+        usable &= np.sum(n_cam * p_cam, axis=-1) < 0.0
     return ViewProjection(uv, usable)
 
 
@@ -116,14 +122,18 @@ class PoseObjective:
     kind : "robust" or "paper"
     tau : float, optional
         Truncation distance (pixels) for the robust kind; per view automatic when None.
+    tau_scale : float
+        Multiplies tau (a wider tau gives a smoother landscape for screening random starts).
     """
 
-    def __init__(self, problem: PoseProblem, kind: FitnessKind = "robust", tau: float | None = None) -> None:
+    def __init__(self, problem: PoseProblem, kind: FitnessKind = "robust", tau: float | None = None,
+                 tau_scale: float = 1.0) -> None:
         if kind not in ("robust", "paper"):
             raise ValueError(f"fitness kind must be 'robust' or 'paper', got {kind!r}")
         self.problem = problem
         self.kind: FitnessKind = kind
-        self.taus = np.array([auto_tau(v.points) if tau is None else float(tau) for v in problem.views])
+        self.taus = tau_scale * np.array([auto_tau(v.points) if tau is None else float(tau) for v in problem.views])
+        self.spreads = np.array([image_spread(v.points) for v in problem.views])
         self.base_weights = np.array([v.weight for v in problem.views], float)
         if not np.any(self.base_weights > 0):
             raise ValueError("at least one view needs a weight > 0")

@@ -49,12 +49,60 @@ def view_centroid_guess(problem: PoseProblem, view: View, n: int, rng: np.random
     return p_cam @ cam.world_from_camera[:3, :3].T + cam.world_from_camera[:3, 3]
 
 
-def initial_poses(problem: PoseProblem, n: int, rng: np.random.Generator, guided_fraction: float = 0.8,
+def align_to_view(problem: PoseProblem, view: View, poses: np.ndarray, rng: np.random.Generator,
+                  scale_jitter: float = 0.15, shift_jitter: float = 0.1, iterations: int = 2) -> np.ndarray:
+    """Move each pose's position so its projection covers the view's points (attitude kept).
+
+    For every individual the visible projected model is shifted onto the robust centre
+    of the image points and scaled (through depth) to their robust spread: a
+    weak-perspective moment match, jittered for diversity. Shapes (n, 6) -> (n, 6).
+    """
+    from .fitness import project_into_view  # local: fitness imports init's siblings only
+
+    cam = view.camera
+    pts = view.points
+    centre_img = np.median(pts, axis=0)
+    spread_img = max(float(np.median(np.linalg.norm(pts - centre_img, axis=1))), 1.0)
+    n = len(poses)
+    target_centre = centre_img + rng.standard_normal((n, 2)) * shift_jitter * spread_img
+    target_spread = spread_img * np.exp(scale_jitter * rng.standard_normal(n))
+    centroid_target = problem.model.points.mean(axis=0)
+    R = rotation_from_euler(poses[:, 3:])
+    poses = poses.copy()
+    for _ in range(iterations):
+        proj = project_into_view(problem.model, view, poses)
+        u = np.where(proj.usable, proj.uv[..., 0], np.nan)
+        v = np.where(proj.usable, proj.uv[..., 1], np.nan)
+        ok = proj.usable.sum(axis=1) >= 2
+        if not np.any(ok):
+            break
+        with np.errstate(all="ignore"):
+            cu, cv = np.nanmedian(u, axis=1), np.nanmedian(v, axis=1)
+            spread = np.nanmedian(np.hypot(u - cu[:, None], v - cv[:, None]), axis=1)
+        ok &= np.isfinite(spread) & (spread > 0.5)
+        c_world = poses[:, :3] + R @ centroid_target
+        c_cam = c_world @ cam.camera_from_world[:3, :3].T + cam.camera_from_world[:3, 3]
+        ok &= c_cam[:, 2] > 0
+        z = np.where(ok, c_cam[:, 2], 1.0)
+        u_c = cam.fx * c_cam[:, 0] / z + cam.cx
+        v_c = cam.fy * c_cam[:, 1] / z + cam.cy
+        new_u = target_centre[:, 0] + (u_c - cu)
+        new_v = target_centre[:, 1] + (v_c - cv)
+        new_z = z * spread / target_spread
+        new_cam = np.stack([(new_u - cam.cx) / cam.fx * new_z, (new_v - cam.cy) / cam.fy * new_z, new_z], axis=1)
+        new_world = new_cam @ cam.world_from_camera[:3, :3].T + cam.world_from_camera[:3, 3]
+        new_t = new_world - R @ centroid_target
+        poses[ok, :3] = new_t[ok]
+    return poses
+
+
+def initial_poses(problem: PoseProblem, n: int, rng: np.random.Generator, guided_fraction: float = 0.9,
                   view_weights: np.ndarray | None = None) -> np.ndarray:
     """``n`` starting poses inside the search box, shape (n, 6).
 
-    A fraction ``guided_fraction`` places the model centroid where a view suggests
-    (views drawn in proportion to their weights); the rest is uniform in the box.
+    A fraction ``guided_fraction`` places the model where a view suggests (views
+    drawn in proportion to their weights): a centroid guess, then a moment match of
+    the projected model to the image points; the rest is uniform in the box.
     """
     bounds = problem.bounds
     poses = bounds.uniform(n, rng)
@@ -68,6 +116,8 @@ def initial_poses(problem: PoseProblem, n: int, rng: np.random.Generator, guided
         R = rotation_from_euler(poses[:n_guided, 3:])
         for k in np.unique(which):
             sel = np.nonzero(which == k)[0]
-            c_world = view_centroid_guess(problem, problem.views[k], len(sel), rng)
+            view = problem.views[k]
+            c_world = view_centroid_guess(problem, view, len(sel), rng)
             poses[sel, :3] = c_world - R[sel] @ centroid_target
+            poses[sel] = align_to_view(problem, view, poses[sel], rng)
     return bounds.project(poses)

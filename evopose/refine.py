@@ -1,72 +1,102 @@
-"""Local refinement of candidate poses: Levenberg–Marquardt on nearest-neighbour matches (an ICP step).
+"""Local refinement of candidate poses: annealed soft matching (EM-ICP) then hard matching (ICP).
 
-Each step matches every image point to its nearest projected model point and every
-visible model point to its nearest image point (the two directions of the robust
-fitness), keeps the pairs closer than a gate, and takes one damped Gauss–Newton step
-on their squared reprojection residuals, for the whole population at once. The gate
-shrinks from a few ``tau`` to ``tau`` so that a start some way off is pulled in and the
-last steps see only inliers. Fixed parameters (eq. 3 with zero tolerance) do not move
-and every step is projected back into the search box, so eq. (3) holds throughout.
-A step that worsens an individual's fitness is rejected (and its damping raised).
+Each step linearises the projection (finite-difference Jacobian, whole population at once)
+and takes one damped Gauss–Newton step on reprojection residuals between projected model
+points and image points:
+
+* ``soft`` steps weigh every pair by ``exp(-d^2 / 2 sigma^2)``, normalised per image
+  point and per model point with an outlier slack (EM-ICP, in the spirit of SoftPOSIT).
+  ``sigma`` shrinks from about the feature spacing to a fraction of it, which widens the
+  basin of attraction far beyond that of nearest-neighbour matching;
+* ``hard`` steps match nearest neighbours in both directions (the two terms of the
+  robust fitness) within a gate and only accept steps that lower the fitness.
+
+Fixed parameters (eq. 3 with zero tolerance) never move, and every step is projected
+back into the search box, so eq. (3) holds throughout. The result is never worse than
+the input (per individual, by the objective's fitness).
 """
 
 from __future__ import annotations
 
+from typing import Sequence
+
 import numpy as np
 
 from .fitness import PoseObjective, project_into_view
-from .kernels import chamfer_matches
+from .kernels import accumulate_normal_equations, accumulate_soft_normal_equations
 
 #: Finite-difference steps for the Jacobian: metres for x, y, z; radians for the angles.
 FD_STEP = np.array([1e-5, 1e-5, 1e-5, 1e-6, 1e-6, 1e-6])
-#: Gate (in units of each view's tau) at successive steps; the last value repeats.
-GATE_SCHEDULE = (3.0, 2.0, 1.0)
+#: Outlier slack of the soft matching: a pair at 2.5 sigma weighs as much as "no match".
+SOFT_OUTLIER = float(np.exp(-0.5 * 2.5**2))
+#: Soft kernel width at the start of annealing, as a fraction of the view's image spread,
+#: and at its end, as a fraction of tau.
+SIGMA_START, SIGMA_END = 0.5, 0.5
 
 
-def _normal_equations(objective: PoseObjective, poses: np.ndarray, gate_scale: float):
-    """Accumulate ``H = sum w J^T J`` (N, 6, 6) and ``g = sum w J^T r`` (N, 6) over the weighted views."""
+SOFT_CFG = {"normals": True, "img": 0.5, "mod": 0.5}
+
+
+def _normal_equations(objective: PoseObjective, poses: np.ndarray, kind: str, scale: float):
+    """``H = sum w J^T J`` (N, 6, 6) and ``g = sum w J^T r`` (N, 6) over the weighted views."""
     N = len(poses)
     free = objective.problem.bounds.free
     H = np.zeros((N, 6, 6))
     g = np.zeros((N, 6))
-    perturbed = np.concatenate([poses] + [poses + FD_STEP[d] * np.eye(6)[d] for d in range(6)])
+    eye = np.eye(6)
+    perturbed = np.concatenate([poses] + [poses + FD_STEP[d] * eye[d] for d in range(6)])
     model = objective.problem.model
     for k, view in enumerate(objective.problem.views):
         w_view = objective.weights[k]
         if w_view == 0:
             continue
-        proj = project_into_view(model, view, perturbed, use_normals=objective.kind == "robust")
+        proj = project_into_view(model, view, perturbed, use_normals=objective.kind == "robust" and SOFT_CFG["normals"] if kind=="soft" else objective.kind == "robust")
         uv_all = proj.uv.reshape(7, N, -1, 2)
         uv, usable = uv_all[0], proj.usable[:N]
         J = np.stack([(uv_all[1 + d] - uv) / FD_STEP[d] for d in range(6)], axis=-1)  # (N, M, 2, 6)
         J[..., ~free] = 0.0
-        pts = view.points
-        img_nn, img_d2, mod_nn, mod_d2 = chamfer_matches(
-            np.ascontiguousarray(uv[..., 0]), np.ascontiguousarray(uv[..., 1]), usable,
-            np.ascontiguousarray(pts[:, 0]), np.ascontiguousarray(pts[:, 1]))
-        gate2 = (gate_scale * objective.taus[k]) ** 2
-        rows = np.arange(N)[:, None]
-        # image -> model pairs (eq. 1 direction)
-        ok_a = (img_nn >= 0) & (img_d2 < gate2)
-        j_a = np.maximum(img_nn, 0)
-        r_a = uv[rows, j_a] - pts[None]                           # (N, P, 2)
-        J_a = J[rows, j_a]                                         # (N, P, 2, 6)
-        w_a = ok_a * (w_view * 0.5 / len(pts))
-        # model -> image pairs
-        ok_b = usable & (mod_nn >= 0) & (mod_d2 < gate2)
-        r_b = uv - pts[np.maximum(mod_nn, 0)]                      # (N, M, 2)
-        n_usable = np.maximum(usable.sum(axis=1, keepdims=True), 1)
-        w_b = ok_b * (w_view * 0.5 / n_usable)
-        for w, Jp, r in ((w_a, J_a, r_a), (w_b, J, r_b)):
-            H += np.einsum("np,npci,npcj->nij", w, Jp, Jp)
-            g += np.einsum("np,npci,npc->ni", w, Jp, r)
+        px = np.ascontiguousarray(view.points[:, 0])
+        py = np.ascontiguousarray(view.points[:, 1])
+        tau = float(objective.taus[k])
+        if kind == "soft":
+            sigma = soft_sigma(objective.spreads[k], tau, scale)
+            accumulate_soft_normal_equations(np.ascontiguousarray(uv), J, usable, px, py, sigma,
+                                             SOFT_OUTLIER, SOFT_CFG["img"]*float(w_view), SOFT_CFG["mod"]*float(w_view), H, g)
+        else:
+            accumulate_normal_equations(np.ascontiguousarray(uv), J, usable, px, py, (scale * tau) ** 2,
+                                        float(w_view), H, g)
     return H, g
 
 
+def soft_sigma(spread: float, tau: float, t: float) -> float:
+    """Kernel width at annealing time ``t`` in [0, 1]: geometric from half the view's spread to tau / 2."""
+    start = max(SIGMA_START * spread, SIGMA_END * tau)
+    return float(start * (SIGMA_END * tau / start) ** t)
+
+
+def annealing(steps: int, hard: int = 2) -> tuple[tuple[str, float], ...]:
+    """A schedule of ``steps`` soft steps from wide to narrow, then ``hard`` polishing steps."""
+    return tuple(("soft", float(t)) for t in np.linspace(0.0, 1.0, steps)) + (("hard", 1.0),) * hard
+
+
+def _damped_step(H: np.ndarray, g: np.ndarray, lam: np.ndarray, free: np.ndarray) -> np.ndarray:
+    """Levenberg–Marquardt step ``-(H + lam diag(H))^-1 g`` with fixed parameters held, (N, 6)."""
+    diag = np.einsum("nii->ni", H)
+    A = H + (lam[:, None] * diag + 1e-12)[:, :, None] * np.eye(6)
+    A[:, ~free, :] = 0.0
+    A[:, :, ~free] = 0.0
+    A[:, ~free, ~free] = 1.0
+    g = np.where(free, g, 0.0)
+    try:
+        return -np.linalg.solve(A, g[..., None])[..., 0]
+    except np.linalg.LinAlgError:  # a degenerate individual: fall back to the pseudo-inverse
+        return -np.einsum("nij,nj->ni", np.linalg.pinv(A), g)
+
+
 def refine(objective: PoseObjective, poses: np.ndarray, fitness: np.ndarray | None = None,
-           steps: int = 4, gate_schedule: tuple[float, ...] = GATE_SCHEDULE,
+           schedule: Sequence[tuple[str, float]] | None = None,
            damping: float = 1e-3) -> tuple[np.ndarray, np.ndarray]:
-    """Improve poses by damped Gauss–Newton steps on nearest-neighbour matches.
+    """Improve poses by annealed soft then hard matching.
 
     Parameters
     ----------
@@ -74,9 +104,9 @@ def refine(objective: PoseObjective, poses: np.ndarray, fitness: np.ndarray | No
     poses : array, shape (N, 6)
     fitness : array, shape (N,), optional
         Current eq. (4) fitness of ``poses`` (computed when absent).
-    steps : int
-    gate_schedule : tuple of float
-        Gate in units of tau per step; the last value repeats.
+    schedule : sequence of (kind, scale)
+        ``("soft", t)``: EM-ICP step with the kernel width at annealing time ``t`` (:func:`soft_sigma`);
+        ``("hard", s)``: nearest-neighbour step with gate ``s * tau``, accepted only if the fitness drops.
     damping : float
         Initial Levenberg–Marquardt damping (relative to diag(H)).
 
@@ -86,29 +116,34 @@ def refine(objective: PoseObjective, poses: np.ndarray, fitness: np.ndarray | No
         Never worse than the input, always inside the search box.
     fitness : array, shape (N,)
     """
+    schedule = annealing(12) if schedule is None else schedule
     bounds = objective.problem.bounds
-    poses = bounds.project(np.atleast_2d(poses))
-    fitness = objective(poses) if fitness is None else np.asarray(fitness, float).copy()
+    start = bounds.project(np.atleast_2d(poses))
+    start_fit = objective(start) if fitness is None else np.asarray(fitness, float)
     free = bounds.free
+    poses = start.copy()
+    fit = None  # fitness of `poses`, known only after the first hard step
     lam = np.full(len(poses), damping)
-    eye = np.eye(6)
-    for it in range(steps):
-        gate = gate_schedule[min(it, len(gate_schedule) - 1)]
-        H, g = _normal_equations(objective, poses, gate)
-        diag = np.einsum("nii->ni", H)
-        A = H + (lam[:, None] * diag + 1e-12)[:, :, None] * eye
-        A[:, ~free, :] = 0.0
-        A[:, :, ~free] = 0.0
-        A[:, ~free, ~free] = 1.0
-        g[:, ~free] = 0.0
-        try:
-            delta = -np.linalg.solve(A, g[..., None])[..., 0]
-        except np.linalg.LinAlgError:  # a degenerate individual: fall back to the pseudo-inverse
-            delta = -np.einsum("nij,nj->ni", np.linalg.pinv(A), g)
-        candidates = bounds.project(poses + delta)
+    for kind, scale in schedule:
+        H, g = _normal_equations(objective, poses, kind, scale)
+        candidates = bounds.project(poses + _damped_step(H, g, lam, free))
+        if kind == "soft":
+            poses = candidates
+            continue
+        if fit is None:
+            fit = objective(poses)
         cand_fit = objective(candidates)
-        better = cand_fit <= fitness
+        better = cand_fit <= fit
         poses[better] = candidates[better]
-        fitness[better] = cand_fit[better]
+        fit[better] = cand_fit[better]
         lam = np.where(better, lam * 0.3, lam * 10.0).clip(1e-6, 1e4)
-    return poses, fitness
+    if fit is None:
+        fit = objective(poses)
+    worse = fit > start_fit
+    poses[worse] = start[worse]
+    fit[worse] = start_fit[worse]
+    return poses, fit
+
+
+#: Tracking: the previous pose is close, so start the annealing late.
+TRACK_SCHEDULE: tuple[tuple[str, float], ...] = (("soft", 0.8), ("soft", 1.0), ("hard", 1.5), ("hard", 1.0), ("hard", 1.0))

@@ -44,8 +44,11 @@ class SearchOptions:
         ``lambda``, new individuals per generation.
     immigrants : float
         Fraction of the offspring that are fresh random starts.
+    screening : int
+        Fresh starts are drawn this many times over and the best by a coarse fitness kept.
     refine_steps : int
-        Local refinement steps per new individual (0 gives the paper's plain EA).
+        Annealed soft-matching steps of the local refinement per new individual
+        (0 gives the paper's plain EA, without refinement).
     max_generations, max_evaluations : int
     time_budget : float or None
         Seconds of wall time.
@@ -68,19 +71,22 @@ class SearchOptions:
     tau: float | None = None
     population: int = 32
     offspring: int = 32
-    immigrants: float = 0.4
-    refine_steps: int = 3
+    immigrants: float = 0.5
+    screening: int = 8
+    refine_steps: int = 10
     max_generations: int = 150
     max_evaluations: int = 2_000_000
     time_budget: float | None = None
     good_fitness: float | None = None
-    consensus: int = 3
+    consensus: int = 2
     min_generations: int = 1
     view_reject: float | None = 0.6
     same_position: float = 0.02
     same_rotation: float = np.deg2rad(3.0)
 
     def __post_init__(self) -> None:
+        if self.screening < 1:
+            raise ValueError(f"screening must be >= 1, got {self.screening}")
         if self.population < 2 or self.offspring < 1:
             raise ValueError("population must be >= 2 and offspring >= 1")
         if not 0.0 <= self.immigrants <= 1.0:
@@ -118,6 +124,8 @@ class EvoPoseState:
     pending_hints: np.ndarray = field(default_factory=lambda: np.zeros((0, 6)))
     hints_seen: int = 0
     pending_initial: np.ndarray | None = None
+    fresh_from: int = 0
+    fresh_keep: int = 0
 
     @property
     def best_pose(self) -> np.ndarray:
@@ -182,11 +190,17 @@ class EvoPose:
 
     # -- ask / tell --------------------------------------------------------------------
     def ask(self, state: EvoPoseState) -> tuple[np.ndarray, np.ndarray]:
-        """New candidates and their origins, shapes (K, 6) and (K,)."""
+        """New candidates and their origins, shapes (K, 6) and (K,).
+
+        Fresh random starts are over-sampled ``options.screening`` times; the caller keeps
+        the best :meth:`n_fresh` of them by a coarse fitness (:func:`screen`) before refining.
+        Fresh starts are the rows whose origin is >= ``state.fresh_from``.
+        """
         o = self.options
         bounds = self.problem.bounds
         rng = self.rng
         parts, origins = [], []
+        state.fresh_from, state.fresh_keep = state.next_origin, 0
         if state.generation == 0 and len(state.population) == 0:
             given = state.pending_initial
             n_random = o.population + o.offspring
@@ -195,8 +209,9 @@ class EvoPose:
                 origins.append(self._new_origins(state, len(given)))
                 n_random = max(o.offspring - len(given), 0)
             if n_random:
-                parts.append(initial_poses(self.problem, n_random, rng))
-                origins.append(self._new_origins(state, n_random))
+                state.fresh_from, state.fresh_keep = state.next_origin, n_random
+                parts.append(initial_poses(self.problem, n_random * o.screening, rng))
+                origins.append(self._new_origins(state, n_random * o.screening))
         else:
             n_imm = int(round(o.immigrants * o.offspring))
             n_children = o.offspring - n_imm
@@ -205,8 +220,9 @@ class EvoPose:
                 parts.append(children)
                 origins.append(child_origin)
             if n_imm:
-                parts.append(initial_poses(self.problem, n_imm, rng))
-                origins.append(self._new_origins(state, n_imm))
+                state.fresh_from, state.fresh_keep = state.next_origin, n_imm
+                parts.append(initial_poses(self.problem, n_imm * o.screening, rng))
+                origins.append(self._new_origins(state, n_imm * o.screening))
         if len(state.pending_hints):
             h = bounds.project(state.pending_hints)
             parts.append(h)

@@ -8,11 +8,30 @@ import numpy as np
 
 from .fitness import PoseObjective
 from .problem import PoseProblem, View
-from .refine import refine
+from .refine import TRACK_SCHEDULE, annealing, refine
 from .search import GOOD_REASONS, EvoPose, EvoPoseState, SearchOptions, Solution
 
+#: Truncation distance of the coarse fitness used to screen random starts, in units of tau.
+SCREEN_TAU_SCALE = 4.0
 #: Generation after which the step-function weight rule of eq. (4) is first applied.
 STEP_RULE_FROM_GENERATION = 2
+
+
+def screen(coarse: PoseObjective, candidates: np.ndarray, origins: np.ndarray, fresh_from: int,
+           keep: int) -> tuple[np.ndarray, np.ndarray]:
+    """Keep the ``keep`` best fresh starts (origin >= ``fresh_from``) by the coarse fitness; others pass.
+
+    Shapes: candidates (K, 6), origins (K,) -> (K', 6), (K',).
+    """
+    fresh = origins >= fresh_from
+    if keep <= 0 or np.count_nonzero(fresh) <= keep:
+        return candidates, origins
+    idx = np.nonzero(fresh)[0]
+    f = coarse(candidates[idx])
+    chosen = idx[np.argsort(f, kind="stable")[:keep]]
+    mask = ~fresh
+    mask[chosen] = True
+    return candidates[mask], origins[mask]
 
 
 def _rng(seed: int | np.random.Generator | None) -> np.random.Generator:
@@ -32,6 +51,8 @@ def run(problem: PoseProblem, options: SearchOptions, rng: np.random.Generator,
     """
     t0 = time.perf_counter()
     objective = PoseObjective(problem, options.fitness, options.tau)
+    coarse = PoseObjective(problem, options.fitness, options.tau, tau_scale=SCREEN_TAU_SCALE)
+    schedule = annealing(options.refine_steps)
     evo = EvoPose(problem, options, rng)
     state = evo.start(initial)
     reason = None
@@ -41,9 +62,10 @@ def run(problem: PoseProblem, options: SearchOptions, rng: np.random.Generator,
             if new is not None and np.size(new):
                 evo.inject(state, new)
         candidates, origins = evo.ask(state)
+        candidates, origins = screen(coarse, candidates, origins, state.fresh_from, state.fresh_keep)
         fitness = objective(candidates)
         if options.refine_steps:
-            candidates, fitness = refine(objective, candidates, fitness, steps=options.refine_steps)
+            candidates, fitness = refine(objective, candidates, fitness, schedule)
         evo.tell(state, candidates, fitness, origins)
         if (options.view_reject is not None and objective.n_views > 1
                 and state.generation >= STEP_RULE_FROM_GENERATION):
@@ -54,12 +76,12 @@ def run(problem: PoseProblem, options: SearchOptions, rng: np.random.Generator,
                 state.best_supporters = set()
         if on_generation is not None:
             on_generation(state)
-        reason = evo.stop_reason(state, objective.evaluations, time.perf_counter() - t0)
+        reason = evo.stop_reason(state, objective.evaluations + coarse.evaluations, time.perf_counter() - t0)
     best = state.best_pose
     terms = objective.view_terms(best[None])[0]
     solution = Solution(
         pose=best, fitness=state.best_fitness, view_terms=terms, view_weights=objective.weights.copy(),
-        generations=state.generation, evaluations=objective.evaluations,
+        generations=state.generation, evaluations=objective.evaluations + coarse.evaluations,
         seconds=time.perf_counter() - t0, converged=reason in GOOD_REASONS, stop_reason=reason,
         history=list(state.history), from_hint=state.best_from_hint, problem=problem, options=options)
     return solution, state
@@ -92,7 +114,7 @@ def match_quality(problem: PoseProblem, pose: np.ndarray, options: SearchOptions
 
 def track(previous: Solution, new_views: list[View] | tuple[View, ...], *, problem: PoseProblem | None = None,
           options: SearchOptions | None = None, seed: int | np.random.Generator | None = None,
-          lost_quality: float = 0.5, steps: int = 5, hints: np.ndarray | None = None) -> Solution:
+          lost_quality: float = 0.5, hints: np.ndarray | None = None) -> Solution:
     """Warm-started pose for the next frame (eq. 2): refine the previous pose on the new views.
 
     The previous pose is refined locally; if the match is then lost (normalised
@@ -121,7 +143,7 @@ def track(previous: Solution, new_views: list[View] | tuple[View, ...], *, probl
     if hints is not None and np.size(hints):
         starts = np.concatenate([starts, np.atleast_2d(hints)])
     fit0 = objective(starts)
-    pose, fit = refine(objective, starts, fit0, steps=steps, gate_schedule=(2.0, 1.0))
+    pose, fit = refine(objective, starts, fit0, schedule=TRACK_SCHEDULE)
     i = int(np.argmin(fit))
     terms = objective.view_terms(pose[i][None])[0]
     quality = float(np.sum(objective.base_weights * terms / objective.taus) / np.sum(objective.base_weights))

@@ -1,0 +1,319 @@
+"""The pose-problem file of DESIGN.md §3: its schema, loading it into an :class:`evopose.PoseProblem`, and the output.
+
+A problem file (YAML or JSON) holds a model, one or more views (eq. 4), the search box,
+optional eq. (3) constraints, hint poses, a seed and search options. Angles are radians,
+lengths metres, image points pixels. :func:`load_problem` validates every field and
+raises :class:`ProblemFileError` with one line naming the first offending field.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import typing
+from pathlib import Path
+from typing import Annotated, Any
+
+import numpy as np
+from pydantic import AfterValidator, BaseModel, BeforeValidator, ConfigDict, Field, ValidationError, \
+    create_model, field_validator, model_validator
+
+from evopose import Bounds, Camera, Model, PoseProblem, SearchOptions, Solution, View
+from evopose.pose import PARAM_NAMES, quaternion_from_euler
+
+from .documents import DocumentError, describe, read_mapping, validation_message
+
+#: Range searched for an angle the file does not mention: a full turn.
+FULL_TURN = (-math.pi, math.pi)
+
+
+class ProblemFileError(ValueError):
+    """A pose-problem file that cannot be used; the message is one line naming the file or the field."""
+
+
+def _fixed_length(n: int, what: str) -> BeforeValidator:
+    """Check that a value is a list of ``n`` entries before its numbers are validated."""
+
+    def check(value: Any) -> Any:
+        if not isinstance(value, list):
+            raise ValueError(f"expected a list of {n} numbers {what}, got {describe(value)}")
+        if len(value) != n:
+            raise ValueError(f"expected {n} numbers {what}, got {len(value)}")
+        return value
+
+    return BeforeValidator(check)
+
+
+def _ordered(value: list[float]) -> list[float]:
+    if value[0] > value[1]:
+        raise ValueError(f"lo {value[0]} > hi {value[1]}")
+    return value
+
+
+def _non_zero(value: list[float]) -> list[float]:
+    if not any(value):
+        raise ValueError("a normal must be a non-zero vector")
+    return value
+
+
+Point2 = Annotated[list[float], _fixed_length(2, "[u, v]")]
+Point3 = Annotated[list[float], _fixed_length(3, "[x, y, z]")]
+Normal = Annotated[Point3, AfterValidator(_non_zero)]
+Range = Annotated[list[float], _fixed_length(2, "[lo, hi]"), AfterValidator(_ordered)]
+Distortion = Annotated[list[float], _fixed_length(5, "[k1, k2, p1, p2, k3]")]
+
+
+class Spec(BaseModel):
+    """Base of the file's mappings: strict types, finite numbers, no unknown keys."""
+
+    model_config = ConfigDict(extra="forbid", strict=True, allow_inf_nan=False, frozen=True)
+
+    @model_validator(mode="before")
+    @classmethod
+    def _known_keys(cls, data: Any) -> Any:
+        if isinstance(data, dict):
+            unknown = [key for key in data if key not in cls.model_fields]
+            if unknown:
+                raise ValueError(f"unknown key {unknown[0]!r} (expected {', '.join(cls.model_fields)})")
+        return data
+
+
+class PoseSpec(Spec):
+    """A full pose ``(x, y, z, roll, pitch, yaw)``, metres and radians."""
+
+    x: float
+    y: float
+    z: float
+    roll: float
+    pitch: float
+    yaw: float
+
+    def vector(self) -> np.ndarray:
+        """The pose as an array, shape (6,)."""
+        return np.array([getattr(self, name) for name in PARAM_NAMES])
+
+
+class ModelSpec(Spec):
+    """The target's feature points in the target frame, optionally with outward normals."""
+
+    points: Annotated[list[Point3], Field(min_length=1)]
+    normals: list[Normal] | None = None
+
+    @field_validator("normals")
+    @classmethod
+    def _one_normal_per_point(cls, normals: list[list[float]] | None, info) -> list[list[float]] | None:
+        points = info.data.get("points")
+        if normals is not None and points is not None and len(normals) != len(points):
+            raise ValueError(f"expected one normal per point ({len(points)}), got {len(normals)}")
+        return normals
+
+    def to_model(self) -> Model:
+        return Model(np.array(self.points), None if self.normals is None else np.array(self.normals))
+
+
+class CameraSpec(Spec):
+    """Intrinsics (pixels), optional plumb_bob distortion and optional ``world_from_camera`` pose."""
+
+    fx: Annotated[float, Field(gt=0)]
+    fy: Annotated[float, Field(gt=0)]
+    cx: float
+    cy: float
+    width: Annotated[int, Field(gt=0)]
+    height: Annotated[int, Field(gt=0)]
+    distortion: Distortion | None = None
+    world_from_camera: PoseSpec | None = None
+
+    def to_camera(self) -> Camera:
+        extrinsic = None if self.world_from_camera is None else self.world_from_camera.vector()
+        return Camera.from_pose(self.fx, self.fy, self.cx, self.cy, self.width, self.height,
+                                distortion=self.distortion, world_from_camera_pose=extrinsic)
+
+
+class ViewSpec(Spec):
+    """One camera's unordered image points and its weight in eq. (4)."""
+
+    camera: CameraSpec
+    points: Annotated[list[Point2], Field(min_length=1)]
+    weight: Annotated[float, Field(ge=0)] = 1.0
+
+    def to_view(self) -> View:
+        return View(self.camera.to_camera(), np.array(self.points), self.weight)
+
+
+class SearchSpec(Spec):
+    """The search box ``[lo, hi]`` per pose parameter; angles default to a full turn."""
+
+    x: Range
+    y: Range
+    z: Range
+    roll: Range = list(FULL_TURN)
+    pitch: Range = list(FULL_TURN)
+    yaw: Range = list(FULL_TURN)
+
+    def to_bounds(self) -> Bounds:
+        return Bounds.from_dict({name: tuple(getattr(self, name)) for name in PARAM_NAMES})
+
+
+class ConstraintSpec(Spec):
+    """Eq. (3): the parameter lies within ``value +- tolerance`` (tolerance 0 fixes it)."""
+
+    value: float
+    tolerance: Annotated[float, Field(ge=0)]
+
+
+class ConstraintsSpec(Spec):
+    """Constraints by pose parameter name."""
+
+    x: ConstraintSpec | None = None
+    y: ConstraintSpec | None = None
+    z: ConstraintSpec | None = None
+    roll: ConstraintSpec | None = None
+    pitch: ConstraintSpec | None = None
+    yaw: ConstraintSpec | None = None
+
+    def given(self) -> dict[str, ConstraintSpec]:
+        """The constraints present in the file, in parameter order."""
+        return {name: c for name in PARAM_NAMES if (c := getattr(self, name)) is not None}
+
+
+#: ``options``: any field of :class:`evopose.SearchOptions`, validated against its type annotation.
+OptionsSpec = create_model(
+    "OptionsSpec", __base__=Spec, __doc__="Overrides of evopose.SearchOptions fields.",
+    **{f.name: (typing.get_type_hints(SearchOptions)[f.name], None) for f in dataclasses.fields(SearchOptions)},
+)
+
+
+class ProblemSpec(Spec):
+    """A whole pose-problem file (DESIGN.md §3)."""
+
+    model: ModelSpec
+    views: Annotated[list[ViewSpec], Field(min_length=1)]
+    search: SearchSpec
+    constraints: ConstraintsSpec = ConstraintsSpec()
+    hints: list[PoseSpec] = []
+    seed: Annotated[int, Field(ge=0)] | None = None
+    options: OptionsSpec = OptionsSpec()
+
+    @field_validator("views")
+    @classmethod
+    def _some_weight(cls, views: list[ViewSpec]) -> list[ViewSpec]:
+        if not any(view.weight > 0 for view in views):
+            raise ValueError("all view weights are 0; at least one must be > 0")
+        return views
+
+
+def _bounds(spec: ProblemSpec) -> Bounds:
+    """The search box with the eq. (3) constraints applied."""
+    bounds = spec.search.to_bounds()
+    for name, constraint in spec.constraints.given().items():
+        try:
+            bounds = bounds.constrained(name, constraint.value, constraint.tolerance)
+        except ValueError as err:
+            raise ProblemFileError(f"constraints.{name}: {err}") from None
+    return bounds
+
+
+def _search_options(spec: ProblemSpec) -> SearchOptions:
+    try:
+        return SearchOptions(**spec.options.model_dump(exclude_unset=True))
+    except ValueError as err:
+        raise ProblemFileError(f"options: {err}") from None
+
+
+def parse_problem(document: dict) -> tuple[PoseProblem, SearchOptions, int | None]:
+    """Validate a problem-file mapping and build the evopose objects.
+
+    Returns
+    -------
+    problem : PoseProblem
+    options : SearchOptions
+    seed : int or None
+
+    Raises
+    ------
+    ProblemFileError
+        With one line naming the first offending field.
+    """
+    try:
+        spec = ProblemSpec.model_validate(document)
+    except ValidationError as err:
+        raise ProblemFileError(validation_message(err)) from None
+    hints = np.array([hint.vector() for hint in spec.hints]).reshape(-1, 6)
+    problem = PoseProblem(spec.model.to_model(), tuple(v.to_view() for v in spec.views), _bounds(spec), hints)
+    return problem, _search_options(spec), spec.seed
+
+
+def load_problem(path: str | Path) -> tuple[PoseProblem, SearchOptions, int | None]:
+    """Read a YAML or JSON pose-problem file (DESIGN.md §3); see :func:`parse_problem`.
+
+    Raises
+    ------
+    ProblemFileError
+        The file cannot be read, is not YAML/JSON, its top level is not a mapping, or a field is invalid.
+    """
+    try:
+        document = read_mapping(path)
+    except DocumentError as err:
+        raise ProblemFileError(str(err)) from None
+    return parse_problem(document)
+
+
+def _pose_dict(pose: np.ndarray) -> dict[str, float]:
+    return {name: float(v) for name, v in zip(PARAM_NAMES, pose)}
+
+
+def problem_to_dict(problem: PoseProblem, constraints: dict[str, tuple[float, float]] | None = None,
+                    seed: int | None = None) -> dict:
+    """The problem-file mapping of ``problem`` (inverse of :func:`parse_problem`).
+
+    Parameters
+    ----------
+    problem : PoseProblem
+        Its bounds are written as the search box; angles spanning ``[-pi, pi]`` are left out (the default).
+    constraints : dict name -> (value, tolerance), optional
+        Eq. (3) constraints to write (applied when the file is loaded).
+    seed : int, optional
+    """
+    model: dict[str, Any] = {"points": problem.model.points.tolist()}
+    if problem.model.normals is not None:
+        model["normals"] = problem.model.normals.tolist()
+    views = []
+    for view in problem.views:
+        cam = view.camera
+        camera: dict[str, Any] = {"fx": float(cam.fx), "fy": float(cam.fy), "cx": float(cam.cx), "cy": float(cam.cy),
+                                  "width": int(cam.width), "height": int(cam.height)}
+        if np.any(cam.distortion):
+            camera["distortion"] = cam.distortion.tolist()
+        if not np.array_equal(cam.world_from_camera, np.eye(4)):
+            camera["world_from_camera"] = _pose_dict(pose_from_matrix(cam.world_from_camera))
+        entry: dict[str, Any] = {"camera": camera, "points": view.points.tolist()}
+        if view.weight != 1.0:
+            entry["weight"] = float(view.weight)
+        views.append(entry)
+    lo, hi = problem.bounds.lo, problem.bounds.hi
+    search = {name: [float(lo[i]), float(hi[i])] for i, name in enumerate(PARAM_NAMES)
+              if i < 3 or (lo[i], hi[i]) != FULL_TURN}
+    out: dict[str, Any] = {"model": model, "views": views, "search": search}
+    if constraints:
+        out["constraints"] = {name: {"value": float(v), "tolerance": float(t)} for name, (v, t) in constraints.items()}
+    if len(problem.hints):
+        out["hints"] = [_pose_dict(h) for h in problem.hints]
+    if seed is not None:
+        out["seed"] = int(seed)
+    return out
+
+
+def solution_to_dict(solution: Solution) -> dict:
+    """The solver's output object (DESIGN.md §3), plus ``stop_reason``, ``view_terms`` and ``view_weights``."""
+    pose = np.asarray(solution.pose, float)
+    return {
+        "pose": {**_pose_dict(pose), "quaternion": quaternion_from_euler(pose[3:]).tolist()},
+        "fitness": float(solution.fitness),
+        "generations": int(solution.generations),
+        "evaluations": int(solution.evaluations),
+        "seconds": float(solution.seconds),
+        "converged": bool(solution.converged),
+        "stop_reason": solution.stop_reason,
+        "view_terms": np.asarray(solution.view_terms, float).tolist(),
+        "view_weights": np.asarray(solution.view_weights, float).tolist(),
+    }
