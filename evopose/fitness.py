@@ -166,6 +166,10 @@ class PoseObjective:
         """Eq. (4) ``sum_k W_k d^(k)`` with the current weights, shape (N, 6) -> (N,)."""
         return self.view_terms(poses, only_weighted=True) @ self.weights
 
+    def fitness_scale(self) -> float | None:
+        """Fitness of a pose that matches nothing (robust kind): ``sum_k W_k tau_k``; None for the paper's."""
+        return float(self.weights @ self.taus) if self.kind == "robust" else None
+
     def normalised(self, terms: np.ndarray) -> np.ndarray:
         """Terms divided by each view's truncation distance (robust kind), shape (..., V)."""
         return terms / self.taus

@@ -55,7 +55,14 @@ class SearchOptions:
     good_fitness : float or None
         Stop as soon as the best fitness is at or below this value.
     consensus : int
-        Stop when the best basin was reached from this many independent starts (0: never).
+        Stop when the best basin was reached from this many independent starts (0: never),
+        at least ``min_starts`` starts were made, and its match quality (robust fitness over
+        the weighted tau: 0 perfect, 1 nothing matched) is at most ``good_quality``.
+    good_quality : float
+    min_starts : int
+        Independent (screened, refined) random starts before the consensus or stall rule may stop.
+    patience : int
+        Stop ("stalled") when the best has not improved for this many generations after ``min_starts``.
     min_generations : int
     view_reject : float or None
         Step-function weight rule of eq. (4): a view whose term exceeds this (fraction of its
@@ -70,7 +77,7 @@ class SearchOptions:
     fitness: FitnessKind = "robust"
     tau: float | None = None
     population: int = 32
-    offspring: int = 32
+    offspring: int = 64
     immigrants: float = 0.5
     screening: int = 8
     refine_steps: int = 10
@@ -79,6 +86,9 @@ class SearchOptions:
     time_budget: float | None = None
     good_fitness: float | None = None
     consensus: int = 2
+    good_quality: float = 0.5
+    min_starts: int = 256
+    patience: int = 6
     min_generations: int = 1
     view_reject: float | None = 0.6
     same_position: float = 0.02
@@ -126,6 +136,8 @@ class EvoPoseState:
     pending_initial: np.ndarray | None = None
     fresh_from: int = 0
     fresh_keep: int = 0
+    starts: int = 0
+    improved_at: int = 0
 
     @property
     def best_pose(self) -> np.ndarray:
@@ -156,10 +168,15 @@ class EvoPose:
     problem : PoseProblem
     options : SearchOptions
     rng : numpy Generator
+    fitness_scale : float, optional
+        Fitness of a pose that matches nothing, for the quality test of the stop rule.
     """
 
-    def __init__(self, problem: PoseProblem, options: SearchOptions, rng: np.random.Generator) -> None:
+    def __init__(self, problem: PoseProblem, options: SearchOptions, rng: np.random.Generator,
+                 fitness_scale: float | None = None) -> None:
         self.problem = problem
+        #: fitness of a pose that matches nothing (sum of weighted tau); None: quality unknown
+        self.fitness_scale = fitness_scale
         self.options = options
         self.rng = rng
         lo, hi = problem.bounds.lo, problem.bounds.hi
@@ -258,19 +275,29 @@ class EvoPose:
             dup = same_basin(pop[i], pop[i + 1:], o, self.reference_distance)
             keep[i + 1:] &= ~dup
         idx = np.nonzero(keep)[0][: o.population]
+        state.starts += int(np.count_nonzero(origins >= state.fresh_from)) if state.fresh_keep else 0
+        if prev_best is None or fit[0] < state.best_fitness - 1e-9 * max(1.0, abs(state.best_fitness)):
+            state.improved_at = state.generation + 1
         state.population, state.fitness, state.origin = pop[idx], fit[idx], org[idx]
         state.best_supporters = supporters
         state.generation += 1
         state.history.append(float(fit[0]))
         return state
 
+    def is_good(self, fitness: float) -> bool:
+        """Match quality within ``good_quality`` (always True when the quality is unknown)."""
+        return self.fitness_scale is None or fitness <= self.options.good_quality * self.fitness_scale
+
     def stop_reason(self, state: EvoPoseState, evaluations: int, elapsed: float) -> str | None:
         """Why the search should stop now, or None."""
         o = self.options
         if o.good_fitness is not None and state.best_fitness <= o.good_fitness:
             return "good_fitness"
-        if o.consensus and state.generation >= o.min_generations and len(state.best_supporters) >= o.consensus:
-            return "consensus"
+        if state.generation >= o.min_generations and state.starts >= o.min_starts:
+            if o.consensus and len(state.best_supporters) >= o.consensus and self.is_good(state.best_fitness):
+                return "consensus"
+            if state.generation - state.improved_at >= o.patience:
+                return "stalled"
         if state.generation >= o.max_generations:
             return "max_generations"
         if evaluations >= o.max_evaluations:
@@ -356,4 +383,4 @@ class Solution:
         return replace(self, **changes)
 
 
-GOOD_REASONS = ("good_fitness", "consensus")
+GOOD_REASONS = ("good_fitness", "consensus", "stalled")

@@ -53,7 +53,7 @@ def run(problem: PoseProblem, options: SearchOptions, rng: np.random.Generator,
     objective = PoseObjective(problem, options.fitness, options.tau)
     coarse = PoseObjective(problem, options.fitness, options.tau, tau_scale=SCREEN_TAU_SCALE)
     schedule = annealing(options.refine_steps)
-    evo = EvoPose(problem, options, rng)
+    evo = EvoPose(problem, options, rng, objective.fitness_scale())
     state = evo.start(initial)
     reason = None
     while reason is None:
@@ -74,6 +74,7 @@ def run(problem: PoseProblem, options: SearchOptions, rng: np.random.Generator,
             if not np.array_equal(old, new_w):  # eq. (4) changed: fitness values must be recomputed
                 state.fitness = objective(state.population)
                 state.best_supporters = set()
+                evo.fitness_scale = objective.fitness_scale()
         if on_generation is not None:
             on_generation(state)
         reason = evo.stop_reason(state, objective.evaluations + coarse.evaluations, time.perf_counter() - t0)
@@ -82,7 +83,8 @@ def run(problem: PoseProblem, options: SearchOptions, rng: np.random.Generator,
     solution = Solution(
         pose=best, fitness=state.best_fitness, view_terms=terms, view_weights=objective.weights.copy(),
         generations=state.generation, evaluations=objective.evaluations + coarse.evaluations,
-        seconds=time.perf_counter() - t0, converged=reason in GOOD_REASONS, stop_reason=reason,
+        seconds=time.perf_counter() - t0, converged=reason in GOOD_REASONS and evo.is_good(state.best_fitness),
+        stop_reason=reason,
         history=list(state.history), from_hint=state.best_from_hint, problem=problem, options=options)
     return solution, state
 
