@@ -49,6 +49,14 @@ def view_centroid_guess(problem: PoseProblem, view: View, n: int, rng: np.random
     return p_cam @ cam.world_from_camera[:3, :3].T + cam.world_from_camera[:3, 3]
 
 
+def _masked_median(values: np.ndarray, mask: np.ndarray, count: np.ndarray) -> np.ndarray:
+    """Row-wise (lower) median of ``values`` (n, m) over entries where ``mask``; rows with none give 0."""
+    ordered = np.sort(np.where(mask, values, np.inf), axis=1)
+    idx = np.maximum(count - 1, 0) // 2
+    out = ordered[np.arange(len(values)), idx]
+    return np.where(count > 0, out, 0.0)
+
+
 def align_to_view(problem: PoseProblem, view: View, poses: np.ndarray, rng: np.random.Generator,
                   scale_jitter: float = 0.15, shift_jitter: float = 0.1, iterations: int = 2) -> np.ndarray:
     """Move each pose's position so its projection covers the view's points (attitude kept).
@@ -71,15 +79,15 @@ def align_to_view(problem: PoseProblem, view: View, poses: np.ndarray, rng: np.r
     poses = poses.copy()
     for _ in range(iterations):
         proj = project_into_view(problem.model, view, poses)
-        u = np.where(proj.usable, proj.uv[..., 0], np.nan)
-        v = np.where(proj.usable, proj.uv[..., 1], np.nan)
-        ok = proj.usable.sum(axis=1) >= 2
+        count = proj.usable.sum(axis=1)
+        ok = count >= 2
         if not np.any(ok):
             break
-        with np.errstate(all="ignore"):
-            cu, cv = np.nanmedian(u, axis=1), np.nanmedian(v, axis=1)
-            spread = np.nanmedian(np.hypot(u - cu[:, None], v - cv[:, None]), axis=1)
-        ok &= np.isfinite(spread) & (spread > 0.5)
+        cu = _masked_median(proj.uv[..., 0], proj.usable, count)
+        cv = _masked_median(proj.uv[..., 1], proj.usable, count)
+        spread = _masked_median(np.hypot(proj.uv[..., 0] - cu[:, None], proj.uv[..., 1] - cv[:, None]),
+                                proj.usable, count)
+        ok &= spread > 0.5
         c_world = poses[:, :3] + R @ centroid_target
         c_cam = c_world @ cam.camera_from_world[:3, :3].T + cam.camera_from_world[:3, 3]
         ok &= c_cam[:, 2] > 0

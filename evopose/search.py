@@ -149,7 +149,8 @@ class EvoPoseState:
 
     @property
     def best_from_hint(self) -> bool:
-        return bool(self.origin[int(np.argmin(self.fitness))] < 0)
+        """A hint (or its descendant) reached the best basin."""
+        return bool(self.origin[int(np.argmin(self.fitness))] < 0 or any(x < 0 for x in self.best_supporters))
 
 
 def same_basin(a: np.ndarray, b: np.ndarray, options: SearchOptions, reference_distance: float) -> np.ndarray:
@@ -258,22 +259,24 @@ class EvoPose:
         org = np.concatenate([state.origin, origins])
         order = np.argsort(fit, kind="stable")
         pop, fit, org = pop[order], fit[order], org[order]
-        best = pop[0]
+        R_all = rotation_from_euler(pop[:, 3:])
+        near = self._basin_mask(pop, R_all)
         # consensus: independent starts whose refined descendants landed in the best basin
-        in_best = same_basin(best, pop, o, self.reference_distance)
+        in_best = near(0, np.arange(len(pop)))
         supporters = set(int(x) for x in org[in_best])
-        if prev_best is not None and same_basin(best, prev_best[None], o, self.reference_distance)[0]:
+        if prev_best is not None and same_basin(pop[0], prev_best[None], o, self.reference_distance)[0]:
             supporters |= state.best_supporters
         # keep distinct individuals: one representative per basin, best first
         keep = np.ones(len(pop), bool)
+        kept = 0
         for i in range(len(pop)):
             if not keep[i]:
                 continue
-            if np.count_nonzero(keep[:i]) >= o.population:
-                keep[i:] = False
+            kept += 1
+            if kept >= o.population:
+                keep[i + 1:] = False
                 break
-            dup = same_basin(pop[i], pop[i + 1:], o, self.reference_distance)
-            keep[i + 1:] &= ~dup
+            keep[i + 1:] &= ~near(i, np.arange(i + 1, len(pop)))
         idx = np.nonzero(keep)[0][: o.population]
         state.starts += int(np.count_nonzero(origins >= state.fresh_from)) if state.fresh_keep else 0
         if prev_best is None or fit[0] < state.best_fitness - 1e-9 * max(1.0, abs(state.best_fitness)):
@@ -288,11 +291,28 @@ class EvoPose:
         """Match quality within ``good_quality`` (always True when the quality is unknown)."""
         return self.fitness_scale is None or fitness <= self.options.good_quality * self.fitness_scale
 
+    def _basin_mask(self, pop: np.ndarray, R_all: np.ndarray):
+        """``near(i, js)``: which of the poses ``js`` share pose ``i``'s basin (rotations precomputed)."""
+        pos_tol = self.options.same_position * max(self.reference_distance, 1e-6)
+        cos_tol = np.cos(self.options.same_rotation)
+
+        def near(i: int, js: np.ndarray) -> np.ndarray:
+            dpos = np.linalg.norm(pop[js, :3] - pop[i, :3], axis=1)
+            # trace(R_i^T R_j) = 1 + 2 cos(angle)
+            cos = (np.einsum("kl,jkl->j", R_all[i], R_all[js]) - 1.0) / 2.0
+            return (dpos <= pos_tol) & (cos >= cos_tol)
+
+        return near
+
     def stop_reason(self, state: EvoPoseState, evaluations: int, elapsed: float) -> str | None:
         """Why the search should stop now, or None."""
         o = self.options
         if o.good_fitness is not None and state.best_fitness <= o.good_fitness:
             return "good_fitness"
+        hinted = any(x < 0 for x in state.best_supporters)
+        if (state.generation >= o.min_generations and hinted and o.consensus
+                and len(state.best_supporters) >= o.consensus and self.is_good(state.best_fitness)):
+            return "consensus"  # a team-mate's hint confirmed by the own search: no need for more starts
         if state.generation >= o.min_generations and state.starts >= o.min_starts:
             if o.consensus and len(state.best_supporters) >= o.consensus and self.is_good(state.best_fitness):
                 return "consensus"
@@ -359,7 +379,7 @@ class Solution:
     history : list of float
         Best fitness per generation.
     from_hint : bool
-        The best individual descends from a hint.
+        A hint (or a descendant of one) reached the best basin.
     reinitialised : bool
         (track) the fit was lost and the search started over.
     """
