@@ -4,7 +4,7 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test bench install clean lock
+.PHONY: demo test bench examples install clean lock
 
 $(STAMP): pyproject.toml constraints.txt
 	$(PYTHON) -m venv $(VENV)
@@ -19,6 +19,10 @@ demo: $(STAMP)
 
 test: $(STAMP)
 	$(PY) -m pytest -q
+
+# Regenerate the example pose-problem files from seeded synthetic problems.
+examples: $(STAMP)
+	$(PY) -m examples.make_examples
 
 bench: $(STAMP)
 	$(PY) -m benchmarks.run_solvers --out BENCHMARKS.md

@@ -23,6 +23,14 @@ class DocumentError(ValueError):
     """A document that cannot be read or does not have the expected shape; the message is one line."""
 
 
+class UnknownKey(ValueError):
+    """Raised by a validator for a key the schema does not know; :func:`validation_message` names it as the field."""
+
+    def __init__(self, key: Any, expected: list[str]) -> None:
+        super().__init__(f"unknown key (expected {', '.join(expected)})")
+        self.key = key
+
+
 class _StrictLoader(yaml.SafeLoader):
     """Safe YAML that rejects duplicate keys and reads ``1e-3`` as a number (as YAML 1.2 and JSON do)."""
 
@@ -135,12 +143,16 @@ _MESSAGES = {
 def validation_message(error: ValidationError) -> str:
     """One line for the first error of a pydantic validation: ``<field path>: <what is wrong>``."""
     first = error.errors(include_url=False)[0]
+    loc = first["loc"]
+    cause = first.get("ctx", {}).get("error")
+    if isinstance(cause, UnknownKey):
+        loc = (*loc, str(cause.key))
     template = _MESSAGES.get(first["type"])
     if template is None:
         text = first["msg"][:1].lower() + first["msg"][1:]
     else:
         text = template.format(input=describe(first.get("input")), **first.get("ctx", {}))
-    where = field_path(first["loc"])
+    where = field_path(loc)
     return _one_line(f"{where}: {text}" if where else text)
 
 

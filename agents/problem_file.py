@@ -15,16 +15,18 @@ from pathlib import Path
 from typing import Annotated, Any
 
 import numpy as np
-from pydantic import AfterValidator, BaseModel, BeforeValidator, ConfigDict, Field, ValidationError, \
-    create_model, field_validator, model_validator
+from pydantic import (AfterValidator, BaseModel, BeforeValidator, ConfigDict, Field, ValidationError,
+                      ValidationInfo, create_model, field_validator, model_validator)
 
 from evopose import Bounds, Camera, Model, PoseProblem, SearchOptions, Solution, View
-from evopose.pose import PARAM_NAMES, quaternion_from_euler
+from evopose.pose import PARAM_NAMES, pose_from_matrix, quaternion_from_euler
 
-from .documents import DocumentError, describe, read_mapping, validation_message
+from .documents import DocumentError, UnknownKey, describe, read_mapping, validation_message
 
 #: Range searched for an angle the file does not mention: a full turn.
 FULL_TURN = (-math.pi, math.pi)
+#: Shortest normal evopose.Model accepts.
+MIN_NORMAL_LENGTH = 1e-12
 
 
 class ProblemFileError(ValueError):
@@ -51,7 +53,7 @@ def _ordered(value: list[float]) -> list[float]:
 
 
 def _non_zero(value: list[float]) -> list[float]:
-    if not any(value):
+    if math.hypot(*value) < MIN_NORMAL_LENGTH:
         raise ValueError("a normal must be a non-zero vector")
     return value
 
@@ -74,7 +76,7 @@ class Spec(BaseModel):
         if isinstance(data, dict):
             unknown = [key for key in data if key not in cls.model_fields]
             if unknown:
-                raise ValueError(f"unknown key {unknown[0]!r} (expected {', '.join(cls.model_fields)})")
+                raise UnknownKey(unknown[0], list(cls.model_fields))
         return data
 
 
@@ -101,7 +103,8 @@ class ModelSpec(Spec):
 
     @field_validator("normals")
     @classmethod
-    def _one_normal_per_point(cls, normals: list[list[float]] | None, info) -> list[list[float]] | None:
+    def _one_normal_per_point(cls, normals: list[list[float]] | None,
+                              info: ValidationInfo) -> list[list[float]] | None:
         points = info.data.get("points")
         if normals is not None and points is not None and len(normals) != len(points):
             raise ValueError(f"expected one normal per point ({len(points)}), got {len(normals)}")
@@ -177,9 +180,10 @@ class ConstraintsSpec(Spec):
 
 
 #: ``options``: any field of :class:`evopose.SearchOptions`, validated against its type annotation.
+_OPTION_TYPES = typing.get_type_hints(SearchOptions)
 OptionsSpec = create_model(
     "OptionsSpec", __base__=Spec, __doc__="Overrides of evopose.SearchOptions fields.",
-    **{f.name: (typing.get_type_hints(SearchOptions)[f.name], None) for f in dataclasses.fields(SearchOptions)},
+    **{f.name: (_OPTION_TYPES[f.name], None) for f in dataclasses.fields(SearchOptions)},
 )
 
 

@@ -17,13 +17,13 @@ from .problem import Bounds, PoseProblem, View
 
 def sample_rotations(bounds: Bounds, n: int, rng: np.random.Generator) -> np.ndarray:
     """Roll/pitch/yaw for ``n`` individuals within the bounds, shape (n, 3)."""
-    rpy = random_rotations(n, rng)
-    lo, hi = bounds.lo[3:], bounds.hi[3:]
-    per = bounds.periodic[3:]
-    inside = np.all(per | ((rpy >= lo) & (rpy <= hi)), axis=1)
-    box = lo + rng.random((n, 3)) * (hi - lo)
-    rpy = np.where(inside[:, None], rpy, box)
-    return rpy
+    poses = np.zeros((n, 6))
+    poses[:, 3:] = random_rotations(n, rng)
+    poses[:, :3] = 0.5 * (bounds.lo[:3] + bounds.hi[:3])
+    poses = bounds.nearest_turn(poses)
+    inside = bounds.contains(poses)
+    box = bounds.lo[3:] + rng.random((n, 3)) * bounds.width[3:]
+    return np.where(inside[:, None], poses[:, 3:], box)
 
 
 def view_centroid_guess(problem: PoseProblem, view: View, n: int, rng: np.random.Generator,

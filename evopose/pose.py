@@ -64,9 +64,8 @@ def euler_from_rotation(R: np.ndarray) -> np.ndarray:
     R = np.asarray(R, dtype=float)
     if R.shape[-2:] != (3, 3):
         raise ValueError(f"expected (..., 3, 3) rotation matrices, got shape {R.shape}")
-    sp = np.clip(-R[..., 2, 0], -1.0, 1.0)
-    pitch = np.arcsin(sp)
     cp = np.hypot(R[..., 0, 0], R[..., 1, 0])
+    pitch = np.arctan2(-R[..., 2, 0], cp)
     regular = cp > 1e-9
     roll = np.where(regular, np.arctan2(R[..., 2, 1], R[..., 2, 2]), 0.0)
     yaw = np.where(regular, np.arctan2(R[..., 1, 0], R[..., 0, 0]),
@@ -107,6 +106,8 @@ def pose_from_matrix(T: np.ndarray) -> np.ndarray:
 def invert_transform(T: np.ndarray) -> np.ndarray:
     """Inverse of rigid transforms ``a_from_b`` -> ``b_from_a``, shape (..., 4, 4)."""
     T = np.asarray(T, dtype=float)
+    if T.shape[-2:] != (4, 4):
+        raise ValueError(f"expected (..., 4, 4) transforms, got shape {T.shape}")
     out = np.zeros_like(T)
     Rt = np.swapaxes(T[..., :3, :3], -1, -2)
     out[..., :3, :3] = Rt
@@ -118,6 +119,8 @@ def invert_transform(T: np.ndarray) -> np.ndarray:
 def quaternion_from_euler(rpy: np.ndarray) -> np.ndarray:
     """Unit quaternions ``(x, y, z, w)`` with ``w >= 0``; rpy shape (..., 3) -> (..., 4)."""
     rpy = np.asarray(rpy, dtype=float)
+    if rpy.shape[-1:] != (3,):
+        raise ValueError(f"expected (..., 3) roll/pitch/yaw, got shape {rpy.shape}")
     hr, hp, hy = rpy[..., 0] / 2, rpy[..., 1] / 2, rpy[..., 2] / 2
     cr, sr = np.cos(hr), np.sin(hr)
     cp, sp = np.cos(hp), np.sin(hp)

@@ -160,17 +160,26 @@ class Bounds:
         return Bounds(lo, hi)
 
     def project(self, s: np.ndarray) -> np.ndarray:
-        """Bring poses into the box: wrap periodic angles, clip the rest. Shape (..., 6)."""
-        s = np.array(s, dtype=float, copy=True)
+        """Bring poses into the box: wrap periodic angles, take the other angles to the turn nearest
+        the box, clip the rest. Shape (..., 6)."""
+        s = self.nearest_turn(s)
         per = self.periodic
         s[..., per] = self.lo[per] + (s[..., per] - self.lo[per]) % TWO_PI
         keep = ~per
         s[..., keep] = np.clip(s[..., keep], self.lo[keep], self.hi[keep])
         return s
 
+    def nearest_turn(self, s: np.ndarray) -> np.ndarray:
+        """Copy of poses (..., 6) whose angles are shifted by whole turns towards the box's middle."""
+        s = np.array(s, dtype=float, copy=True)
+        idx = list(ANGLE_PARAMS)
+        mid = 0.5 * (self.lo[idx] + self.hi[idx])
+        s[..., idx] += TWO_PI * np.round((mid - s[..., idx]) / TWO_PI)
+        return s
+
     def contains(self, s: np.ndarray, atol: float = 1e-9) -> np.ndarray:
-        """Whether poses (..., 6) lie in the box (periodic angles always do)."""
-        s = np.asarray(s, float)
+        """Whether poses (..., 6) lie in the box (angles compared modulo a full turn)."""
+        s = self.nearest_turn(s)
         inside = (s >= self.lo - atol) & (s <= self.hi + atol)
         inside[..., self.periodic] = True
         return np.all(inside, axis=-1)

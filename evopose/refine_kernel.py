@@ -226,7 +226,10 @@ def _add_pair(uv, J, m, qx, qy, w, H, g):  # pragma: no cover - compiled
 
 @nb.njit(cache=True, fastmath=_FASTMATH, nogil=True)
 def _to_bounds(s, lo, hi, periodic):  # pragma: no cover - compiled
+    """As :meth:`evopose.problem.Bounds.project` for one pose."""
     for d in range(6):
+        if d >= 3:  # angles: the turn nearest the middle of the box
+            s[d] += _TWO_PI * np.round((0.5 * (lo[d] + hi[d]) - s[d]) / _TWO_PI)
         if periodic[d]:
             s[d] = lo[d] + (s[d] - lo[d]) % _TWO_PI
         else:

@@ -78,7 +78,7 @@ class SearchOptions:
     tau: float | None = None
     population: int = 32
     offspring: int = 64
-    immigrants: float = 0.5
+    immigrants: float = 0.8
     screening: int = 8
     refine_steps: int = 10
     max_generations: int = 150

@@ -1,0 +1,88 @@
+"""The ``evopose`` command line: thin typer commands that call one service function each.
+
+Errors become exit codes only here: a malformed input or a bad argument prints one line
+``error: <message>`` on stderr and exits with code 2, never a traceback.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import sys
+from pathlib import Path
+from typing import Annotated
+
+import typer
+from rich.console import Console
+from rich.table import Table
+
+from evopose.fitness import FitnessKind
+
+from .problem_file import ProblemFileError
+from .services import solve_file
+
+#: Exit code of a malformed input or a bad command-line argument.
+USAGE_ERROR = 2
+
+app = typer.Typer(name="evopose", add_completion=False, pretty_exceptions_enable=False)
+
+
+@app.callback()
+def evopose() -> None:
+    """EvoPose Fleet: cooperative 6-DOF pose estimation by evolutionary search."""
+
+
+@app.command("solve")
+def solve_command(
+    problem: Annotated[Path, typer.Argument(metavar="PROBLEM", show_default=False,
+                                            help="Pose-problem file, YAML or JSON (DESIGN.md §3).")],
+    as_json: Annotated[bool, typer.Option("--json", help="Print one JSON object instead of a table.")] = False,
+    seed: Annotated[int | None, typer.Option(min=0, help="Random seed; overrides the file's seed.")] = None,
+    time_budget: Annotated[float | None, typer.Option(min=0, help="Wall-time budget in seconds.")] = None,
+    fitness: Annotated[FitnessKind | None, typer.Option(help="Fitness: robust or the paper's eq. (1).")] = None,
+) -> None:
+    """Find the pose of the model in the views of PROBLEM."""
+    result = solve_file(problem, seed=seed, time_budget=time_budget, fitness=fitness)
+    if as_json:
+        print(json.dumps(result))
+    else:
+        Console().print(solution_table(result))
+
+
+def solution_table(result: dict) -> Table:
+    """A short human-readable table of a solve result (position in metres, angles in degrees)."""
+    pose = result["pose"]
+    table = Table(title="EvoPose solution", show_header=False)
+    table.add_column(style="bold")
+    table.add_column(justify="right")
+    for name in ("x", "y", "z"):
+        table.add_row(name, f"{pose[name]:.3f} m")
+    for name in ("roll", "pitch", "yaw"):
+        table.add_row(name, f"{math.degrees(pose[name]):.2f}°")
+    table.add_row("fitness", f"{result['fitness']:.4g}")
+    table.add_row("generations", str(result["generations"]))
+    table.add_row("time", f"{result['seconds']:.2f} s")
+    table.add_row("converged", f"{'yes' if result['converged'] else 'no'} ({result['stop_reason']})")
+    return table
+
+
+def _fail(message: str, code: int) -> int:
+    print(f"error: {' '.join(message.split())}", file=sys.stderr)
+    return code
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run the CLI on ``argv`` (default: ``sys.argv[1:]``) and return the exit code."""
+    try:
+        code = app(args=argv, prog_name="evopose", standalone_mode=False)
+    except ProblemFileError as err:
+        return _fail(str(err), USAGE_ERROR)
+    except typer.TyperException as err:
+        return _fail(err.format_message(), err.exit_code)
+    except typer.Abort:
+        return _fail("aborted", 1)
+    return code if isinstance(code, int) else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
