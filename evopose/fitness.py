@@ -5,7 +5,10 @@
              the target can move its global minimum.
 ``robust`` — a bounded, two-sided version of the same distance: each image point
              contributes ``min(min_j |p_i - m_j(s)|, tau)`` and each visible model point
-             ``min(min_i |m_j(s) - p_i|, tau)``; the two means are averaged (pixels).
+             ``min(min_i |m_j(s) - p_i|, tau)``; the term is the mean over all of them
+             (pixels). Pooling both directions in one mean matters: averaging each
+             direction separately rewards poses that hide most of the model and match the
+             few marks left visible.
              False image points and missing marks then add a constant that does not
              depend on the pose, and a grid shifted by one row pays for the unmatched
              row in both directions. Visibility uses the model normals when given.
@@ -85,9 +88,7 @@ def view_term(proj: ViewProjection, points: np.ndarray, kind: FitnessKind, tau: 
     img_sum, mod_sum, n_usable = chamfer_sums(u, v, proj.usable, px, py, float(tau), robust)
     if not robust:
         return img_sum  # eq. (1)
-    img_mean = img_sum / len(points)
-    mod_mean = np.where(n_usable > 0, mod_sum / np.maximum(n_usable, 1), tau)
-    return 0.5 * (img_mean + mod_mean)
+    return (img_sum + mod_sum) / (len(points) + n_usable)
 
 
 def step_weights(terms: np.ndarray, weights: np.ndarray, threshold: float | np.ndarray) -> np.ndarray:

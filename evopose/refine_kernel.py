@@ -112,8 +112,7 @@ def view_term_one(uv, usable, px, py, tau, robust, row):  # pragma: no cover - c
     if robust:
         for p in range(P):
             s_img += np.sqrt(min(row[p], tau2))
-        mod_mean = s_mod / cnt if cnt > 0 else tau
-        return 0.5 * (s_img / P + mod_mean)
+        return (s_img + s_mod) / (P + cnt)
     for p in range(P):
         s_img += np.sqrt(row[p])
     return s_img
@@ -142,8 +141,8 @@ def _soft_accumulate(uv, J, usable, px, py, sigma, outlier, w_img, w_mod, H, g, 
             w = np.exp(-d2 * inv2s2) if d2 < cut2 else 0.0
             w_pair[m, p] = w
             row_sum[p] += w
-    a = w_img / P
-    b = w_mod / max(n_usable, 1)
+    a = w_img / (P + n_usable)
+    b = w_mod / (P + n_usable)
     for m in range(M):
         if not usable[m]:
             continue
@@ -186,8 +185,8 @@ def _hard_accumulate(uv, J, usable, px, py, gate2, w_img, w_mod, H, g, row_d2, r
     for m in range(M):
         if usable[m]:
             n_usable += 1
-    a = w_img / P
-    b = w_mod / max(n_usable, 1)
+    a = w_img / (P + n_usable)
+    b = w_mod / (P + n_usable)
     for m in range(M):
         if not usable[m]:
             continue
@@ -315,12 +314,12 @@ def refine_population(poses, fitness, lo, hi, periodic, free, model, normals, us
                 a, b = offsets[k], offsets[k + 1]
                 px = pts[a:b, 0]
                 py = pts[a:b, 1]
-                half = 0.5 * weights[k]
+                w_k = weights[k]
                 if kinds[step] != 1:
-                    _soft_accumulate(uv, J, usable, px, py, sigmas[step, k], outlier, half, half, H, g, w_pair, row)
+                    _soft_accumulate(uv, J, usable, px, py, sigmas[step, k], outlier, w_k, w_k, H, g, w_pair, row)
                 else:
                     gate = scales[step] * taus[k]
-                    _hard_accumulate(uv, J, usable, px, py, gate * gate, half, half, H, g, row, row_m)
+                    _hard_accumulate(uv, J, usable, px, py, gate * gate, w_k, w_k, H, g, row, row_m)
             # damped step (Levenberg–Marquardt), fixed parameters held
             for i in range(6):
                 for j in range(i):

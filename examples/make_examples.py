@@ -37,7 +37,7 @@ class Example:
 
 EXAMPLES: dict[str, Example] = {
     "pioneer_clutter": Example("Pioneer-2 DX-like marked box with 25 % false points and 15 % missing marks",
-                               "box", 1, {"clutter": 0.25, "missing": 0.15}),
+                               "box", 2, {"clutter": 0.25, "missing": 0.15}),
     "airship_imu": Example("Airship-like ellipsoid; roll and pitch constrained by an IMU (eq. 3, +-0.02 rad)",
                            "ellipsoid", 2, imu=True),
     "grid_stereo": Example("Chessboard corners (9 x 6) seen by two cameras (eq. 4)", "grid", 3, {"n_views": 2}),

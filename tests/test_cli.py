@@ -78,7 +78,7 @@ def test_seed_reproduces_the_run():
 
 def test_fitness_and_time_budget_options(tmp_path):
     document = yaml.safe_load((EXAMPLES_DIR / "pioneer_clutter.yaml").read_text(encoding="utf-8"))
-    document["options"] = {"consensus": 0}  # only the time budget can stop it
+    document["options"] = {"consensus": 0, "patience": 100000}  # only the time budget can stop it
     path = tmp_path / "problem.yaml"
     path.write_text(yaml.safe_dump(document), encoding="utf-8")
     out = solve_json(path, "--time-budget", "0.3", "--fitness", "paper")

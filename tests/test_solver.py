@@ -135,11 +135,16 @@ def test_step_rule_drops_a_view_without_the_target():
 
 
 def test_two_views_beat_one_on_depth():
-    sp = make_problem("box", np.random.default_rng(42), noise=2.0, clutter=0.1, missing=0.0, n_views=2)
-    both = solve(sp.problem, seed=0)
-    alone = solve(sp.problem.with_views(sp.problem.views[:1]), seed=0)
-    _assert_solved(sp, both)
-    assert _errors(sp, both.pose)[1] < _errors(sp, alone.pose)[1]
+    """Eq. (4): over a few problems the stereo position error is lower than the single view's."""
+    both_err, alone_err = [], []
+    for seed in (42, 43, 44, 45):
+        sp = make_problem("box", np.random.default_rng(seed), noise=2.0, clutter=0.1, missing=0.0, n_views=2)
+        both = solve(sp.problem, seed=0)
+        alone = solve(sp.problem.with_views(sp.problem.views[:1]), seed=0)
+        _assert_solved(sp, both)
+        both_err.append(_errors(sp, both.pose)[1])
+        alone_err.append(_errors(sp, alone.pose)[1])
+    assert np.mean(both_err) < np.mean(alone_err), (both_err, alone_err)
 
 
 def test_paper_fitness_is_selectable_and_evaluated():
