@@ -107,5 +107,8 @@ def refine(objective: PoseObjective, poses: np.ndarray, fitness: np.ndarray | No
                       np.ascontiguousarray(objective.weights, dtype=float), np.ascontiguousarray(objective.taus),
                       sigmas, packed.pts, packed.offsets, objective.kind == "robust", kinds, values,
                       SOFT_OUTLIER, damping)
-    objective.evaluations += len(poses) * int(np.count_nonzero(kinds)) * 2
+    # count every projection of the model as an evaluation: 7 per step (pose + 6 Jacobian columns),
+    # one fitness per hard step, and the fitness before the first hard step and at the end
+    n_hard = int(np.count_nonzero(kinds == STEP_KINDS["hard"]))
+    objective.evaluations += len(poses) * (7 * len(kinds) + n_hard + 2)
     return poses, fitness

@@ -60,7 +60,11 @@ class SearchOptions:
         the weighted tau: 0 perfect, 1 nothing matched) is at most ``good_quality``.
     good_quality : float
     min_starts : int
-        Independent (screened, refined) random starts before the consensus or stall rule may stop.
+        Independent (screened, refined) random starts before the consensus or stall rule may stop...
+    confident_quality : float
+        ...when the best match quality is at most this; otherwise
+    min_starts_unsure : int
+        starts are needed (a poor best match may be a wrong basin: search longer).
     patience : int
         Stop ("stalled") when the best has not improved for this many generations after ``min_starts``.
     min_generations : int
@@ -88,6 +92,8 @@ class SearchOptions:
     consensus: int = 2
     good_quality: float = 0.5
     min_starts: int = 256
+    confident_quality: float = 0.3
+    min_starts_unsure: int = 1024
     patience: int = 6
     min_generations: int = 1
     view_reject: float | None = 0.6
@@ -313,7 +319,9 @@ class EvoPose:
         if (state.generation >= o.min_generations and hinted and o.consensus
                 and len(state.best_supporters) >= o.consensus and self.is_good(state.best_fitness)):
             return "consensus"  # a team-mate's hint confirmed by the own search: no need for more starts
-        if state.generation >= o.min_generations and state.starts >= o.min_starts:
+        confident = self.fitness_scale is None or state.best_fitness <= o.confident_quality * self.fitness_scale
+        needed = o.min_starts if confident else o.min_starts_unsure
+        if state.generation >= o.min_generations and state.starts >= needed:
             if o.consensus and len(state.best_supporters) >= o.consensus and self.is_good(state.best_fitness):
                 return "consensus"
             if state.generation - state.improved_at >= o.patience:
@@ -371,7 +379,10 @@ class Solution:
         Each view's term ``d^(k)`` at the best pose.
     view_weights : array, shape (V,)
         Weights in force at the end (the step rule may have set some to 0).
-    generations, evaluations : int
+    generations : int
+    evaluations : int
+        Projections of the model (fitness evaluations, screening, and the 6 Jacobian
+        columns of every refinement step): the budget to compare with other optimisers.
     seconds : float
     converged : bool
         Stopped because the pose is good (consensus or threshold), not because a budget ran out.

@@ -13,6 +13,8 @@ from .search import GOOD_REASONS, EvoPose, EvoPoseState, SearchOptions, Solution
 
 #: Truncation distance of the coarse fitness used to screen random starts, in units of tau.
 SCREEN_TAU_SCALE = 4.0
+#: Annealing time at which the refinement of children and hints starts (they are near good poses).
+LOCAL_ANNEALING_START = 0.5
 #: Generation after which the step-function weight rule of eq. (4) is first applied.
 STEP_RULE_FROM_GENERATION = 2
 
@@ -53,6 +55,7 @@ def run(problem: PoseProblem, options: SearchOptions, rng: np.random.Generator,
     objective = PoseObjective(problem, options.fitness, options.tau)
     coarse = PoseObjective(problem, options.fitness, options.tau, tau_scale=SCREEN_TAU_SCALE)
     schedule = annealing(options.refine_steps)
+    local_schedule = annealing(max(options.refine_steps // 2, 1), start=LOCAL_ANNEALING_START)
     evo = EvoPose(problem, options, rng, objective.fitness_scale())
     state = evo.start(initial)
     reason = None
@@ -65,7 +68,11 @@ def run(problem: PoseProblem, options: SearchOptions, rng: np.random.Generator,
         candidates, origins = screen(coarse, candidates, origins, state.fresh_from, state.fresh_keep)
         fitness = objective(candidates)
         if options.refine_steps:
-            candidates, fitness = refine(objective, candidates, fitness, schedule)
+            # fresh starts explore (the whole annealing); children and hints exploit (its narrow end)
+            fresh = origins >= state.fresh_from if state.fresh_keep else np.zeros(len(origins), bool)
+            for rows, sched in ((fresh, schedule), (~fresh, local_schedule)):
+                if np.any(rows):
+                    candidates[rows], fitness[rows] = refine(objective, candidates[rows], fitness[rows], sched)
         evo.tell(state, candidates, fitness, origins)
         if (options.view_reject is not None and objective.n_views > 1
                 and state.generation >= STEP_RULE_FROM_GENERATION):
