@@ -122,8 +122,13 @@ def _random_attitude(kind: str, rng: np.random.Generator) -> np.ndarray:
 
 def make_problem(kind: str, rng: np.random.Generator, *, distance: float | None = None,
                  noise: float | None = None, clutter: float | None = None, missing: float | None = None,
-                 n_views: int = 1, size_px: float | None = None, min_visible: int = 6) -> SyntheticProblem:
-    """One random problem of ``kind``; unspecified difficulty parameters are drawn at random."""
+                 n_views: int = 1, size_px: float | None = None, min_visible: int = 6,
+                 scene_points: int = 0) -> SyntheticProblem:
+    """One random problem of ``kind``; unspecified difficulty parameters are drawn at random.
+
+    ``scene_points`` adds that many false points anywhere in each image (other corners of the
+    scene), beside the ``clutter`` fraction scattered around the target.
+    """
     distance = rng.uniform(5, 30) if distance is None else distance
     noise = rng.uniform(0.5, 2.0) if noise is None else noise
     clutter = rng.uniform(0, 0.3) if clutter is None else clutter
@@ -152,22 +157,13 @@ def make_problem(kind: str, rng: np.random.Generator, *, distance: float | None 
             cams.append(Camera(f, f, WIDTH / 2, HEIGHT / 2, WIDTH, HEIGHT, world_from_camera=T))
         views, corr, ok = [], [], True
         for cam in cams:
-            proj = project_into_view(model, View(cam, np.zeros((1, 2))), true_pose[None])
-            uv, vis = proj.uv[0], proj.usable[0] & cam.in_image(proj.uv[0])
-            idx = np.nonzero(vis)[0]
-            keep = idx[rng.random(len(idx)) >= missing]
-            if len(keep) < min_visible:
+            seen = observe(model, cam, true_pose, rng, noise=noise, clutter=clutter, missing=missing,
+                           scene_points=scene_points, min_visible=min_visible)
+            if seen is None:
                 ok = False
                 break
-            pts = uv[keep] + noise * rng.standard_normal((len(keep), 2))
-            n_false = int(round(clutter * len(keep) / max(1 - clutter, 1e-9)))
-            lo_box = uv[idx].min(axis=0) - 0.25 * np.ptp(uv[idx], axis=0)
-            hi_box = uv[idx].max(axis=0) + 0.25 * np.ptp(uv[idx], axis=0)
-            false_pts = rng.uniform(lo_box, hi_box, (n_false, 2))
-            all_pts = np.concatenate([pts, false_pts])
-            perm = rng.permutation(len(all_pts))
-            views.append(View(cam, all_pts[perm]))
-            corr.append((keep, pts))
+            views.append(seen[0])
+            corr.append(seen[1])
         if ok:
             break
     else:
@@ -176,6 +172,39 @@ def make_problem(kind: str, rng: np.random.Generator, *, distance: float | None 
     problem = PoseProblem(model, tuple(views), bounds)
     return SyntheticProblem(kind, problem, true_pose, corr, symmetries, distance, noise, clutter, missing,
                             {"focal": f})
+
+
+def observe(model: Model, camera: Camera, pose: np.ndarray, rng: np.random.Generator, *, noise: float,
+            clutter: float, missing: float, scene_points: int = 0,
+            min_visible: int = 6) -> tuple[View, tuple[np.ndarray, np.ndarray]] | None:
+    """What ``camera`` sees of ``model`` at ``pose`` (world_from_target, (6,)): a view and its true matches.
+
+    Visible marks get Gaussian pixel ``noise``, a fraction ``missing`` is dropped, false points
+    make up a fraction ``clutter`` of the result (scattered around the target), and
+    ``scene_points`` more fall anywhere in the image. None when fewer than ``min_visible`` marks remain.
+
+    Returns
+    -------
+    view : View with the shuffled points, shape (P, 2)
+    correspondences : (model indices (K,), their noisy image points (K, 2))
+    """
+    proj = project_into_view(model, View(camera, np.zeros((1, 2))), np.asarray(pose, float)[None])
+    uv, vis = proj.uv[0], proj.usable[0] & camera.in_image(proj.uv[0])
+    idx = np.nonzero(vis)[0]
+    keep = idx[rng.random(len(idx)) >= missing]
+    if len(keep) < min_visible:
+        return None
+    pts = uv[keep] + noise * rng.standard_normal((len(keep), 2))
+    n_false = int(round(clutter * len(keep) / max(1 - clutter, 1e-9)))
+    lo_box = uv[idx].min(axis=0) - 0.25 * np.ptp(uv[idx], axis=0)
+    hi_box = uv[idx].max(axis=0) + 0.25 * np.ptp(uv[idx], axis=0)
+    false_pts = rng.uniform(lo_box, hi_box, (n_false, 2))
+    all_pts = np.concatenate([pts, false_pts])
+    if scene_points:
+        scene = rng.uniform([0, 0], [camera.width, camera.height], (scene_points, 2))
+        all_pts = np.concatenate([all_pts, scene])
+    perm = rng.permutation(len(all_pts))
+    return View(camera, all_pts[perm]), (keep, pts)
 
 
 def pose_errors(estimate: np.ndarray, truth: np.ndarray, symmetries: list[np.ndarray],

@@ -24,11 +24,13 @@ from typing import Literal
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .kernels import chamfer_sums
+from .kernels import chamfer_matches, chamfer_sums
 from .pose import rotation_from_euler
 from .problem import Model, PoseProblem, View
 
 FitnessKind = Literal["robust", "paper"]
+#: A view judges a pose's match only if at least this fraction of the model points is visible in it.
+MIN_VISIBLE_FRACTION = 0.25
 #: Bounds of the automatic truncation distance (pixels).
 TAU_MIN_PX, TAU_MAX_PX = 4.0, 30.0
 
@@ -170,6 +172,41 @@ class PoseObjective:
     def fitness_scale(self) -> float | None:
         """Fitness of a pose that matches nothing (robust kind): ``sum_k W_k tau_k``; None for the paper's."""
         return float(self.weights @ self.taus) if self.kind == "robust" else None
+
+    def unmatched_fraction(self, pose: np.ndarray, min_visible_fraction: float = MIN_VISIBLE_FRACTION) -> float:
+        """Share of the visible model points without a one-to-one image match at ``pose`` (6,).
+
+        A visible model point is matched when its nearest image point lies within tau and has
+        it as its own nearest model point (mutual nearest neighbours). Unlike the fitness,
+        this ignores false image points, so it tells a right pose in heavy clutter from a
+        wrong one: 0 when every visible mark is matched, 1 when none is. Views are averaged
+        with their current weights; a view where fewer than ``min_visible_fraction`` of the
+        model points (and at least 4) are visible counts as 1. The paper's fitness kind
+        gives 1 (no truncation distance to judge a match by).
+        """
+        if self.kind != "robust":
+            return 1.0
+        pose = np.atleast_2d(pose)
+        n_model = len(self.problem.model.points)
+        need = max(4, int(np.ceil(min_visible_fraction * n_model)))
+        out = np.ones(self.n_views)
+        for k, view in enumerate(self.problem.views):
+            if self.weights[k] == 0:
+                continue
+            proj = self.project(k, pose)
+            u = np.ascontiguousarray(proj.uv[..., 0])
+            v = np.ascontiguousarray(proj.uv[..., 1])
+            img_nn, _, mod_nn, mod_d2 = chamfer_matches(u, v, proj.usable, np.ascontiguousarray(view.points[:, 0]),
+                                                        np.ascontiguousarray(view.points[:, 1]))
+            visible = proj.usable[0]
+            n_visible = int(np.count_nonzero(visible))
+            if n_visible < need:
+                continue
+            m = np.nonzero(visible & (mod_d2[0] <= self.taus[k] ** 2))[0]
+            mutual = img_nn[0, mod_nn[0, m]] == m
+            out[k] = 1.0 - np.count_nonzero(mutual) / n_visible
+        self.evaluations += 1
+        return float(out @ self.weights / self.weights.sum())
 
     def normalised(self, terms: np.ndarray) -> np.ndarray:
         """Terms divided by each view's truncation distance (robust kind), shape (..., V)."""

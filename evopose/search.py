@@ -62,7 +62,9 @@ class SearchOptions:
     min_starts : int
         Independent (screened, refined) random starts before the consensus or stall rule may stop...
     confident_quality : float
-        ...when the best match quality is at most this; otherwise
+        ...when the best match quality is at most this, or at most ``confident_unmatched``
+        of the best pose's visible marks lack a one-to-one image match; otherwise
+    confident_unmatched : float
     min_starts_unsure : int
         starts are needed (a poor best match may be a wrong basin: search longer).
     patience : int
@@ -93,6 +95,7 @@ class SearchOptions:
     good_quality: float = 0.5
     min_starts: int = 256
     confident_quality: float = 0.3
+    confident_unmatched: float = 0.1
     min_starts_unsure: int = 1024
     patience: int = 6
     min_generations: int = 1
@@ -144,6 +147,8 @@ class EvoPoseState:
     fresh_keep: int = 0
     starts: int = 0
     improved_at: int = 0
+    #: share of the best pose's visible marks left unmatched (clutter-blind match quality; 1: unknown)
+    best_unmatched: float = 1.0
 
     @property
     def best_pose(self) -> np.ndarray:
@@ -293,9 +298,20 @@ class EvoPose:
         state.history.append(float(fit[0]))
         return state
 
-    def is_good(self, fitness: float) -> bool:
-        """Match quality within ``good_quality`` (always True when the quality is unknown)."""
-        return self.fitness_scale is None or fitness <= self.options.good_quality * self.fitness_scale
+    def is_good(self, fitness: float, unmatched: float = 1.0) -> bool:
+        """Match quality within ``good_quality`` (always True when the quality is unknown).
+
+        The quality is the fitness over its no-match value, or, when lower, the share of
+        visible marks left unmatched (which false image points do not inflate).
+        """
+        return (self.fitness_scale is None or fitness <= self.options.good_quality * self.fitness_scale
+                or unmatched <= self.options.good_quality)
+
+    def is_confident(self, state: EvoPoseState) -> bool:
+        """The best match is so good that ``min_starts`` starts suffice (else ``min_starts_unsure``)."""
+        o = self.options
+        return (self.fitness_scale is None or state.best_fitness <= o.confident_quality * self.fitness_scale
+                or state.best_unmatched <= o.confident_unmatched)
 
     def _basin_mask(self, pop: np.ndarray, R_all: np.ndarray):
         """``near(i, js)``: which of the poses ``js`` share pose ``i``'s basin (rotations precomputed)."""
@@ -317,12 +333,13 @@ class EvoPose:
             return "good_fitness"
         hinted = any(x < 0 for x in state.best_supporters)
         if (state.generation >= o.min_generations and hinted and o.consensus
-                and len(state.best_supporters) >= o.consensus and self.is_good(state.best_fitness)):
+                and len(state.best_supporters) >= o.consensus
+                and self.is_good(state.best_fitness, state.best_unmatched)):
             return "consensus"  # a team-mate's hint confirmed by the own search: no need for more starts
-        confident = self.fitness_scale is None or state.best_fitness <= o.confident_quality * self.fitness_scale
-        needed = o.min_starts if confident else o.min_starts_unsure
+        needed = o.min_starts if self.is_confident(state) else o.min_starts_unsure
         if state.generation >= o.min_generations and state.starts >= needed:
-            if o.consensus and len(state.best_supporters) >= o.consensus and self.is_good(state.best_fitness):
+            if (o.consensus and len(state.best_supporters) >= o.consensus
+                    and self.is_good(state.best_fitness, state.best_unmatched)):
                 return "consensus"
             if state.generation - state.improved_at >= o.patience:
                 return "stalled"

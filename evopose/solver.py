@@ -15,6 +15,8 @@ from .search import GOOD_REASONS, EvoPose, EvoPoseState, SearchOptions, Solution
 SCREEN_TAU_SCALE = 4.0
 #: Annealing time at which the refinement of children and hints starts (they are near good poses).
 LOCAL_ANNEALING_START = 0.5
+#: Final polish of the best pose: hard nearest-neighbour steps (accepted only when the fitness drops).
+POLISH_SCHEDULE = annealing(1, hard=6, start=1.0)
 #: Generation after which the step-function weight rule of eq. (4) is first applied.
 STEP_RULE_FROM_GENERATION = 2
 
@@ -73,7 +75,10 @@ def run(problem: PoseProblem, options: SearchOptions, rng: np.random.Generator,
             for rows, sched in ((fresh, schedule), (~fresh, local_schedule)):
                 if np.any(rows):
                     candidates[rows], fitness[rows] = refine(objective, candidates[rows], fitness[rows], sched)
+        best_before = state.best_fitness
         evo.tell(state, candidates, fitness, origins)
+        if state.best_fitness != best_before:
+            state.best_unmatched = objective.unmatched_fraction(state.best_pose)
         if (options.view_reject is not None and objective.n_views > 1
                 and state.generation >= STEP_RULE_FROM_GENERATION):
             old = objective.weights.copy()
@@ -81,16 +86,22 @@ def run(problem: PoseProblem, options: SearchOptions, rng: np.random.Generator,
             if not np.array_equal(old, new_w):  # eq. (4) changed: fitness values must be recomputed
                 state.fitness = objective(state.population)
                 state.best_supporters = set()
+                state.best_unmatched = objective.unmatched_fraction(state.best_pose)
                 evo.fitness_scale = objective.fitness_scale()
         if on_generation is not None:
             on_generation(state)
         reason = evo.stop_reason(state, objective.evaluations + coarse.evaluations, time.perf_counter() - t0)
+    if options.refine_steps:
+        polished, fit = refine(objective, state.best_pose[None], np.array([state.best_fitness]), POLISH_SCHEDULE)
+        i = int(np.argmin(state.fitness))
+        state.population[i], state.fitness[i] = polished[0], fit[0]
     best = state.best_pose
     terms = objective.view_terms(best[None])[0]
     solution = Solution(
         pose=best, fitness=state.best_fitness, view_terms=terms, view_weights=objective.weights.copy(),
         generations=state.generation, evaluations=objective.evaluations + coarse.evaluations,
-        seconds=time.perf_counter() - t0, converged=reason in GOOD_REASONS and evo.is_good(state.best_fitness),
+        seconds=time.perf_counter() - t0,
+        converged=reason in GOOD_REASONS and evo.is_good(state.best_fitness, state.best_unmatched),
         stop_reason=reason,
         history=list(state.history), from_hint=state.best_from_hint, problem=problem, options=options)
     return solution, state
@@ -127,8 +138,8 @@ def track(previous: Solution, new_views: list[View] | tuple[View, ...], *, probl
     """Warm-started pose for the next frame (eq. 2): refine the previous pose on the new views.
 
     The previous pose is refined locally; if the match is then lost (normalised
-    robust term above ``lost_quality``), the search re-initialises from scratch with
-    the previous pose as a hint.
+    robust term, or the share of visible marks without a one-to-one match, above
+    ``lost_quality``), the search re-initialises from scratch with the previous pose as a hint.
 
     Parameters
     ----------
@@ -156,7 +167,8 @@ def track(previous: Solution, new_views: list[View] | tuple[View, ...], *, probl
     i = int(np.argmin(fit))
     terms = objective.view_terms(pose[i][None])[0]
     quality = float(np.sum(objective.base_weights * terms / objective.taus) / np.sum(objective.base_weights))
-    if options.fitness == "robust" and quality <= lost_quality:
+    if (options.fitness == "robust" and quality <= lost_quality
+            and objective.unmatched_fraction(pose[i]) <= lost_quality):
         return Solution(pose=pose[i], fitness=float(fit[i]), view_terms=terms,
                         view_weights=objective.weights.copy(), generations=0,
                         evaluations=objective.evaluations, seconds=time.perf_counter() - t0, converged=True,

@@ -1,0 +1,51 @@
+"""Benchmark results as markdown: each benchmark writes one section file, this assembles BENCHMARKS.md.
+
+    python -m benchmarks.report            # benchmarks/results/*.md -> BENCHMARKS.md
+
+Sections keep the command that produced them, so a reader can re-run any one of them.
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+RESULTS = Path(__file__).resolve().parent / "results"
+ROOT = Path(__file__).resolve().parents[1]
+#: Order of the sections in BENCHMARKS.md (others follow alphabetically).
+ORDER = ("solvers", "kernels", "features", "footprint")
+
+INTRO = """# Benchmarks
+
+Measured on this project's 2-core development machine, which is shared and noisy: compare solvers
+by the ratios measured side by side in one run, not by absolute times across sections.
+`make bench` re-runs every section and re-assembles this file (`python -m benchmarks.report`).
+"""
+
+
+def md_table(header: list[str], rows: list[list]) -> list[str]:
+    """A GitHub markdown table as lines."""
+    out = ["| " + " | ".join(header) + " |", "|" + "|".join("---" for _ in header) + "|"]
+    out += ["| " + " | ".join(str(c) for c in row) + " |" for row in rows]
+    return out
+
+
+def write_section(path: Path, title: str, body: str) -> None:
+    """Write one section file (``## title`` + body)."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(f"## {title}\n\n{body.rstrip()}\n")
+
+
+def assemble(results: Path = RESULTS, out: Path = ROOT / "BENCHMARKS.md") -> Path:
+    """Concatenate the section files in :data:`ORDER` into ``out``."""
+    files = sorted(results.glob("*.md"), key=lambda p: (ORDER.index(p.stem) if p.stem in ORDER else len(ORDER),
+                                                        p.stem))
+    parts = [INTRO] + [f.read_text() for f in files]
+    out.write_text("\n".join(p.rstrip() + "\n" for p in parts))
+    return out
+
+
+if __name__ == "__main__":
+    print(assemble())
+    sys.exit(0)
