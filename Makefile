@@ -24,8 +24,11 @@ test: $(STAMP)
 examples: $(STAMP)
 	$(PY) -m examples.make_examples
 
+# Long (tens of minutes): each benchmark writes benchmarks/results/<name>.md, then BENCHMARKS.md is assembled.
 bench: $(STAMP)
-	$(PY) -m benchmarks.run_solvers --out BENCHMARKS.md
+	NUMBA_NUM_THREADS=1 $(PY) -m benchmarks.run_solvers
+	NUMBA_NUM_THREADS=1 $(PY) -m benchmarks.bench_kernels
+	$(PY) -m benchmarks.report
 
 # Re-pin every dependency to what is installed in the venv now.
 lock: $(STAMP)

@@ -34,6 +34,8 @@ GROUPS: dict[str, tuple[tuple[str, ...], dict]] = {
     "grid, 150 image points": (("grid",), {"clutter": 0.1, "scene_points": 90}),
 }
 CMA_BUDGET = 100_000
+#: True marks in the image from which a problem counts as well-posed.
+WELL_POSED_MARKS = 8
 
 
 @dataclass
@@ -52,6 +54,7 @@ class Outcome:
     evaluations: int
     n_model: int
     n_image: int
+    n_true: int
 
 
 @dataclass
@@ -63,7 +66,7 @@ class Run:
         rot, pos = pose_errors(pose, sp.true_pose, sp.symmetries, sp.problem.model.points.mean(axis=0))
         out = Outcome(solver, problem, group, sp.kind, is_success(rot, pos, sp.distance), float(np.rad2deg(rot)), pos,
                       pos / sp.distance, seconds, evaluations, len(sp.problem.model.points),
-                      sum(len(v.points) for v in sp.problem.views))
+                      sum(len(v.points) for v in sp.problem.views), min(len(c[0]) for c in sp.correspondences))
         self.outcomes.append(out)
         return out
 
@@ -179,6 +182,21 @@ def markdown(result: Run, args: argparse.Namespace, seconds: float) -> str:
             lines += md_table(["target"] + HEADER[1:],
                               [[k] + summary_rows(result, "EvoPose", group, k)[1:] for k in kinds])
         lines.append("")
+    lines.append("### Well-posed problems")
+    lines.append("")
+    lines.append(f"Problems where the oracle succeeds and at least {WELL_POSED_MARKS} true marks are in the image "
+                 "(with 6 marks, 2 of them false points, no correspondence-free method can be sure):")
+    lines.append("")
+    oracle_ok = {o.problem for o in result.select(solver="solvePnP oracle") if o.success}
+    rows = []
+    for group in GROUPS:
+        outs = [o for o in result.select(solver="EvoPose", group=group)
+                if o.problem in oracle_ok and o.n_true >= WELL_POSED_MARKS]
+        if outs:
+            rows.append([group, len(outs), f"{100 * np.mean([o.success for o in outs]):.1f} %",
+                         f"{1000 * _median([o.seconds for o in outs]):.1f}"])
+    lines += md_table(["group", "problems", "EvoPose success", "median time (ms)"], rows)
+    lines.append("")
     lines.append("### Side by side")
     lines.append("")
     rows = paired_ratios(result)

@@ -28,6 +28,11 @@ from .pose import rotation_angle, rotation_from_euler, wrap_angle
 from .problem import PoseProblem
 
 
+#: Model x image point pairs at which ``min_starts`` starts suffice; fewer pairs need proportionally more.
+REFERENCE_PAIRS = 400
+MAX_START_FACTOR = 4.0
+
+
 @dataclass(frozen=True)
 class SearchOptions:
     """Tuning of the search; the defaults solve the benchmark problems.
@@ -60,7 +65,8 @@ class SearchOptions:
         the weighted tau: 0 perfect, 1 nothing matched) is at most ``good_quality``.
     good_quality : float
     min_starts : int
-        Independent (screened, refined) random starts before the consensus or stall rule may stop...
+        Independent (screened, refined) random starts before the consensus or stall rule may stop
+        (times up to 4 when the problem has fewer than ``REFERENCE_PAIRS`` model x image point pairs)...
     confident_quality : float
         ...when the best match quality is at most this, or at most ``confident_unmatched``
         of the best pose's visible marks lack a one-to-one image match; otherwise
@@ -200,6 +206,11 @@ class EvoPose:
         pos_small = 0.03 * self.reference_distance
         self.sigma_small = np.minimum(np.r_[[pos_small] * 3, [np.deg2rad(8)] * 3], width / 2)
         self.sigma_large = np.minimum(np.r_[[4 * pos_small] * 3, [np.deg2rad(60)] * 3], width / 2)
+        # few image points for many model points: a random start rarely lands in the right basin,
+        # but every evaluation is cheap, so ask for more starts (up to MAX_START_FACTOR times)
+        n_img = np.mean([len(v.points) for v in problem.views])
+        pairs = len(problem.model.points) * n_img
+        self.start_factor = float(np.clip(REFERENCE_PAIRS / pairs, 1.0, MAX_START_FACTOR))
 
     # -- state -------------------------------------------------------------------------
     def start(self, initial: np.ndarray | None = None) -> EvoPoseState:
@@ -336,7 +347,7 @@ class EvoPose:
                 and len(state.best_supporters) >= o.consensus
                 and self.is_good(state.best_fitness, state.best_unmatched)):
             return "consensus"  # a team-mate's hint confirmed by the own search: no need for more starts
-        needed = o.min_starts if self.is_confident(state) else o.min_starts_unsure
+        needed = (o.min_starts if self.is_confident(state) else o.min_starts_unsure) * self.start_factor
         if state.generation >= o.min_generations and state.starts >= needed:
             if (o.consensus and len(state.best_supporters) >= o.consensus
                     and self.is_good(state.best_fitness, state.best_unmatched)):
