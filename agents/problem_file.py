@@ -21,7 +21,11 @@ from pydantic import (AfterValidator, BaseModel, BeforeValidator, ConfigDict, Fi
 from evopose import Bounds, Camera, Model, PoseProblem, SearchOptions, Solution, View
 from evopose.pose import PARAM_NAMES, pose_from_matrix, quaternion_from_euler
 
+from scenarios.errors import WorldError
+from scenarios.target import TargetModel, load_model, resolve_model_path
+
 from .documents import DocumentError, UnknownKey, describe, read_mapping, validation_message
+from .world_services import detect_marks, read_image
 
 #: Range searched for an angle the file does not mention: a full turn.
 FULL_TURN = (-math.pi, math.pi)
@@ -96,10 +100,12 @@ class PoseSpec(Spec):
 
 
 class ModelSpec(Spec):
-    """The target's feature points in the target frame, optionally with outward normals."""
+    """The target's feature points in the target frame, optionally with outward normals; or a model ``file``
+    (``scenarios/models`` format: marks with colours, relative to the problem file, or a shipped model name)."""
 
-    points: Annotated[list[Point3], Field(min_length=1)]
+    points: Annotated[list[Point3], Field(min_length=1)] | None = None
     normals: list[Normal] | None = None
+    file: str | None = None
 
     @field_validator("normals")
     @classmethod
@@ -109,6 +115,14 @@ class ModelSpec(Spec):
         if normals is not None and points is not None and len(normals) != len(points):
             raise ValueError(f"expected one normal per point ({len(points)}), got {len(normals)}")
         return normals
+
+    @model_validator(mode="after")
+    def _points_or_file(self) -> "ModelSpec":
+        if (self.points is None) == (self.file is None):
+            raise ValueError("give either points or file")
+        if self.file is not None and self.normals is not None:
+            raise ValueError("normals come from the model file; leave them out")
+        return self
 
     def to_model(self) -> Model:
         return Model(np.array(self.points), None if self.normals is None else np.array(self.normals))
@@ -133,11 +147,18 @@ class CameraSpec(Spec):
 
 
 class ViewSpec(Spec):
-    """One camera's unordered image points and its weight in eq. (4)."""
+    """One camera's unordered image points (or an ``image`` file to extract them from) and its weight in eq. (4)."""
 
     camera: CameraSpec
-    points: Annotated[list[Point2], Field(min_length=1)]
+    points: Annotated[list[Point2], Field(min_length=1)] | None = None
+    image: str | None = None
     weight: Annotated[float, Field(ge=0)] = 1.0
+
+    @model_validator(mode="after")
+    def _points_or_image(self) -> "ViewSpec":
+        if (self.points is None) == (self.image is None):
+            raise ValueError("give either points or image")
+        return self
 
     def to_view(self) -> View:
         return View(self.camera.to_camera(), np.array(self.points), self.weight)
@@ -224,8 +245,75 @@ def _search_options(spec: ProblemSpec) -> SearchOptions:
         raise ProblemFileError(f"options: {err}") from None
 
 
-def parse_problem(document: dict) -> tuple[PoseProblem, SearchOptions, int | None]:
-    """Validate a problem-file mapping and build the evopose objects.
+@dataclasses.dataclass
+class ProblemInputs:
+    """A loaded problem with what it was made from: the images of image views and the target-model file."""
+
+    problem: PoseProblem
+    options: SearchOptions
+    seed: int | None
+    images: list[np.ndarray | None]
+    target: TargetModel | None
+
+
+def _model(spec: ProblemSpec, base: Path | None) -> tuple[Model, TargetModel | None]:
+    if spec.model.file is None:
+        return spec.model.to_model(), None
+    try:
+        target = load_model(resolve_model_path(spec.model.file, base))
+    except WorldError as err:
+        raise ProblemFileError(f"model.file: {err}") from None
+    return target.evopose_model(), target
+
+
+def _views(spec: ProblemSpec, base: Path | None, target: TargetModel | None):
+    views, images = [], []
+    for i, view in enumerate(spec.views):
+        if view.image is None:
+            views.append(view.to_view())
+            images.append(None)
+            continue
+        path = Path(view.image)
+        if base is not None and not path.is_absolute():
+            path = base / path
+        try:
+            image = read_image(path)
+        except WorldError as err:
+            raise ProblemFileError(f"views[{i}].image: {err}") from None
+        camera = view.camera.to_camera()
+        if image.shape[:2] != (camera.height, camera.width):
+            raise ProblemFileError(f"views[{i}].image: {path} is {image.shape[1]}x{image.shape[0]}, "
+                                   f"the camera is {camera.width}x{camera.height}")
+        points = detect_marks(image, None if target is None else target.palette).points
+        if len(points) == 0:
+            raise ProblemFileError(f"views[{i}].image: no marks found in {path}")
+        views.append(View(camera, points, view.weight))
+        images.append(image)
+    return tuple(views), images
+
+
+def parse_inputs(document: dict, base: str | Path | None = None) -> ProblemInputs:
+    """Validate a problem-file mapping and build the evopose objects; paths are relative to ``base``.
+
+    Raises
+    ------
+    ProblemFileError
+        With one line naming the first offending field.
+    """
+    try:
+        spec = ProblemSpec.model_validate(document)
+    except ValidationError as err:
+        raise ProblemFileError(validation_message(err)) from None
+    base = None if base is None else Path(base)
+    model, target = _model(spec, base)
+    views, images = _views(spec, base, target)
+    hints = np.array([hint.vector() for hint in spec.hints]).reshape(-1, 6)
+    problem = PoseProblem(model, views, _bounds(spec), hints)
+    return ProblemInputs(problem, _search_options(spec), spec.seed, images, target)
+
+
+def parse_problem(document: dict, base: str | Path | None = None) -> tuple[PoseProblem, SearchOptions, int | None]:
+    """Validate a problem-file mapping and build the evopose objects (see :func:`parse_inputs`).
 
     Returns
     -------
@@ -238,13 +326,17 @@ def parse_problem(document: dict) -> tuple[PoseProblem, SearchOptions, int | Non
     ProblemFileError
         With one line naming the first offending field.
     """
+    inputs = parse_inputs(document, base)
+    return inputs.problem, inputs.options, inputs.seed
+
+
+def read_problem(path: str | Path) -> ProblemInputs:
+    """Read a YAML or JSON pose-problem file with its images; see :func:`parse_inputs`."""
     try:
-        spec = ProblemSpec.model_validate(document)
-    except ValidationError as err:
-        raise ProblemFileError(validation_message(err)) from None
-    hints = np.array([hint.vector() for hint in spec.hints]).reshape(-1, 6)
-    problem = PoseProblem(spec.model.to_model(), tuple(v.to_view() for v in spec.views), _bounds(spec), hints)
-    return problem, _search_options(spec), spec.seed
+        document = read_mapping(path)
+    except DocumentError as err:
+        raise ProblemFileError(str(err)) from None
+    return parse_inputs(document, Path(path).parent)
 
 
 def load_problem(path: str | Path) -> tuple[PoseProblem, SearchOptions, int | None]:
@@ -255,11 +347,8 @@ def load_problem(path: str | Path) -> tuple[PoseProblem, SearchOptions, int | No
     ProblemFileError
         The file cannot be read, is not YAML/JSON, its top level is not a mapping, or a field is invalid.
     """
-    try:
-        document = read_mapping(path)
-    except DocumentError as err:
-        raise ProblemFileError(str(err)) from None
-    return parse_problem(document)
+    inputs = read_problem(path)
+    return inputs.problem, inputs.options, inputs.seed
 
 
 def _pose_dict(pose: np.ndarray) -> dict[str, float]:

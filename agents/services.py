@@ -5,26 +5,78 @@ from __future__ import annotations
 import dataclasses
 from pathlib import Path
 
-from evopose import solve
+import numpy as np
+
+from evopose import PoseProblem, SearchOptions, View, solve
 from evopose.fitness import FitnessKind
 
-from .problem_file import load_problem, solution_to_dict
+from .problem_file import CameraSpec, ProblemFileError, ProblemInputs, read_problem, solution_to_dict
 
 
 def solve_file(path: str | Path, *, seed: int | None = None, time_budget: float | None = None,
-               fitness: FitnessKind | None = None) -> dict:
+               fitness: FitnessKind | None = None, overlay: str | Path | None = None) -> dict:
     """Solve the pose-problem file at ``path`` (DESIGN.md §3) and return the output object.
 
     ``seed``, ``time_budget`` and ``fitness`` override the file's ``seed`` and ``options`` when given.
+    Views may give an ``image`` instead of ``points`` (marks are extracted first). ``overlay`` writes a
+    PNG of the first view: its image points and the model projected at the estimated pose.
 
     Raises
     ------
     ProblemFileError
         The file is unreadable or malformed.
     """
-    problem, options, file_seed = load_problem(path)
+    return _solve_inputs(read_problem(path), seed, time_budget, fitness, overlay)
+
+
+def solve_image(image: str | Path, model: str | Path, camera: str | Path, *, seed: int | None = None,
+                time_budget: float | None = None, fitness: FitnessKind | None = None,
+                overlay: str | Path | None = None) -> dict:
+    """Solve from one image: extract the marks of ``model`` (a model file), search inside ``camera``'s view.
+
+    ``camera`` is a YAML/JSON file with the problem file's camera fields (intrinsics, optional distortion
+    and ``world_from_camera``). The search box is the camera's view at the depth the marks' spread gives.
+    """
+    from scenarios.errors import WorldError
+    from scenarios.target import load_model
+
+    from .documents import DocumentError, read_mapping
+    from .documents import validation_message
+    from .world_services import detect_marks, frustum_bounds, read_image
+    from pydantic import ValidationError
+
+    try:
+        spec = CameraSpec.model_validate(read_mapping(camera))
+    except DocumentError as err:
+        raise ProblemFileError(str(err)) from None
+    except ValidationError as err:
+        raise ProblemFileError(f"{camera}: {validation_message(err)}") from None
+    cam = spec.to_camera()
+    target = load_model(model)
+    picture = read_image(image)
+    if picture.shape[:2] != (cam.height, cam.width):
+        raise WorldError(f"{image}: image is {picture.shape[1]}x{picture.shape[0]}, "
+                         f"the camera is {cam.width}x{cam.height}")
+    points = detect_marks(picture, target.palette).points
+    if len(points) < 3:
+        raise WorldError(f"{image}: {len(points)} marks found; at least 3 are needed")
+    evo_model = target.evopose_model()
+    problem = PoseProblem(evo_model, (View(cam, points),), frustum_bounds(cam, evo_model, points))
+    inputs = ProblemInputs(problem, SearchOptions(), None, [picture], target)
+    return _solve_inputs(inputs, seed, time_budget, fitness, overlay)
+
+
+def _solve_inputs(inputs: ProblemInputs, seed, time_budget, fitness, overlay) -> dict:
     overrides = {name: value for name, value in (("time_budget", time_budget), ("fitness", fitness))
                  if value is not None}
-    options = dataclasses.replace(options, **overrides)
-    solution = solve(problem, options, seed=file_seed if seed is None else seed)
-    return solution_to_dict(solution)
+    options = dataclasses.replace(inputs.options, **overrides)
+    solution = solve(inputs.problem, options, seed=inputs.seed if seed is None else seed)
+    result = solution_to_dict(solution)
+    if overlay is not None:
+        from .world_services import draw_overlay, write_image
+
+        view = inputs.problem.views[0]
+        canvas = draw_overlay(inputs.images[0], view.camera, inputs.problem.model, np.asarray(solution.pose),
+                              view.points, inputs.target)
+        result["overlay"] = str(write_image(overlay, canvas))
+    return result

@@ -161,7 +161,7 @@ def test_unreadable_file(tmp_path):
     (("solve", "p.yaml", "--seed", "-1"), "--seed"),
     (("solve", "p.yaml", "--time-budget", "soon"), "--time-budget"),
     (("solve", "p.yaml", "--verbose"), "--verbose"),
-    (("render",), "No such command"),
+    (("teleport",), "No such command"),
 ])
 def test_bad_arguments_exit_2(args, expected):
     assert_usage_error(evopose(*args), expected)

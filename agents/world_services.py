@@ -1,0 +1,160 @@
+"""Service functions of the world commands (``render``, ``features``) and of solving from images.
+
+Each returns plain data; input problems raise :class:`scenarios.errors.WorldError` subclasses whose
+one-line message the CLI prints as ``error: ...`` with exit code 2.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from evopose import Bounds, Camera, Model
+from evopose.features import MarkDetections, colour_ranges, detect_colour_marks, detect_corners
+from evopose.pose import matrix_from_pose
+from scenarios.errors import ImageError, WorldError
+from scenarios.render import render_frame
+from scenarios.target import MODELS_DIR, TargetModel, load_model
+from scenarios.world import load_scenario
+
+#: Colours searched when no model is given: the union of the shipped models' palettes.
+SHIPPED_MODELS = ("pioneer", "airship")
+
+
+def default_palette() -> dict[str, tuple[int, int, int]]:
+    palette: dict[str, tuple[int, int, int]] = {}
+    for name in SHIPPED_MODELS:
+        palette.update(load_model(MODELS_DIR / f"{name}.yaml").palette)
+    return palette
+
+
+def read_image(path: str | Path) -> np.ndarray:
+    """A BGR uint8 image from a file (PNG, JPEG, ...).
+
+    Raises
+    ------
+    ImageError
+        The file is missing or is not a decodable image.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise ImageError(f"{path}: cannot read: no such file")
+    data = np.fromfile(str(path), dtype=np.uint8)
+    image = cv2.imdecode(data, cv2.IMREAD_COLOR) if data.size else None
+    if image is None:
+        raise ImageError(f"{path}: cannot read: not an image OpenCV can decode")
+    return image
+
+
+def write_image(path: str | Path, image: np.ndarray) -> Path:
+    path = Path(path)
+    if path.suffix.lower() not in (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff"):
+        raise ImageError(f"{path}: unsupported image type {path.suffix!r} (use .png)")
+    if path.parent and not path.parent.exists():
+        raise ImageError(f"{path}: cannot write: directory {path.parent} does not exist")
+    if not cv2.imwrite(str(path), image):
+        raise ImageError(f"{path}: cannot write the image")
+    return path
+
+
+def render_to_files(scenario: str | Path, frame: int, out: str | Path, *, vehicle: str | None = None,
+                    truth_path: str | Path | None = None, clean: bool = False) -> dict:
+    """Render ``frame`` of ``scenario`` as seen by ``vehicle``; write the PNG and its ground truth JSON.
+
+    The truth goes to ``truth_path`` or beside the image (``frame.png`` -> ``frame.json``).
+    Returns the truth mapping, with ``image`` and ``truth`` paths added.
+    """
+    world = load_scenario(scenario)
+    rendered = render_frame(world, frame, vehicle, clean=clean)
+    image_path = write_image(out, rendered.image)
+    truth_path = Path(truth_path) if truth_path is not None else image_path.with_suffix(".json")
+    truth = rendered.truth.to_dict()
+    k = rendered.camera
+    truth["camera"] = {"fx": k.fx, "fy": k.fy, "cx": k.cx, "cy": k.cy, "width": k.width, "height": k.height,
+                       "distortion": k.distortion.tolist(), "world_from_camera": truth["camera_pose"]}
+    truth["model"] = world.model.name
+    try:
+        truth_path.write_text(json.dumps(truth, indent=1), encoding="utf-8")
+    except OSError as err:
+        raise ImageError(f"{truth_path}: cannot write: {err.strerror or err}") from None
+    return {**truth, "image": str(image_path), "truth": str(truth_path)}
+
+
+def detect_marks(image: np.ndarray, palette: dict | None = None) -> MarkDetections:
+    """Colour marks of ``palette`` (default: every shipped model's colours) in a BGR image."""
+    return detect_colour_marks(image, colour_ranges(palette or default_palette()))
+
+
+def image_features(image_path: str | Path, *, model: str | Path | None = None, corners: bool = False,
+                   max_corners: int = 200) -> dict:
+    """The feature points of an image file: colour marks (of ``model``'s palette) or corners.
+
+    Returns ``{"image", "width", "height", "method", "count", "points": [[u, v], ...], "colours": [...]}``.
+    """
+    image = read_image(image_path)
+    out: dict = {"image": str(image_path), "width": int(image.shape[1]), "height": int(image.shape[0])}
+    if corners:
+        pts = detect_corners(image, max_corners=max_corners)
+        return {**out, "method": "corners", "count": len(pts), "points": pts.tolist()}
+    palette = load_model(model).palette if model is not None else None
+    det = detect_marks(image, palette)
+    return {**out, "method": "colour-marks", "count": len(det), "points": det.points.tolist(),
+            "colours": det.colours()}
+
+
+def frustum_bounds(camera: Camera, model: Model, points: np.ndarray) -> Bounds:
+    """A search box for a target seen by one camera: inside its view, at the depth its apparent size gives.
+
+    The depth is ``f * model size / spread of the image points``, searched from half to twice that;
+    angles span a full turn. The box is in the world frame (the camera's extrinsic applied).
+    """
+    spread = float(np.max(np.ptp(points, axis=0))) if len(points) > 1 else 0.0
+    size = 2 * model.radius
+    f = 0.5 * (camera.fx + camera.fy)
+    depth = f * size / max(spread, 1.0)
+    z_lo, z_hi = 0.5 * depth, 2.0 * depth
+    corners = []
+    for z in (z_lo, z_hi):
+        for u in (0.0, camera.width):
+            for v in (0.0, camera.height):
+                corners.append([(u - camera.cx) / camera.fx * z, (v - camera.cy) / camera.fy * z, z])
+    corners = np.array(corners)
+    world = corners @ camera.world_from_camera[:3, :3].T + camera.world_from_camera[:3, 3]
+    lo, hi = world.min(axis=0) - size, world.max(axis=0) + size
+    return Bounds.from_dict({n: (float(lo[i]), float(hi[i])) for i, n in enumerate("xyz")})
+
+
+def draw_overlay(image: np.ndarray | None, camera: Camera, model: Model, pose: np.ndarray,
+                 points: np.ndarray, target: TargetModel | None = None) -> np.ndarray:
+    """The image (or a dark canvas) with the image points (green crosses) and the model projected at
+    ``pose`` (visible marks as red circles, the body outline when ``target`` is given)."""
+    canvas = np.full((camera.height, camera.width, 3), 40, np.uint8) if image is None else image.copy()
+    T = matrix_from_pose(np.asarray(pose, float))
+    if target is not None and len(target.body.faces):
+        v = target.body.vertices @ T[:3, :3].T + T[:3, 3]
+        uv, front = camera.project_world(v)
+        normals = target.body.normals @ T[:3, :3].T
+        for face, n, two_sided in zip(target.body.faces, normals, target.body.two_sided):
+            seen = two_sided or np.dot(n, camera.center_world - v[face].mean(axis=0)) > 0
+            if seen and front[face].all():
+                pts = np.round(uv[face] * 16).astype(np.int32)
+                cv2.polylines(canvas, [pts], True, (255, 200, 0), 1, cv2.LINE_AA, 4)
+    p_world = model.points @ T[:3, :3].T + T[:3, 3]
+    uv, front = camera.project_world(p_world)
+    visible = front.copy()
+    if model.normals is not None:
+        n_world = model.normals @ T[:3, :3].T
+        visible &= np.sum(n_world * (camera.center_world - p_world), axis=1) > 0
+    for (u, v), ok in zip(uv, visible):
+        if ok and abs(u) < 1e5 and abs(v) < 1e5:
+            cv2.circle(canvas, (int(round(u * 16)), int(round(v * 16))), 6 * 16, (0, 0, 255), 2, cv2.LINE_AA, 4)
+    for u, v in np.asarray(points, float).reshape(-1, 2):
+        cv2.drawMarker(canvas, (int(round(u)), int(round(v))), (0, 255, 0), cv2.MARKER_CROSS, 10, 1, cv2.LINE_AA)
+    return canvas
+
+
+__all__ = ["WorldError", "default_palette", "detect_marks", "draw_overlay", "frustum_bounds", "image_features",
+           "read_image", "render_to_files", "write_image"]

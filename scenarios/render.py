@@ -1,0 +1,359 @@
+"""The renderer: what a vehicle's camera sees at a frame, with its exact ground truth.
+
+OpenCV drawing, no per-pixel Python loops:
+
+1. sky, and a seeded procedural ground texture warped onto the ground plane ``z = 0`` by its homography;
+2. the target's body and the occluders as flat-shaded convex faces, back faces culled, far to near
+   (painter's algorithm), projected through the camera's plumb_bob distortion;
+3. the marks as discs on the body (their outline projected, so perspective shapes them), only where
+   the mark's centre faces the camera and no face hides it; faces that hide part of a mark are drawn again over it;
+4. distractor blobs in the mark colours (false positives), then blur, a lighting gain and sensor noise.
+
+Ground truth: the target pose, the camera pose and, for every mark whose centre is visible, its model
+index and its projected centre in pixels (``fully_visible`` tells whether its whole disc is).
+Every random draw of frame N comes from a generator seeded by ``(scenario seed, vehicle, N)``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from functools import lru_cache
+
+import cv2
+import numpy as np
+
+from evopose import Camera
+from evopose.pose import matrix_from_pose, pose_from_matrix
+
+from .mesh import Mesh, box_mesh, first_hits, hits
+from .sensors import stream_rng
+from .world import GroundSpec, RenderSpec, Scenario, Vehicle
+
+#: Points per mark outline (its projected polygon, and the samples of the partial-visibility test).
+MARK_OUTLINE = 24
+#: Occlusion rays end this far (metres) above a mark, so the mark's own face never hides it.
+MARK_LIFT = 0.003
+#: Faces with a vertex nearer than this (metres, optical axis) are not drawn.
+NEAR_CLIP = 0.05
+#: Fixed-point bits of OpenCV drawing coordinates (1/16 px).
+SHIFT = 4
+#: Side of the square ground texture, texels (a power of two: the FFT noise tiles seamlessly).
+TEXTURE_SIZE = 1024
+#: Largest HSV saturation (0-255) of the ground texture.
+MAX_GROUND_SATURATION = 60
+#: A mark seen more obliquely than this (cosine between its normal and the line of sight) is a sliver,
+#: not a disc: it does not count as visible in the ground truth.
+MIN_FACING_COS = 0.2
+#: Stream numbers of the scenario's random processes (see :func:`scenarios.sensors.stream_rng`).
+STREAM_GROUND, STREAM_FRAME = 101, 202
+
+
+@dataclass
+class FrameTruth:
+    """Exact ground truth of one rendered frame.
+
+    Attributes
+    ----------
+    target_pose : array, shape (6,)
+        ``world_from_target``.
+    camera_pose : array, shape (6,)
+        ``world_from_camera`` (optical frame).
+    vehicle_pose : array, shape (6,)
+        ``world_from_vehicle``.
+    mark_index : int array, shape (K,)
+        Model index of each visible mark.
+    mark_uv : array, shape (K, 2)
+        Projected centres, pixels.
+    mark_colour : list of str, length K
+    fully_visible : bool array, shape (K,)
+        Whether the whole disc is visible (not cut by a face, an occluder or the image border).
+    distractor_uv : array, shape (D, 2)
+    distractor_colour : list of str
+    sensors : dict
+        Readings of the target's sensors at this frame (``imu_rpy`` radians, ``gps_xyz`` metres or None).
+    """
+
+    scenario: str
+    frame: int
+    time: float
+    vehicle: str
+    target_pose: np.ndarray
+    camera_pose: np.ndarray
+    vehicle_pose: np.ndarray
+    mark_index: np.ndarray
+    mark_uv: np.ndarray
+    mark_colour: list[str]
+    fully_visible: np.ndarray
+    distractor_uv: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
+    distractor_colour: list[str] = field(default_factory=list)
+    sensors: dict = field(default_factory=dict)
+
+    def to_dict(self) -> dict:
+        """JSON-ready mapping (lists of floats; angles radians, lengths metres, pixels)."""
+        names = ("x", "y", "z", "roll", "pitch", "yaw")
+        pose = lambda s: {n: float(v) for n, v in zip(names, s)}  # noqa: E731
+        return {
+            "scenario": self.scenario, "frame": self.frame, "time": self.time, "vehicle": self.vehicle,
+            "target_pose": pose(self.target_pose), "camera_pose": pose(self.camera_pose),
+            "vehicle_pose": pose(self.vehicle_pose),
+            "marks": [{"index": int(i), "uv": [float(u), float(v)], "colour": c, "fully_visible": bool(f)}
+                      for i, (u, v), c, f in zip(self.mark_index, self.mark_uv, self.mark_colour, self.fully_visible)],
+            "distractors": [{"uv": [float(u), float(v)], "colour": c}
+                            for (u, v), c in zip(self.distractor_uv, self.distractor_colour)],
+            "sensors": {k: (None if v is None else np.asarray(v, float).tolist()) for k, v in self.sensors.items()},
+        }
+
+
+@dataclass
+class RenderedFrame:
+    """A camera image (BGR uint8, shape (H, W, 3)), the camera that took it and its ground truth."""
+
+    image: np.ndarray
+    camera: Camera
+    truth: FrameTruth
+
+
+@lru_cache(maxsize=8)
+def ground_texture(seed: int, colour: tuple[int, int, int], contrast: float) -> np.ndarray:
+    """Seamless procedural ground texture, shape (TEXTURE_SIZE, TEXTURE_SIZE, 3) uint8.
+
+    1/f noise made in the frequency domain (so it tiles), plus a little per-channel variation.
+    """
+    rng = stream_rng(seed, STREAM_GROUND)
+    n = TEXTURE_SIZE
+    f = np.fft.fftfreq(n)[:, None] ** 2 + np.fft.rfftfreq(n)[None, :] ** 2
+    amplitude = 1.0 / np.maximum(np.sqrt(f), 1.0 / n) ** 1.1
+    layers = []
+    for _ in range(2):
+        spectrum = amplitude * (rng.standard_normal(f.shape) + 1j * rng.standard_normal(f.shape))
+        layer = np.fft.irfft2(spectrum, s=(n, n))
+        layers.append((layer - layer.mean()) / layer.std())
+    grain = rng.standard_normal((n, n)) * 0.35
+    base = np.asarray(colour, float)
+    tex = base + contrast * (layers[0] + grain)[..., None] + 0.3 * contrast * layers[1][..., None] * [1.0, -0.5, -0.5]
+    tex = np.clip(tex, 0, 255).astype(np.uint8)
+    # earth, gravel and asphalt are dull: keep the saturation well below that of paint (the marks)
+    hsv = cv2.cvtColor(tex, cv2.COLOR_BGR2HSV)
+    hsv[..., 1] = np.minimum(hsv[..., 1], MAX_GROUND_SATURATION)
+    return cv2.cvtColor(hsv, cv2.COLOR_HSV2BGR)
+
+
+def _background(camera: Camera, ground: GroundSpec, seed: int, shade: float) -> np.ndarray:
+    """Sky and textured ground plane ``z = 0`` seen by ``camera`` (distortion ignored for the background)."""
+    w, h = camera.width, camera.height
+    c_from_w = camera.camera_from_world
+    K = camera.matrix
+    texel = ground.texel
+    # image ~ K [r1 r2 t] [x y 1]^T and texture pixel (col, row) = (x, y) / texel
+    H = K @ np.column_stack([c_from_w[:3, 0], c_from_w[:3, 1], c_from_w[:3, 3]]) @ np.diag([texel, texel, 1.0])
+    tex = ground_texture(seed, tuple(ground.colour), float(ground.contrast))
+    image = cv2.warpPerspective(tex, H, (w, h), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_WRAP)
+    if shade != 1.0:
+        image = cv2.convertScaleAbs(image, alpha=shade)
+    # rays that do not reach the ground in front of the camera see the sky
+    ray_z = (camera.world_from_camera[:3, :3] @ np.linalg.inv(K))[2]  # world z of the ray through (u, v, 1)
+    u = np.arange(w, dtype=np.float32)
+    v = np.arange(h, dtype=np.float32)
+    dz = ray_z[0] * u[None, :] + ray_z[1] * v[:, None] + ray_z[2]
+    height = camera.world_from_camera[2, 3]
+    sky = (dz >= -1e-6) if height > 0 else np.ones((h, w), bool)
+    if sky.any():
+        gradient = np.clip(0.75 + 0.25 * (v / h), 0, 1)[:, None, None] * np.asarray(ground.sky, np.float32)
+        sky_img = np.broadcast_to(gradient, (h, w, 3)).astype(np.uint8)
+        image[sky] = sky_img[sky]
+    return image
+
+
+def _face_shades(normals_cam: np.ndarray, sun_cam: np.ndarray, ambient: float) -> np.ndarray:
+    return ambient + (1 - ambient) * np.clip(normals_cam @ sun_cam, 0, 1)
+
+
+def _occluder_mesh(render: RenderSpec, t: float) -> Mesh:
+    mesh = Mesh.empty()
+    for occ in render.occluders:
+        centre = np.asarray(occ.centre) + t * np.asarray(occ.velocity)
+        mesh = mesh + box_mesh(centre, occ.size, tuple(occ.colour))
+    return mesh
+
+
+class _SceneFaces:
+    """The faces of one frame in the camera frame: culled, shaded, sorted far to near, projected."""
+
+    def __init__(self, mesh: Mesh, camera: Camera, sun_world: np.ndarray, ambient: float) -> None:
+        R, t = camera.camera_from_world[:3, :3], camera.camera_from_world[:3, 3]
+        v_cam = mesh.vertices @ R.T + t
+        self.uv, _ = camera.project_camera_points(v_cam)
+        normals = mesh.normals @ R.T
+        centres = np.array([v_cam[f].mean(axis=0) for f in mesh.faces]).reshape(-1, 3)
+        facing = np.sum(normals * centres, axis=1) < 0
+        normals = np.where(facing[:, None], normals, -normals)  # two-sided faces lit from the seen side
+        near_ok = np.array([v_cam[f, 2].min() > NEAR_CLIP for f in mesh.faces], bool)
+        keep = near_ok & (facing | mesh.two_sided)
+        sun_cam = R @ (sun_world / np.linalg.norm(sun_world))
+        shades = _face_shades(normals, sun_cam, ambient)
+        self.mesh = mesh
+        self.visible = np.nonzero(keep)[0]
+        self.order = self.visible[np.argsort(-centres[self.visible, 2], kind="stable")]
+        self.colours = mesh.colours * shades[:, None]
+        # triangles that can hide something: the kept faces (seen from the camera)
+        tris, owner = [], []
+        for i in self.visible:
+            f = mesh.faces[i]
+            for k in range(1, len(f) - 1):
+                tris.append(mesh.vertices[[f[0], f[k], f[k + 1]]])
+                owner.append(i)
+        self.triangles = np.array(tris).reshape(-1, 3, 3)
+        self.triangle_face = np.array(owner, int)
+
+    def draw(self, image: np.ndarray, faces) -> None:
+        for i in faces:
+            pts = np.round(self.uv[self.mesh.faces[i]] * (1 << SHIFT)).astype(np.int32)
+            if np.abs(pts).max() > (1 << 28):
+                continue
+            cv2.fillConvexPoly(image, pts, tuple(float(c) for c in self.colours[i]), cv2.LINE_AA, SHIFT)
+
+
+def _mark_outlines(points: np.ndarray, normals: np.ndarray, radius: float) -> np.ndarray:
+    """Disc outlines of the marks (target frame), shape (M, MARK_OUTLINE, 3)."""
+    helper = np.where(np.abs(normals[:, :1]) < 0.9, [[1.0, 0, 0]], [[0, 1.0, 0]])
+    e1 = np.cross(normals, helper)
+    e1 /= np.linalg.norm(e1, axis=1, keepdims=True)
+    e2 = np.cross(normals, e1)
+    a = np.linspace(0, 2 * np.pi, MARK_OUTLINE, endpoint=False)
+    return (points[:, None, :] + radius * (np.cos(a)[None, :, None] * e1[:, None, :]
+                                           + np.sin(a)[None, :, None] * e2[:, None, :]))
+
+
+def _draw_distractors(image: np.ndarray, rng: np.random.Generator, render: RenderSpec, palette: dict,
+                      marks_uv: np.ndarray, shade: float) -> tuple[np.ndarray, list[str]]:
+    spec = render.distractors
+    h, w = image.shape[:2]
+    if spec.count == 0:
+        return np.zeros((0, 2)), []
+    names = list(palette)
+    if len(marks_uv):
+        lo, hi = marks_uv.min(axis=0), marks_uv.max(axis=0)
+        span = np.maximum(hi - lo, 40.0)
+        lo, hi = np.maximum(lo - span, 0), np.minimum(hi + span, [w - 1, h - 1])
+    else:
+        lo, hi = np.zeros(2), np.array([w - 1.0, h - 1.0])
+    uv_out, colours = [], []
+    r_lo, r_hi = sorted(spec.radius_px)
+    for _ in range(spec.count):
+        for _attempt in range(20):
+            near = rng.random() < spec.near_target
+            uv = rng.uniform(lo, hi) if near else rng.uniform([0, 0], [w - 1, h - 1])
+            r = rng.uniform(r_lo, r_hi)
+            clear = len(marks_uv) == 0 or np.min(np.linalg.norm(marks_uv - uv, axis=1)) > 2.5 * r + 6
+            if clear:
+                break
+        else:
+            continue
+        name = names[int(rng.integers(len(names)))]
+        axes = (r * (1 << SHIFT), r * rng.uniform(0.5, 1.0) * (1 << SHIFT))
+        centre = tuple(int(round(c * (1 << SHIFT))) for c in uv)
+        colour = tuple(float(c) * shade for c in palette[name])
+        cv2.ellipse(image, centre, tuple(int(a) for a in axes), float(rng.uniform(0, 180)), 0, 360, colour,
+                    -1, cv2.LINE_AA, SHIFT)
+        uv_out.append(uv)
+        colours.append(name)
+    return np.array(uv_out).reshape(-1, 2), colours
+
+
+def render_frame(scenario: Scenario, frame: int, vehicle: str | None = None, *, clean: bool = False) -> RenderedFrame:
+    """Render what ``vehicle`` (default: the first) sees at ``frame``.
+
+    Parameters
+    ----------
+    clean : bool
+        Leave out every nuisance (noise, blur, lighting changes, distractors, occluders): the
+        geometry only, for checking the feature extraction against the truth.
+
+    Raises
+    ------
+    FrameError
+        The frame or the vehicle is not in the scenario.
+    """
+    t = scenario.time(frame)
+    veh: Vehicle = scenario.vehicle(vehicle)
+    camera = veh.camera_at(t)
+    render = scenario.render
+    light = render.lighting
+    rng = stream_rng(scenario.seed, STREAM_FRAME, veh.index, frame)
+    gain = 1.0 if clean else light.gain * (1 + light.gain_amplitude * np.sin(2 * np.pi * t / light.gain_period)
+                                           + light.gain_jitter * rng.standard_normal())
+    sun = np.asarray(light.sun, float)
+    ground_shade = light.ambient + (1 - light.ambient) * max(sun[2] / np.linalg.norm(sun), 0)
+    image = _background(camera, render.ground, scenario.seed, ground_shade)
+
+    model = scenario.model
+    world_from_target = matrix_from_pose(scenario.target_pose(frame))
+    mesh = model.body.transformed(world_from_target)
+    if not clean:
+        mesh = mesh + _occluder_mesh(render, t)
+    faces = _SceneFaces(mesh, camera, sun, light.ambient)
+    faces.draw(image, faces.order)
+
+    # marks: centre and outline in the world, visibility by normal, image bounds and occlusion rays
+    R, p = world_from_target[:3, :3], world_from_target[:3, 3]
+    normals_w = model.mark_normals @ R.T
+    centres_w = model.mark_points @ R.T + p
+    outlines_w = _mark_outlines(centres_w, normals_w, model.mark_radius)
+    eye = camera.center_world
+    sight = eye - centres_w
+    facing = np.sum(normals_w * sight, axis=1) > MIN_FACING_COS * np.linalg.norm(sight, axis=1)
+    uv_c, in_front = camera.project_world(centres_w)
+    uv_o, front_o = camera.project_world(outlines_w.reshape(-1, 3))
+    uv_o = uv_o.reshape(len(centres_w), MARK_OUTLINE, 2)
+    candidates = np.nonzero(facing & in_front & camera.in_image(uv_c))[0]
+    # occlusion rays end a little above the surface, so the mark's own face never blocks them
+    lift = MARK_LIFT * normals_w[candidates, None, :]
+    samples = np.concatenate([centres_w[candidates, None, :], outlines_w[candidates]], axis=1) + lift
+    blocked = first_hits(eye, samples.reshape(-1, 3), faces.triangles).reshape(len(candidates), -1)
+    shown = candidates[~blocked[:, 0]]
+    whole = ~blocked[~blocked[:, 0]].any(axis=1)
+    whole &= np.all(camera.in_image(uv_o[shown], margin=-0.5), axis=1) & front_o.reshape(-1, MARK_OUTLINE)[shown].all(1)
+    mark_shades = _face_shades(normals_w[shown] @ camera.camera_from_world[:3, :3].T,
+                               camera.camera_from_world[:3, :3] @ (sun / np.linalg.norm(sun)), light.ambient)
+    for k, i in enumerate(shown):
+        colour = tuple(float(c) * mark_shades[k] for c in model.palette[model.mark_colours[i]])
+        pts = np.round(uv_o[i] * (1 << SHIFT)).astype(np.int32)
+        cv2.fillConvexPoly(image, pts, colour, cv2.LINE_AA, SHIFT)
+    # faces hiding part of a drawn mark go over it again
+    partial = candidates[~blocked[:, 0]][~whole] if len(shown) else np.zeros(0, int)
+    if len(partial) and len(faces.triangles):
+        lifted = outlines_w[partial] + MARK_LIFT * normals_w[partial, None, :]
+        crossed = hits(eye, lifted.reshape(-1, 3), faces.triangles).any(axis=0)
+        hiders = set(faces.triangle_face[crossed].tolist())
+        faces.draw(image, [f for f in faces.order if f in hiders])
+
+    distractor_uv, distractor_colour = np.zeros((0, 2)), []
+    if not clean:
+        distractor_uv, distractor_colour = _draw_distractors(image, rng, render, model.palette, uv_c[shown],
+                                                             ground_shade)
+        if render.blur_sigma > 0:
+            image = cv2.GaussianBlur(image, (0, 0), render.blur_sigma)
+        if gain != 1.0 or render.noise_sigma > 0:
+            noisy = image.astype(np.float32) * np.float32(gain)
+            if render.noise_sigma > 0:
+                noisy += rng.standard_normal(noisy.shape, dtype=np.float32) * np.float32(render.noise_sigma)
+            image = np.clip(noisy, 0, 255).astype(np.uint8)
+
+    sensors = {}
+    target_pose = scenario.target_pose(frame)
+    if scenario.target_imu is not None:
+        sensors["imu_rpy"] = scenario.target_imu.read(target_pose[3:], scenario.seed, 1000, frame)
+    if scenario.target_gps is not None:
+        sensors["gps_xyz"] = scenario.target_gps.read(target_pose[:3], t, scenario.seed, 1001, frame)
+    for v in scenario.vehicles:
+        pose_v = v.trajectory.pose(t)
+        if v.imu is not None:
+            sensors[f"{v.name}.imu_rpy"] = v.imu.read(pose_v[3:], scenario.seed, 2000 + v.index, frame)
+        if v.gps is not None:
+            sensors[f"{v.name}.gps_xyz"] = v.gps.read(pose_v[:3], t, scenario.seed, 3000 + v.index, frame)
+
+    truth = FrameTruth(
+        scenario.name, frame, t, veh.name, target_pose, pose_from_matrix(camera.world_from_camera),
+        veh.trajectory.pose(t), shown.astype(int), uv_c[shown], [model.mark_colours[i] for i in shown], whole,
+        distractor_uv, distractor_colour, sensors)
+    return RenderedFrame(image, camera, truth)
