@@ -193,6 +193,34 @@ def detect_corners(image: np.ndarray, *, max_corners: int = 200, quality: float 
     return corners.reshape(-1, 2).astype(float)
 
 
+def x_junctions(image: np.ndarray, corners: np.ndarray, radius: float = 5.0, samples: int = 32) -> np.ndarray:
+    """Which corners are X-junctions (a chessboard's inner corners), not L-corners of an outline.
+
+    Around an X-junction the intensity on a circle of ``radius`` pixels crosses its mean
+    four times (dark, light, dark, light); around the corner of a box or of the board's
+    border it crosses twice. Shapes: image (H, W) or (H, W, 3) uint8, corners (K, 2) -> (K,) bool.
+    """
+    image = np.asarray(image)
+    grey = cv2.cvtColor(image, cv2.COLOR_BGR2GRAY) if image.ndim == 3 else image
+    grey = grey.astype(np.float32)
+    corners = np.asarray(corners, float).reshape(-1, 2)
+    if len(corners) == 0:
+        return np.zeros(0, bool)
+    angles = np.linspace(0, 2 * np.pi, samples, endpoint=False)
+    xs = (corners[:, :1] + radius * np.cos(angles)).astype(np.float32)
+    ys = (corners[:, 1:] + radius * np.sin(angles)).astype(np.float32)
+    ring = cv2.remap(grey, xs, ys, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)  # (K, samples)
+    centred = ring - ring.mean(axis=1, keepdims=True)
+    contrast = np.percentile(np.abs(centred), 75, axis=1)
+    sign = np.where(np.abs(centred) > 0.25 * contrast[:, None], np.sign(centred), 0.0)
+    crossings = np.zeros(len(corners), int)
+    for k in range(len(corners)):  # count sign changes around the ring, ignoring near-mean samples
+        s_k = sign[k][sign[k] != 0]
+        if len(s_k) > 1:
+            crossings[k] = int(np.count_nonzero(s_k != np.roll(s_k, 1)))
+    return crossings == 4
+
+
 def match_to_truth(detected: np.ndarray, truth: np.ndarray, max_distance: float = 3.0) -> tuple[np.ndarray, np.ndarray]:
     """Greedy one-to-one matching of detected points to true points (nearest pairs first).
 
