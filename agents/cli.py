@@ -17,9 +17,13 @@ from rich.console import Console
 from rich.table import Table
 
 from evopose.fitness import FitnessKind
+from protocol import ProtocolError
+from scenarios.errors import WorldError
 
+from . import cli_fleet, cli_world
+from .fleet_errors import FleetError
 from .problem_file import ProblemFileError
-from .services import solve_file
+from .services import solve_file, solve_image
 
 #: Exit code of a malformed input or a bad command-line argument.
 USAGE_ERROR = 2
@@ -32,17 +36,37 @@ def evopose() -> None:
     """EvoPose Fleet: cooperative 6-DOF pose estimation by evolutionary search."""
 
 
+cli_fleet.register(app)
+cli_world.register(app)
+
+
 @app.command("solve")
 def solve_command(
-    problem: Annotated[Path, typer.Argument(metavar="PROBLEM", show_default=False,
-                                            help="Pose-problem file, YAML or JSON (DESIGN.md §3).")],
+    problem: Annotated[Path | None, typer.Argument(metavar="[PROBLEM]", show_default=False,
+                                                   help="Pose-problem file, YAML or JSON (DESIGN.md §3).")] = None,
     as_json: Annotated[bool, typer.Option("--json", help="Print one JSON object instead of a table.")] = False,
     seed: Annotated[int | None, typer.Option(min=0, help="Random seed; overrides the file's seed.")] = None,
     time_budget: Annotated[float | None, typer.Option(min=0, help="Wall-time budget in seconds.")] = None,
     fitness: Annotated[FitnessKind | None, typer.Option(help="Fitness: robust or the paper's eq. (1).")] = None,
+    image: Annotated[Path | None, typer.Option(help="Solve from this image instead of a problem file "
+                                                    "(needs --model and --camera).")] = None,
+    model: Annotated[str | None, typer.Option(help="Target-model file (or shipped name) for --image.")] = None,
+    camera: Annotated[Path | None, typer.Option(help="Camera file (the problem file's camera fields) "
+                                                     "for --image.")] = None,
+    overlay: Annotated[Path | None, typer.Option(help="Write a PNG of the first view with its points and "
+                                                      "the model projected at the estimate.")] = None,
 ) -> None:
-    """Find the pose of the model in the views of PROBLEM."""
-    result = solve_file(problem, seed=seed, time_budget=time_budget, fitness=fitness)
+    """Find the pose of the model in the views of PROBLEM (or in one --image)."""
+    if image is not None:
+        if problem is not None or model is None or camera is None:
+            raise typer.BadParameter("--image needs --model and --camera, and no PROBLEM", param_hint="--image")
+        result = solve_image(image, model, camera, seed=seed, time_budget=time_budget, fitness=fitness,
+                             overlay=overlay)
+    elif problem is None:
+        raise typer.BadParameter("Missing argument 'PROBLEM' (or --image with --model and --camera).",
+                                 param_hint="PROBLEM")
+    else:
+        result = solve_file(problem, seed=seed, time_budget=time_budget, fitness=fitness, overlay=overlay)
     if as_json:
         print(json.dumps(result))
     else:
@@ -75,7 +99,7 @@ def main(argv: list[str] | None = None) -> int:
     """Run the CLI on ``argv`` (default: ``sys.argv[1:]``) and return the exit code."""
     try:
         code = app(args=argv, prog_name="evopose", standalone_mode=False)
-    except ProblemFileError as err:
+    except (ProblemFileError, FleetError, ProtocolError, WorldError) as err:
         return _fail(str(err), USAGE_ERROR)
     except typer.TyperException as err:
         return _fail(err.format_message(), err.exit_code)

@@ -1,0 +1,432 @@
+"""FleetBus: one vehicle's view of the fleet over ONE Zenoh session (DESIGN.md §4).
+
+Sending: one publisher per topic with the topic's QoS (``protocol.QOS``): BLOCK for hints,
+features, attitude and poses (hints also ``express``), DROP for images; every message gets the
+vehicle as ``sender`` and a per-topic ``seq``.
+
+Receiving: the Zenoh callback does only cheap work — drop DELETE samples and our own echoes,
+reject payloads over the size limit without copying them, copy the bytes into a bounded inbox
+(images into a ring of the newest few). One worker thread decodes, checks the sender against the
+key, drops stale data (``stamp_ns`` older than ``max_age_s``), counts lost messages by ``seq``,
+keeps the newest message per team-mate and hands messages to :meth:`recv` and to handlers.
+A bad payload is counted under its reason, logged (rate-limited), and never stops the receiver.
+
+Presence: the vehicle's liveliness token ``evopose/<fleet>/@alive/<vehicle>``; a liveliness
+subscriber (with history) tracks which team-mates are alive. A team-mate that leaves is dropped
+from :meth:`teammates` and :meth:`latest`; when it returns it is used again.
+
+Typical agent loop::
+
+    with stop_on_signals() as stop, FleetBus.open(options, "alpha", "uav1", max_age_s=0.5) as bus:
+        bus.subscribe(Topic.HINT)
+        bus.subscribe(Topic.FEATURES)
+        while not stop.is_set():
+            frame = camera.next()                                    # scenarios/
+            bus.publish(FeatureSet.from_array(uv, cam, **bus.header(Topic.FEATURES, frame.stamp_ns)))
+            for mate, rx in bus.latest(Topic.FEATURES).items(): ...  # fresh data of live team-mates
+            bus.publish_hint(pose_world_from_target)
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections import deque
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass
+
+import numpy as np
+import zenoh
+
+from protocol import (QOS, SIZE_LIMITS, Message, Payload, ProtocolError, Stats, Topic, alive_key,
+                      alive_selector, check_name, check_topic, decode_sample, encode, encode_hint,
+                      parse_alive_key, topic_key, topic_selector)
+
+from .traffic import RateLimitedLog, TrafficCounters
+from .zenoh_config import SessionOptions, open_session
+
+log = logging.getLogger("evopose.bus")
+
+#: Time given to queued outgoing messages to leave at close, s.
+FLUSH_S = 0.2
+
+#: Handler of received messages, called in the bus's worker thread (keep it short).
+MessageHandler = Callable[["Received"], None]
+#: Handler of a team-mate joining or leaving, called in the worker thread with its vehicle name.
+PresenceHandler = Callable[[str], None]
+
+
+@dataclass(frozen=True)
+class Received:
+    """A decoded message from a team-mate.
+
+    Attributes
+    ----------
+    topic, vehicle : the key's topic and sender.
+    message : the payload model (``Hint`` for hints).
+    size : payload bytes on the wire.
+    received_ns : local wall-clock arrival time, ns since the Unix epoch.
+    """
+
+    topic: Topic
+    vehicle: str
+    message: Payload
+    size: int
+    received_ns: int
+
+    @property
+    def stamp_ns(self) -> int:
+        """Acquisition time of the data; arrival time for hints, which carry none."""
+        return self.message.stamp_ns if isinstance(self.message, Message) else self.received_ns
+
+    def age_s(self, now_ns: int | None = None) -> float:
+        """Seconds since acquisition."""
+        return ((time.time_ns() if now_ns is None else now_ns) - self.stamp_ns) * 1e-9
+
+
+class _Inbox:
+    """Bounded hand-off from Zenoh callbacks to the worker: a FIFO, plus a ring for images."""
+
+    def __init__(self, fifo_size: int, ring_size: int) -> None:
+        self.fifo: deque = deque()
+        self.ring: deque = deque(maxlen=ring_size)
+        self.fifo_size = fifo_size
+        self.ready = threading.Condition()
+
+    def put(self, item: tuple, *, ring: bool = False, force: bool = False) -> bool:
+        """Queue ``item``; False if it (or, for the ring, the oldest frame) had to be dropped."""
+        with self.ready:
+            if ring:
+                kept = len(self.ring) < (self.ring.maxlen or 0)
+                self.ring.append(item)
+            else:
+                kept = force or len(self.fifo) < self.fifo_size
+                if kept:
+                    self.fifo.append(item)
+            self.ready.notify()
+        return kept
+
+    def get(self, timeout: float) -> tuple | None:
+        with self.ready:
+            if not self.fifo and not self.ring:
+                self.ready.wait(timeout)
+            if self.fifo:
+                return self.fifo.popleft()
+            if self.ring:
+                return self.ring.popleft()
+            return None
+
+    def wake(self) -> None:
+        with self.ready:
+            self.ready.notify_all()
+
+
+class FleetBus:
+    """One vehicle on the fleet bus; see the module docstring. Use as a context manager or call :meth:`close`.
+
+    Parameters
+    ----------
+    session : zenoh.Session
+        The process's session (one per process).
+    fleet, vehicle : str
+        Names (``protocol.check_name``).
+    max_age_s : float or None
+        Data acquired longer ago are ignored (rejected as ``stale``); ``None`` keeps everything.
+    image_ring : int
+        Newest image frames kept by the receiver; older ones are dropped (counted as ``overflow``).
+    queue_size : int
+        Capacity of the inbox and of each topic's :meth:`recv` queue.
+    announce : bool
+        Declare the liveliness token (a listener that is not a team-mate, like the meter, does not).
+    stats_period_s : float or None
+        Publish this agent's Stats every so often (and once at close).
+    owns_session : bool
+        Close ``session`` in :meth:`close`.
+    """
+
+    def __init__(self, session: zenoh.Session, fleet: str, vehicle: str, *, max_age_s: float | None = 1.0,
+                 image_ring: int = 4, queue_size: int = 4096, announce: bool = True,
+                 stats_period_s: float | None = None, on_join: PresenceHandler | None = None,
+                 on_leave: PresenceHandler | None = None, owns_session: bool = False) -> None:
+        self.session = session
+        self.fleet, self.vehicle = check_name(fleet, "fleet"), check_name(vehicle, "vehicle")
+        self.max_age_s, self.stats_period_s = max_age_s, stats_period_s
+        self.counters = TrafficCounters()
+        self._owns_session = owns_session
+        self._on_join, self._on_leave = on_join, on_leave
+        self._queue_size, self._image_ring = queue_size, image_ring
+        self._inbox = _Inbox(queue_size, image_ring)
+        self._lock = threading.Lock()
+        self._alive: set[str] = set()
+        self._latest: dict[Topic, dict[str, Received]] = {topic: {} for topic in Topic}
+        self._delivery: dict[Topic, deque[Received]] = {}
+        self._delivered = threading.Condition(self._lock)
+        self._handlers: dict[Topic, list[MessageHandler]] = {}
+        self._last_seq: dict[tuple[Topic, str], int] = {}
+        self._seq: dict[Topic, int] = {topic: 0 for topic in Topic}
+        self._publishers: dict[Topic, zenoh.Publisher] = {}
+        self._subscribers: dict[Topic, zenoh.Subscriber] = {}
+        self._rejections = RateLimitedLog()
+        self._closed = threading.Event()
+        self._token = session.liveliness().declare_token(alive_key(fleet, vehicle)) if announce else None
+        self._presence = session.liveliness().declare_subscriber(alive_selector(fleet), self._on_presence,
+                                                                 history=True)
+        self._worker = threading.Thread(target=self._work, name=f"fleetbus-{vehicle}", daemon=True)
+        self._worker.start()
+
+    @classmethod
+    def open(cls, options: SessionOptions, fleet: str, vehicle: str, **kwargs) -> "FleetBus":
+        """Open the process's session from ``options`` and a bus that closes it."""
+        check_name(fleet, "fleet"), check_name(vehicle, "vehicle")
+        session = open_session(options)
+        try:
+            return cls(session, fleet, vehicle, owns_session=True, **kwargs)
+        except BaseException:
+            session.close()
+            raise
+
+    # -- presence ---------------------------------------------------------------------------
+
+    def teammates(self) -> frozenset[str]:
+        """Vehicles of the fleet whose liveliness token is present now (not this one)."""
+        with self._lock:
+            return frozenset(self._alive)
+
+    def wait_for_teammates(self, wanted: Iterable[str] | int, timeout: float) -> bool:
+        """Wait until the named team-mates (or at least ``wanted`` of them) are alive; False on timeout."""
+        deadline = time.monotonic() + timeout
+        while True:
+            alive = self.teammates()
+            if (len(alive) >= wanted) if isinstance(wanted, int) else set(wanted) <= alive:
+                return True
+            if time.monotonic() >= deadline or self._closed.is_set():
+                return False
+            time.sleep(0.01)
+
+    def _on_presence(self, sample: zenoh.Sample) -> None:  # Zenoh thread: set update only
+        try:
+            _, vehicle = parse_alive_key(str(sample.key_expr))
+        except ProtocolError:
+            return
+        if vehicle == self.vehicle:
+            return
+        joined = sample.kind == zenoh.SampleKind.PUT
+        with self._lock:
+            if joined:
+                self._alive.add(vehicle)
+            else:
+                self._alive.discard(vehicle)
+                for by_vehicle in self._latest.values():
+                    by_vehicle.pop(vehicle, None)
+        self._inbox.put(("join" if joined else "leave", vehicle), force=True)
+
+    # -- sending ----------------------------------------------------------------------------
+
+    def header(self, topic: Topic | str, stamp_ns: int | None = None) -> dict:
+        """``sender``, the next ``seq`` of ``topic`` and ``stamp_ns`` (default now) for a new message."""
+        topic = check_topic(topic)
+        with self._lock:
+            seq = self._seq[topic]
+            self._seq[topic] = seq + 1
+        return {"sender": self.vehicle, "seq": seq, "stamp_ns": time.time_ns() if stamp_ns is None else stamp_ns}
+
+    def publish(self, message: Payload) -> int:
+        """Encode and publish ``message`` on this vehicle's key of its topic; the payload size in bytes."""
+        if isinstance(message, Message) and message.sender != self.vehicle:
+            raise ValueError(f"message sender {message.sender!r} is not this vehicle {self.vehicle!r}")
+        return self.put_raw(message.TOPIC, encode(message))
+
+    def publish_hint(self, pose_world_from_target: np.ndarray) -> int:
+        """Publish the 24-byte hint of ``pose_world_from_target`` ``(x, y, z, roll, pitch, yaw)``."""
+        return self.put_raw(Topic.HINT, encode_hint(pose_world_from_target))
+
+    def _publisher(self, topic: Topic) -> zenoh.Publisher:
+        publisher = self._publishers.get(topic)
+        if publisher is None:
+            qos = QOS[topic]
+            publisher = self._publishers[topic] = self.session.declare_publisher(
+                topic_key(self.fleet, self.vehicle, topic),
+                congestion_control=zenoh.CongestionControl.BLOCK if qos.block else zenoh.CongestionControl.DROP,
+                express=qos.express, priority=getattr(zenoh.Priority, qos.priority))
+        return publisher
+
+    def wait_for_subscribers(self, topic: Topic | str, timeout: float) -> bool:
+        """Wait until some subscriber matches this vehicle's ``topic`` key; False on timeout."""
+        publisher = self._publisher(check_topic(topic))
+        deadline = time.monotonic() + timeout
+        while not publisher.matching_status:
+            if time.monotonic() >= deadline or self._closed.is_set():
+                return False
+            time.sleep(0.01)
+        return True
+
+    def put_raw(self, topic: Topic | str, payload: bytes) -> int:
+        """Publish ``payload`` unchecked on this vehicle's ``topic`` key (for tools and fault injection)."""
+        topic = check_topic(topic)
+        self._publisher(topic).put(payload)
+        self.counters.count_sent(topic.value, len(payload))
+        return len(payload)
+
+    def stats_message(self) -> Stats:
+        """This agent's counters as a Stats message (not yet sent)."""
+        snap = self.counters.snapshot()
+        return Stats(**self.header(Topic.STATS), sent=snap["sent"], received=snap["received"],
+                     bytes_sent=snap["bytes_sent"], bytes_received=snap["bytes_received"], rejected=snap["rejected"])
+
+    def publish_stats(self) -> Stats:
+        """Publish :meth:`stats_message` on ``evopose/<fleet>/<vehicle>/stats`` and return it."""
+        stats = self.stats_message()
+        self.publish(stats)
+        return stats
+
+    # -- receiving --------------------------------------------------------------------------
+
+    def subscribe(self, topic: Topic | str, handler: MessageHandler | None = None, *,
+                  include_self: bool = False) -> None:
+        """Receive ``topic`` from every team-mate (and from this vehicle if ``include_self``).
+
+        Messages are then available from :meth:`recv` and :meth:`latest`; ``handler`` (optional,
+        may be given again to add more) is called in the worker thread for each one.
+        """
+        topic = check_topic(topic)
+        with self._lock:
+            if handler is not None:
+                self._handlers.setdefault(topic, []).append(handler)
+            if topic in self._subscribers:
+                return
+            self._delivery[topic] = deque(maxlen=self._image_ring if QOS[topic].ring else self._queue_size)
+        ring, limit = QOS[topic].ring, SIZE_LIMITS[topic]
+        own_prefix = None if include_self else topic_key(self.fleet, self.vehicle, topic)
+
+        def on_sample(sample: zenoh.Sample) -> None:  # Zenoh thread: size check and copy, nothing more
+            if sample.kind != zenoh.SampleKind.PUT:
+                return
+            key = str(sample.key_expr)
+            if key == own_prefix:
+                return
+            size = len(sample.payload)
+            if size > limit:
+                self._reject(topic, "oversized", f"{key}: payload of {size} bytes exceeds the {limit}-byte limit")
+                return
+            if not self._inbox.put(("sample", topic, key, sample.payload.to_bytes(), time.time_ns()), ring=ring):
+                self._reject(topic, "overflow", f"{key}: receiver queue full, {'oldest frame' if ring else 'sample'} "
+                                                "dropped")
+
+        self._subscribers[topic] = self.session.declare_subscriber(topic_selector(self.fleet, topic), on_sample)
+
+    def recv(self, topic: Topic | str, timeout: float | None = None) -> Received | None:
+        """The oldest undelivered message of a subscribed ``topic``, waiting up to ``timeout`` s; None if none."""
+        topic = check_topic(topic)
+        deadline = None if timeout is None else time.monotonic() + timeout
+        with self._delivered:
+            queue = self._delivery.get(topic)
+            if queue is None:
+                raise ValueError(f"not subscribed to {topic.value!r}; call subscribe first")
+            while not queue:
+                remaining = None if deadline is None else deadline - time.monotonic()
+                if self._closed.is_set() or (remaining is not None and remaining <= 0):
+                    return None
+                self._delivered.wait(0.1 if remaining is None else min(remaining, 0.1))
+            return queue.popleft()
+
+    def latest(self, topic: Topic | str, *, max_age_s: float | None = None) -> dict[str, Received]:
+        """Newest message of ``topic`` per team-mate, without those older than ``max_age_s`` (default the bus's)."""
+        topic = check_topic(topic)
+        max_age_s = self.max_age_s if max_age_s is None else max_age_s
+        now_ns = time.time_ns()
+        with self._lock:
+            return {vehicle: rx for vehicle, rx in self._latest[topic].items()
+                    if max_age_s is None or rx.age_s(now_ns) <= max_age_s}
+
+    def _reject(self, topic: Topic, reason: str, message: str) -> None:
+        self.counters.count_rejected(topic.value, reason)
+        self._rejections.warning(reason, message)
+
+    # -- the worker ---------------------------------------------------------------------------
+
+    def _work(self) -> None:
+        next_stats = time.monotonic() + (self.stats_period_s or 0)
+        while not self._closed.is_set():
+            item = self._inbox.get(timeout=0.1)
+            if item is not None:
+                try:
+                    self._handle(item)
+                except Exception:  # a handler bug must not kill the receiver
+                    log.exception("error while handling %s", item[:2])
+            if self.stats_period_s and time.monotonic() >= next_stats:
+                next_stats = time.monotonic() + self.stats_period_s
+                try:
+                    self.publish_stats()
+                except Exception as err:  # session closing
+                    log.debug("stats not published: %s", err)
+
+    def _handle(self, item: tuple) -> None:
+        kind = item[0]
+        if kind in ("join", "leave"):
+            handler = self._on_join if kind == "join" else self._on_leave
+            log.info("team-mate %s %s", item[1], "joined" if kind == "join" else "left")
+            if handler is not None:
+                handler(item[1])
+            return
+        _, topic, key, payload, received_ns = item
+        try:
+            key_parts, message = decode_sample(key, payload)
+        except ProtocolError as err:
+            self._reject(topic, err.reason, f"{key}: {err}")
+            return
+        rx = Received(topic, key_parts.vehicle, message, len(payload), received_ns)
+        if isinstance(message, Message):
+            if self.max_age_s is not None and rx.age_s(received_ns) > self.max_age_s:
+                self._reject(topic, "stale", f"{key}: acquired {rx.age_s(received_ns):.3f} s ago "
+                                             f"(max age {self.max_age_s} s)")
+                return
+            last = self._last_seq.get((topic, rx.vehicle))
+            if last is not None and message.seq > last + 1:
+                self.counters.count_lost(topic.value, message.seq - last - 1)
+            self._last_seq[(topic, rx.vehicle)] = message.seq
+        self.counters.count_received(topic.value, rx.size)
+        with self._delivered:
+            self._latest[topic][rx.vehicle] = rx
+            self._delivery[topic].append(rx)
+            self._delivered.notify_all()
+            handlers = list(self._handlers.get(topic, ()))
+        for handler in handlers:
+            handler(rx)
+
+    # -- shutdown ---------------------------------------------------------------------------
+
+    def close(self) -> None:
+        """Publish final Stats (if periodic), undeclare everything, stop the worker, close an owned session."""
+        if self._closed.is_set():
+            return
+        if self.stats_period_s:
+            try:
+                self.publish_stats()
+            except Exception as err:
+                log.debug("final stats not published: %s", err)
+        if self._publishers:
+            time.sleep(FLUSH_S)  # Zenoh has no flush: let the last messages leave before undeclaring
+        self._closed.set()
+        self._inbox.wake()
+        with self._delivered:
+            self._delivered.notify_all()
+        entities = [*self._subscribers.values(), self._presence, *self._publishers.values(), self._token]
+        for entity in entities:
+            if entity is not None:
+                try:
+                    entity.undeclare()
+                except Exception as err:  # already undeclared by a closed session
+                    log.debug("undeclare: %s", err)
+        self._subscribers.clear()
+        self._publishers.clear()
+        if self._worker is not threading.current_thread():
+            self._worker.join(timeout=2.0)
+        if self._owns_session:
+            self.session.close()
+
+    def __enter__(self) -> "FleetBus":
+        return self
+
+    def __exit__(self, *exc_info) -> None:
+        self.close()

@@ -1,0 +1,162 @@
+"""The fleet commands: ``evopose router``, ``meter``, ``publish`` and ``listen``; thin wrappers over fleet_services.
+
+Registered on the main typer app by :func:`register` (called from agents/cli.py).
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+from typing import Annotated
+
+import typer
+from rich.console import Console
+from rich.table import Table
+
+from protocol import Topic
+
+from .fleet_errors import FleetError
+from .fleet_services import PAYLOADS, PublishSpec, emit_json, run_listener, run_meter, run_publisher, run_router
+from .meter import format_period, human_rate, human_size
+from .shutdown import stop_on_signals
+from .zenoh_config import SessionOptions
+
+Connect = Annotated[list[str] | None, typer.Option("--connect", "-e", metavar="ENDPOINT",
+                                                   help="Endpoint to connect to, e.g. tcp/10.0.0.1:7447 (repeatable).")]
+Listen = Annotated[list[str] | None, typer.Option("--listen", "-l", metavar="ENDPOINT",
+                                                  help="Endpoint to listen on, e.g. tcp/0.0.0.0:7447 (repeatable).")]
+Mode = Annotated[str | None, typer.Option(help="Zenoh mode: peer, client or router.")]
+ConfigFile = Annotated[Path | None, typer.Option("--config", metavar="FILE",
+                                                 help="Zenoh JSON5 config file (default: $ZENOH_CONFIG).")]
+NoMulticast = Annotated[bool, typer.Option("--no-multicast", help="Turn multicast scouting off.")]
+Fleet = Annotated[str, typer.Option(help="Fleet name.")]
+Vehicle = Annotated[str, typer.Option(help="This vehicle's name.")]
+
+
+def _options(mode, connect, listen, config, no_multicast) -> SessionOptions:
+    return SessionOptions(mode=mode, connect=tuple(connect or ()), listen=tuple(listen or ()), config_file=config,
+                          multicast=not no_multicast)
+
+
+def _topics(text: str) -> tuple[Topic, ...]:
+    try:
+        return tuple(Topic(name.strip()) for name in text.split(",") if name.strip())
+    except ValueError:
+        raise FleetError(f"--topics must be names from {', '.join(t.value for t in Topic)}, got {text!r}") from None
+
+
+def meter_table(records: list[dict]) -> Table:
+    """Per key: rate, period min/max/std, window, bandwidth, message sizes."""
+    table = Table(title="evopose meter", title_justify="left")
+    for name in ("key", "rate", "min", "max", "std dev", "window", "bandwidth", "mean", "min size", "max size"):
+        table.add_column(name, justify="left" if name == "key" else "right")
+    for r in records:
+        table.add_row(r["key"], f"{r['rate_hz']:.2f} Hz", format_period(r["period_min_s"]),
+                      format_period(r["period_max_s"]), format_period(r["period_std_s"]), str(r["window"]),
+                      human_rate(r["bandwidth_Bps"]), human_size(r["size_mean"]), human_size(r["size_min"]),
+                      human_size(r["size_max"]))
+    return table
+
+
+def agents_table(agents: dict[str, dict]) -> Table:
+    """The agents' own sent/received counts per topic."""
+    table = Table(title="agents' own counts", title_justify="left")
+    for name in ("agent", "topic", "sent", "received", "bytes sent", "bytes received"):
+        table.add_column(name, justify="left" if name in ("agent", "topic") else "right")
+    for agent, stats in sorted(agents.items()):
+        for topic in sorted(set(stats["sent"]) | set(stats["received"])):
+            table.add_row(agent, topic, str(stats["sent"].get(topic, 0)), str(stats["received"].get(topic, 0)),
+                          human_size(stats["bytes_sent"].get(topic, 0)),
+                          human_size(stats["bytes_received"].get(topic, 0)))
+        if stats["rejected"]:
+            table.add_row(agent, "rejected", "", json.dumps(stats["rejected"]), "", "")
+    return table
+
+
+def register(app: typer.Typer) -> None:
+    """Add the fleet commands to ``app``."""
+
+    @app.command("router")
+    def router_command(listen: Listen = None, connect: Connect = None, config: ConfigFile = None,
+                       no_multicast: NoMulticast = False,
+                       as_json: Annotated[bool, typer.Option("--json", help="Print JSON lines.")] = False) -> None:
+        """Run a Zenoh router (a Python session in router mode) until SIGINT/SIGTERM."""
+        options = _options("router", connect, listen or ["tcp/0.0.0.0:7447"], config, no_multicast)
+        console = Console(stderr=True)
+
+        def ready(info: dict) -> None:
+            if as_json:
+                emit_json({"event": "ready", **info})
+            else:
+                console.print(f"router {info['zid']} listening on {', '.join(info['listen'])}; Ctrl-C stops it")
+
+        with stop_on_signals() as stop:
+            summary = run_router(options, stop, ready)
+        if as_json:
+            emit_json({"event": "stopped", **summary})
+
+    @app.command("meter")
+    def meter_command(fleet: Annotated[str | None, typer.Option(help="Fleet to meter (default: every fleet).")] = None,
+                      connect: Connect = None, listen: Listen = None, mode: Mode = None, config: ConfigFile = None,
+                      no_multicast: NoMulticast = False,
+                      window: Annotated[int, typer.Option(min=2, help="Messages per key in the window.")] = 100,
+                      duration: Annotated[float | None, typer.Option(min=0, help="Stop after S seconds.")] = None,
+                      as_json: Annotated[bool, typer.Option("--json", help="One JSON object per key per second.")]
+                      = False) -> None:
+        """Print per key, once a second, the rate, period statistics, bandwidth and message sizes."""
+        console = Console(width=None if sys.stdout.isatty() else 160)
+
+        def emit(records: list[dict]) -> None:
+            if as_json:
+                for record in records:
+                    emit_json({"type": "rate", **record})
+            elif records:
+                console.print(meter_table(records))
+
+        with stop_on_signals() as stop:
+            summary = run_meter(_options(mode, connect, listen, config, no_multicast), stop, emit, fleet=fleet,
+                                window=window, duration=duration)
+        if as_json:
+            emit_json({"type": "summary", **summary})
+        else:
+            console.print(meter_table(summary["keys"]))
+            if summary["agents"]:
+                console.print(agents_table(summary["agents"]))
+
+    @app.command("publish")
+    def publish_command(fleet: Fleet, vehicle: Vehicle,
+                        topic: Annotated[Topic, typer.Option(help="What to send.")] = Topic.HINT,
+                        rate: Annotated[float, typer.Option(min=0, help="Messages per second (0: flat out).")] = 10.0,
+                        count: Annotated[int | None, typer.Option(min=0, help="Stop after N messages.")] = None,
+                        duration: Annotated[float | None, typer.Option(min=0, help="Stop after S seconds.")] = None,
+                        payload: Annotated[str, typer.Option(help=f"One of {', '.join(PAYLOADS)}.")] = "valid",
+                        points: Annotated[int, typer.Option(min=0, help="Feature points per set.")] = 30,
+                        width: Annotated[int, typer.Option(min=1, help="Image width, pixels.")] = 640,
+                        height: Annotated[int, typer.Option(min=1, help="Image height, pixels.")] = 480,
+                        seed: Annotated[int, typer.Option(min=0)] = 0,
+                        wait: Annotated[float, typer.Option(min=0, help="Wait up to S seconds for a subscriber.")]
+                        = 3.0,
+                        stay: Annotated[bool, typer.Option(help="Stay alive after sending until SIGINT.")] = False,
+                        connect: Connect = None, listen: Listen = None, mode: Mode = None, config: ConfigFile = None,
+                        no_multicast: NoMulticast = False) -> None:
+        """Send well-formed (or deliberately bad) messages of one topic at a rate: a test and demo tool."""
+        if payload not in PAYLOADS:
+            raise FleetError(f"--payload must be one of {', '.join(PAYLOADS)}, got {payload!r}")
+        spec = PublishSpec(topic, rate, count, duration, payload, points, width, height, seed)
+        with stop_on_signals() as stop:
+            emit_json(run_publisher(_options(mode, connect, listen, config, no_multicast), stop, fleet, vehicle,
+                                    spec, wait_s=wait, stay=stay))
+
+    @app.command("listen")
+    def listen_command(fleet: Fleet, vehicle: Vehicle,
+                       topics: Annotated[str, typer.Option(help="Comma-separated topics to receive.")]
+                       = "image,features,hint,attitude,pose",
+                       duration: Annotated[float | None, typer.Option(min=0, help="Stop after S seconds.")] = None,
+                       max_age: Annotated[float, typer.Option(min=0, help="Ignore data older than S seconds.")] = 1.0,
+                       connect: Connect = None, listen: Listen = None, mode: Mode = None, config: ConfigFile = None,
+                       no_multicast: NoMulticast = False) -> None:
+        """Join the fleet as a receiving vehicle; print join/leave events and, at the end, the counters (JSON)."""
+        with stop_on_signals() as stop:
+            emit_json(run_listener(_options(mode, connect, listen, config, no_multicast), stop, fleet, vehicle,
+                                   _topics(topics), duration=duration, max_age_s=max_age))

@@ -1,0 +1,11 @@
+"""Exceptions of the fleet plumbing; the CLI turns :class:`FleetError` into ``error: ...`` and exit 2."""
+
+from __future__ import annotations
+
+
+class FleetError(Exception):
+    """Root of the errors a fleet command reports to its user as one line."""
+
+
+class BusConfigError(FleetError):
+    """A bad Zenoh mode, endpoint or configuration file, or a session that cannot be opened."""

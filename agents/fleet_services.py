@@ -1,0 +1,186 @@
+"""Service functions behind the fleet commands (router, meter, publish, listen); each returns plain data.
+
+Each opens the process's single Zenoh session, runs until ``stop`` is set (SIGINT/SIGTERM, see
+:mod:`agents.shutdown`) or its duration/count is reached, and always closes what it declared.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from protocol import (SIZE_LIMITS, Attitude, CameraInfo, FeatureSet, Hint, ImageFrame, Payload, PoseEstimate,
+                      Topic, check_name, encode)
+
+from .bus import FleetBus
+from .meter import Meter
+from .zenoh_config import SessionOptions, open_session
+
+PAYLOADS = ("valid", "garbage", "oversized", "truncated")
+
+
+def emit_json(record: dict) -> None:
+    """Print one JSON object on its own line, flushed (for pipes and tests)."""
+    sys.stdout.write(json.dumps(record) + "\n")
+    sys.stdout.flush()
+
+
+# -- router ------------------------------------------------------------------------------------
+
+def run_router(options: SessionOptions, stop: threading.Event, on_ready: Callable[[dict], None]) -> dict:
+    """Run a Zenoh router (a session in mode ``router``) until ``stop``; returns its id and uptime."""
+    session = open_session(SessionOptions(**{**options.__dict__, "mode": "router"}))
+    started = time.monotonic()
+    try:
+        info = {"zid": str(session.zid()), "listen": list(options.listen)}
+        on_ready(info)
+        while not stop.wait(0.2):
+            pass
+        info["peers"] = len(session.info.peers_zid())
+    finally:
+        session.close()
+    return {**info, "seconds": time.monotonic() - started}
+
+
+# -- meter -------------------------------------------------------------------------------------
+
+def run_meter(options: SessionOptions, stop: threading.Event, emit: Callable[[list[dict]], None], *,
+              fleet: str | None = None, window: int = 100, duration: float | None = None,
+              period_s: float = 1.0) -> dict:
+    """Meter the fleet, calling ``emit`` with the per-key records every ``period_s``; returns the summary."""
+    if fleet is not None:
+        check_name(fleet, "fleet")
+    session = open_session(options)
+    try:
+        meter = Meter(session, fleet, window)
+        deadline = None if duration is None else time.monotonic() + duration
+        try:
+            next_report = time.monotonic() + period_s
+            while not stop.is_set():
+                timeout = next_report - time.monotonic()
+                if deadline is not None:
+                    timeout = min(timeout, deadline - time.monotonic())
+                if stop.wait(max(timeout, 0)):
+                    break
+                if time.monotonic() >= next_report:
+                    emit(meter.report())
+                    next_report += period_s
+                if deadline is not None and time.monotonic() >= deadline:
+                    break
+            time.sleep(0.05)  # last stats from agents still in flight
+        finally:
+            meter.close()
+        return {"keys": meter.report(), "agents": meter.agents}
+    finally:
+        session.close()
+
+
+# -- publisher (test and demo tool) ---------------------------------------------------------------
+
+@dataclass(frozen=True)
+class PublishSpec:
+    """What ``evopose publish`` sends: ``count`` messages of ``topic`` at ``rate_hz`` (0: as fast as possible)."""
+
+    topic: Topic
+    rate_hz: float = 10.0
+    count: int | None = None
+    duration: float | None = None
+    payload: str = "valid"  #: one of PAYLOADS
+    points: int = 30
+    width: int = 640
+    height: int = 480
+    seed: int = 0
+
+
+def sample_message(spec: PublishSpec, header: dict, rng: np.random.Generator) -> Payload:
+    """A well-formed message of ``spec.topic``, random but plausible."""
+    camera = CameraInfo(fx=800.0, fy=800.0, cx=spec.width / 2, cy=spec.height / 2, width=spec.width,
+                        height=spec.height)
+    pose = (rng.uniform(-2, 2), rng.uniform(-2, 2), rng.uniform(8, 20), *rng.uniform(-0.3, 0.3, 3))
+    if spec.topic is Topic.HINT:
+        return Hint(pose=pose)
+    if spec.topic is Topic.FEATURES:
+        uv = rng.uniform((0, 0), (spec.width, spec.height), (spec.points, 2))
+        return FeatureSet.from_array(uv, camera, **header)
+    if spec.topic is Topic.IMAGE:
+        image = rng.integers(0, 256, (spec.height, spec.width, 3), dtype=np.uint8)
+        return ImageFrame.from_array(image, camera, **header)
+    if spec.topic is Topic.ATTITUDE:
+        return Attitude(**header, body=header["sender"], roll=pose[3], pitch=pose[4], yaw=pose[5],
+                        sigma=(0.002, 0.002, 0.01))
+    if spec.topic is Topic.POSE:
+        return PoseEstimate(**header, pose=pose, fitness=0.5, quality=0.9, converged=True, generations=10,
+                            seconds=0.1)
+    raise ValueError(f"publish cannot make {spec.topic.value!r} messages; Stats are sent by agents themselves")
+
+
+def bad_payload(spec: PublishSpec, valid: bytes, rng: np.random.Generator) -> bytes:
+    """A payload the receivers must reject: random bytes, one byte over the limit, or the valid one truncated."""
+    if spec.payload == "garbage":
+        return bytes(rng.integers(0, 256, max(len(valid), 1), dtype=np.uint8)) + b"\xc1"
+    if spec.payload == "oversized":
+        return b"\x00" * (SIZE_LIMITS[spec.topic] + 1)
+    return valid[: len(valid) // 2]
+
+
+def run_publisher(options: SessionOptions, stop: threading.Event, fleet: str, vehicle: str,
+                  spec: PublishSpec, *, wait_s: float = 0.0, stay: bool = False) -> dict:
+    """Publish per ``spec`` as ``vehicle``; with ``stay``, keep the session (and presence) until ``stop``.
+
+    Before sending, wait up to ``wait_s`` for a subscriber to match, then a little longer for the
+    other subscribers' declarations to arrive.
+    """
+    rng = np.random.default_rng(spec.seed)
+    with FleetBus.open(options, fleet, vehicle, stats_period_s=1.0) as bus:
+        if wait_s > 0 and bus.wait_for_subscribers(spec.topic, wait_s):
+            stop.wait(0.2)
+        sent, total_bytes, sizes = 0, 0, set()
+        started = next_time = time.monotonic()
+        while not stop.is_set() and (spec.count is None or sent < spec.count) and (
+                spec.duration is None or time.monotonic() - started < spec.duration):
+            message = sample_message(spec, bus.header(spec.topic), rng)
+            payload = encode(message)
+            if spec.payload != "valid":
+                payload = bad_payload(spec, payload, rng)
+            size = bus.put_raw(spec.topic, payload)
+            sent, total_bytes = sent + 1, total_bytes + size
+            sizes.add(size)
+            if spec.rate_hz > 0:
+                next_time += 1.0 / spec.rate_hz
+                stop.wait(max(0.0, next_time - time.monotonic()))
+        seconds = time.monotonic() - started
+        while stay and not stop.wait(0.2):
+            pass
+        return {"vehicle": vehicle, "topic": spec.topic.value, "payload": spec.payload, "sent": sent,
+                "bytes": total_bytes, "size_min": min(sizes, default=0), "size_max": max(sizes, default=0),
+                "seconds": seconds, "rate_hz": (sent - 1) / seconds if sent > 1 and seconds > 0 else 0.0}
+
+
+# -- listener (a receiving agent without the per-frame loop) --------------------------------------
+
+def run_listener(options: SessionOptions, stop: threading.Event, fleet: str, vehicle: str,
+                 topics: tuple[Topic, ...], *, duration: float | None = None, max_age_s: float | None = 1.0,
+                 emit: Callable[[dict], None] = emit_json) -> dict:
+    """Receive ``topics`` from the team-mates as ``vehicle``, emitting join/leave events; returns the counters."""
+    started = time.monotonic()
+    with FleetBus.open(options, fleet, vehicle, max_age_s=max_age_s, stats_period_s=1.0,
+                       on_join=lambda v: emit({"event": "join", "vehicle": v, "t_s": time.monotonic() - started}),
+                       on_leave=lambda v: emit({"event": "leave", "vehicle": v,
+                                                "t_s": time.monotonic() - started})) as bus:
+        for topic in topics:
+            bus.subscribe(topic)
+        emit({"event": "ready", "vehicle": vehicle})
+        while not stop.wait(0.1):
+            for topic in topics:  # drain, as an agent loop would
+                while bus.recv(topic, timeout=0) is not None:
+                    pass
+            if duration is not None and time.monotonic() - started >= duration:
+                break
+        return {"event": "summary", "vehicle": vehicle, "teammates": sorted(bus.teammates()),
+                **bus.counters.snapshot()}

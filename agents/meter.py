@@ -1,0 +1,128 @@
+"""The rate and bandwidth meter: what ``ros2 topic hz`` and ``ros2 topic bw`` report, per key.
+
+The Zenoh callback only appends ``(arrival time, payload size)`` to the key's window (and copies
+Stats payloads, which are decoded later in the report loop). Once a second the meter reports, per
+key: average rate over the window, min/max/std dev of the period, window size, bandwidth (mean
+size x rate) and mean/min/max payload size; at the end, totals and the agents' own Stats.
+"""
+
+from __future__ import annotations
+
+import math
+import statistics
+import threading
+import time
+from collections import deque
+from dataclasses import dataclass, field
+
+import zenoh
+
+from protocol import ProtocolError, Stats, Topic, decode_sample, fleet_selector
+
+
+@dataclass
+class KeyWindow:
+    """The last ``size`` arrivals on one key, and totals since the meter started."""
+
+    size: int
+    arrivals_s: deque = field(default_factory=deque)  #: monotonic arrival times, s
+    sizes: deque = field(default_factory=deque)       #: payload sizes, bytes
+    count: int = 0
+    total_bytes: int = 0
+
+    def add(self, arrival_s: float, size: int) -> None:
+        if len(self.arrivals_s) == self.size:
+            self.arrivals_s.popleft()
+            self.sizes.popleft()
+        self.arrivals_s.append(arrival_s)
+        self.sizes.append(size)
+        self.count += 1
+        self.total_bytes += size
+
+    def report(self, now_s: float) -> dict:
+        """Rate (Hz), period min/max/std (s), window, bandwidth (B/s), sizes (B), age of the last message (s)."""
+        times, sizes = list(self.arrivals_s), list(self.sizes)
+        periods = [b - a for a, b in zip(times, times[1:])]
+        span = times[-1] - times[0] if len(times) > 1 else 0.0
+        rate = (len(times) - 1) / span if span > 0 else 0.0
+        mean_size = sum(sizes) / len(sizes)
+        return {
+            "rate_hz": rate,
+            "period_min_s": min(periods) if periods else None,
+            "period_max_s": max(periods) if periods else None,
+            "period_std_s": statistics.pstdev(periods) if len(periods) > 1 else 0.0 if periods else None,
+            "window": len(times),
+            "bandwidth_Bps": mean_size * rate,
+            "size_mean": mean_size, "size_min": min(sizes), "size_max": max(sizes),
+            "count": self.count, "total_bytes": self.total_bytes,
+            "age_s": now_s - times[-1],
+        }
+
+
+class Meter:
+    """Subscribes to every data key of ``fleet`` (of every fleet when None) on ``session``."""
+
+    def __init__(self, session: zenoh.Session, fleet: str | None = None, window: int = 100) -> None:
+        if window < 2:
+            raise ValueError(f"window must be at least 2 messages, got {window}")
+        self.window = window
+        self.started_s = time.monotonic()
+        self._keys: dict[str, KeyWindow] = {}
+        self._stats_payloads: deque[tuple[str, bytes]] = deque(maxlen=1000)
+        self.agents: dict[str, dict] = {}
+        self._lock = threading.Lock()
+        self._subscriber = session.declare_subscriber(fleet_selector(fleet), self._on_sample)
+
+    def _on_sample(self, sample: zenoh.Sample) -> None:  # Zenoh thread: append only
+        if sample.kind != zenoh.SampleKind.PUT:
+            return
+        key, size, now = str(sample.key_expr), len(sample.payload), time.monotonic()
+        with self._lock:
+            window = self._keys.get(key)
+            if window is None:
+                window = self._keys[key] = KeyWindow(self.window)
+            window.add(now, size)
+        if key.endswith("/" + Topic.STATS.value) and size <= 16384:
+            self._stats_payloads.append((key, sample.payload.to_bytes()))
+
+    def _collect_stats(self) -> None:
+        while self._stats_payloads:
+            key, payload = self._stats_payloads.popleft()
+            try:
+                parts, stats = decode_sample(key, payload)
+            except ProtocolError:
+                continue
+            assert isinstance(stats, Stats)
+            self.agents[f"{parts.fleet}/{parts.vehicle}"] = stats.model_dump(
+                include={"seq", "sent", "received", "bytes_sent", "bytes_received", "rejected"})
+
+    def report(self) -> list[dict]:
+        """One record per key seen so far, sorted by key."""
+        self._collect_stats()
+        now = time.monotonic()
+        with self._lock:
+            return [{"key": key, "t_s": now - self.started_s, **window.report(now)}
+                    for key, window in sorted(self._keys.items())]
+
+    def close(self) -> None:
+        self._subscriber.undeclare()
+        self._collect_stats()
+
+
+def human_rate(bytes_per_s: float) -> str:
+    """``123 B/s``, ``12.3 KB/s`` or ``1.23 MB/s`` (powers of 1000, like ``ros2 topic bw``)."""
+    for unit, scale in (("MB/s", 1e6), ("KB/s", 1e3)):
+        if bytes_per_s >= scale:
+            return f"{bytes_per_s / scale:.3g} {unit}"
+    return f"{bytes_per_s:.0f} B/s"
+
+
+def human_size(size: float) -> str:
+    for unit, scale in (("MB", 1e6), ("KB", 1e3)):
+        if size >= scale:
+            return f"{size / scale:.3g} {unit}"
+    return f"{size:.0f} B"
+
+
+def format_period(seconds: float | None) -> str:
+    return "-" if seconds is None or math.isnan(seconds) else f"{seconds * 1e3:.2f} ms"

@@ -1,0 +1,108 @@
+"""Helpers for multi-process fleet tests: free loopback ports, `evopose` subprocesses that are always killed,
+and their JSON-line output read with timeouts."""
+
+from __future__ import annotations
+
+import json
+import queue
+import signal
+import socket
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def free_port() -> int:
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        return sock.getsockname()[1]
+
+
+class Proc:
+    """A subprocess whose stdout lines are collected by a thread; JSON lines are parsed."""
+
+    def __init__(self, args: list[str]) -> None:
+        self.args = args
+        self.popen = subprocess.Popen(args, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        self.lines: queue.Queue[str] = queue.Queue()
+        self.records: list[dict] = []
+        self._reader = threading.Thread(target=self._read, daemon=True)
+        self._reader.start()
+
+    def _read(self) -> None:
+        for line in self.popen.stdout:
+            self.lines.put(line)
+
+    def next_record(self, timeout: float, where=lambda record: True) -> dict:
+        """The next JSON line satisfying ``where``, waiting up to ``timeout`` s."""
+        deadline = time.monotonic() + timeout
+        while True:
+            try:
+                line = self.lines.get(timeout=max(deadline - time.monotonic(), 0.01))
+            except queue.Empty:
+                raise AssertionError(f"no matching output from {self.args} within {timeout} s; "
+                                     f"exit code {self.popen.poll()}, stderr: {self.stderr_now()}") from None
+            try:
+                record = json.loads(line)
+            except ValueError:
+                continue
+            self.records.append(record)
+            if where(record):
+                return record
+
+    def stderr_now(self) -> str:
+        return "" if self.popen.poll() is None else self.popen.stderr.read()
+
+    def stop(self, sig: int = signal.SIGTERM, timeout: float = 5.0) -> tuple[int, float]:
+        """Send ``sig`` and wait; return the exit code and how long the exit took (s)."""
+        started = time.monotonic()
+        self.popen.send_signal(sig)
+        code = self.popen.wait(timeout)
+        self._reader.join(2)
+        return code, time.monotonic() - started
+
+    def wait(self, timeout: float) -> int:
+        code = self.popen.wait(timeout)
+        self._reader.join(2)
+        return code
+
+    def all_records(self) -> list[dict]:
+        while not self.lines.empty():
+            try:
+                self.records.append(json.loads(self.lines.get_nowait()))
+            except ValueError:
+                pass
+        return self.records
+
+    def kill(self) -> None:
+        if self.popen.poll() is None:
+            self.popen.kill()
+            self.popen.wait(5)
+
+
+class Fleet:
+    """Starts `python -m agents.cli ...` processes connected to one router; kills them all in :meth:`close`."""
+
+    def __init__(self, router_port: int, fleet: str) -> None:
+        self.endpoint = f"tcp/127.0.0.1:{router_port}"
+        self.fleet = fleet
+        self.procs: list[Proc] = []
+
+    def start(self, *args: str, connect: bool = True) -> Proc:
+        net = ["--connect", self.endpoint, "--mode", "client", "--no-multicast"] if connect else []
+        proc = Proc([sys.executable, "-m", "agents.cli", *args, *net])
+        self.procs.append(proc)
+        return proc
+
+    def python(self, code: str) -> Proc:
+        proc = Proc([sys.executable, "-c", code])
+        self.procs.append(proc)
+        return proc
+
+    def close(self) -> None:
+        for proc in self.procs:
+            proc.kill()

@@ -1,0 +1,1 @@
+"""Golden encoded payloads that pin the wire format (docs/protocol.md)."""
