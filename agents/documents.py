@@ -8,12 +8,13 @@ names the field path (``views[0].points[3]: expected 2 numbers [u, v], got 3``).
 from __future__ import annotations
 
 import json
-import re
 from pathlib import Path
 from typing import Any
 
 import yaml
 from pydantic import ValidationError
+
+from scenarios.documents import StrictLoader
 
 #: Longest excerpt of an offending value quoted in a message.
 MAX_QUOTE = 40
@@ -29,30 +30,6 @@ class UnknownKey(ValueError):
     def __init__(self, key: Any, expected: list[str]) -> None:
         super().__init__(f"unknown key (expected {', '.join(expected)})")
         self.key = key
-
-
-class _StrictLoader(yaml.SafeLoader):
-    """Safe YAML that rejects duplicate keys and reads ``1e-3`` as a number (as YAML 1.2 and JSON do)."""
-
-
-def _construct_mapping(loader: _StrictLoader, node: yaml.MappingNode, deep: bool = False) -> dict:
-    loader.flatten_mapping(node)
-    seen = set()
-    for key_node, _ in node.value:
-        if isinstance(key_node, yaml.ScalarNode):
-            key = loader.construct_object(key_node, deep=deep)
-            if key in seen:
-                raise yaml.constructor.ConstructorError(None, None, f"duplicate key {key!r}", key_node.start_mark)
-            seen.add(key)
-    return loader.construct_mapping(node, deep=deep)
-
-
-_StrictLoader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _construct_mapping)
-_StrictLoader.add_implicit_resolver(
-    "tag:yaml.org,2002:float",
-    re.compile(r"^[-+]?(?:[0-9][0-9_]*)(?:\.[0-9_]*)?[eE][-+]?[0-9]+$"),
-    list("-+0123456789"),
-)
 
 
 def _json_object(pairs: list[tuple[str, Any]]) -> dict:
@@ -74,7 +51,7 @@ def _parse(path: Path, text: str) -> Any:
         except ValueError as err:
             raise DocumentError(f"{path}: invalid JSON: {err}") from None
     try:
-        return yaml.load(text, Loader=_StrictLoader)  # noqa: S506 - a SafeLoader subclass
+        return yaml.load(text, Loader=StrictLoader)  # noqa: S506 - a SafeLoader subclass
     except yaml.MarkedYAMLError as err:
         mark = err.problem_mark or err.context_mark
         where = f"{path}:{mark.line + 1}:{mark.column + 1}" if mark else str(path)
