@@ -1,0 +1,106 @@
+"""``evopose agent``: one vehicle of the fleet as its own process (a thin wrapper over agents.vehicle)."""
+
+from __future__ import annotations
+
+import json
+from typing import Annotated
+
+import typer
+from rich.console import Console
+from rich.table import Table
+
+from .cli_fleet import ConfigFile, Connect, Listen, Mode, NoMulticast, _options
+from .fleet_services import emit_json
+from .shutdown import stop_on_signals
+from .vehicle import ENCODINGS, ROLES, SHARES, AgentConfig, run_agent
+
+
+def summary_table(summary: dict) -> Table:
+    """The end-of-run summary of one agent, for people."""
+    table = Table(title=f"{summary['vehicle']} ({summary['role']}, share {summary['share']})", show_header=False,
+                  title_justify="left")
+    table.add_column(style="bold")
+    table.add_column(justify="right")
+    table.add_row("frames", f"{summary['frames']} ({summary['late_frames']} skipped late)")
+    table.add_row("estimates (good)", f"{summary['estimates']} ({summary['good']})")
+    if summary.get("first_good_s") is not None:
+        table.add_row("first good pose after", f"{summary['first_good_s']:.3f} s")
+    if "error_position" in summary:
+        table.add_row("mean position error", f"{summary['error_position'] * 100:.2f} cm")
+        table.add_row("mean roll/pitch/yaw error",
+                      " / ".join(f"{summary[f'error_{n}']:.2f}°" for n in ("roll", "pitch", "yaw")))
+    if summary.get("frame_seconds_median") is not None:
+        table.add_row("median estimate time", f"{summary['frame_seconds_median'] * 1e3:.1f} ms")
+    traffic = summary["traffic"]
+    for topic in sorted(set(traffic["sent"]) | set(traffic["received"])):
+        table.add_row(f"{topic} sent / received",
+                      f"{traffic['sent'].get(topic, 0)} / {traffic['received'].get(topic, 0)}")
+    if traffic["rejected"]:
+        table.add_row("rejected", json.dumps(traffic["rejected"]))
+    return table
+
+
+def register(app: typer.Typer) -> None:
+    """Add ``agent`` to ``app``."""
+
+    @app.command("agent")
+    def agent_command(
+        fleet: Annotated[str, typer.Option(help="Fleet name.")],
+        vehicle: Annotated[str, typer.Option(help="This vehicle: a vehicle of the scenario, or its target.")],
+        scenario: Annotated[str, typer.Option(help="Scenario file or shipped name (the simulated world).")] = "exp2",
+        role: Annotated[str | None, typer.Option(help=f"One of {', '.join(ROLES)} (default: the scenario's).")]
+        = None,
+        share: Annotated[str, typer.Option(help=f"What to share with team-mates: {', '.join(SHARES)}.")] = "none",
+        frames: Annotated[int | None, typer.Option(min=1, help="Stop after N frames (default: run until "
+                                                                "SIGINT/SIGTERM).")] = None,
+        fps: Annotated[float | None, typer.Option(help="Camera rate (default: the scenario's).")] = None,
+        epoch_ns: Annotated[int, typer.Option(help="Fleet time of frame 0, ns since the Unix epoch; agents of a "
+                                                   "fleet share it.")] = 0,
+        seed: Annotated[int, typer.Option(min=0, help="Seed of the searches.")] = 0,
+        world_seed: Annotated[int | None, typer.Option(min=0, help="Replace the scenario's seed (image noise, "
+                                                                   "IMU bias).")] = None,
+        max_age: Annotated[float, typer.Option(help="Ignore team-mates' data older than S seconds.")] = 1.0,
+        sync_wait: Annotated[float | None, typer.Option(min=0, help="Wait up to S seconds for team-mates' data "
+                                                                    "of each frame (default: half a frame).")]
+        = None,
+        hint_rate: Annotated[float, typer.Option(help="Most hints per second.")] = 200.0,
+        image_encoding: Annotated[str, typer.Option(help=f"Shared images: {', '.join(ENCODINGS)}.")] = "raw",
+        imu: Annotated[bool, typer.Option("--imu/--no-imu", help="Ground station: hold the attitude within the "
+                                                                 "airship's IMU reading (eq. 3).")] = True,
+        imu_sigmas: Annotated[float, typer.Option(help="IMU tolerance, in its standard deviations.")] = 3.0,
+        wait_for: Annotated[str, typer.Option(help="Comma-separated team-mates to wait for before frame 0.")] = "",
+        wait_timeout: Annotated[float, typer.Option(min=0, help="How long to wait for them, s.")] = 10.0,
+        time_budget: Annotated[float | None, typer.Option(min=0, help="Seconds per search from scratch.")] = None,
+        as_json: Annotated[bool, typer.Option("--json", help="One JSON object per event on stdout.")] = False,
+        connect: Connect = None, listen: Listen = None, mode: Mode = None, config: ConfigFile = None,
+        no_multicast: NoMulticast = False,
+    ) -> None:
+        """Run one vehicle: acquire, extract, share, estimate (eq. 1-4 and hints), publish; until stopped."""
+        agent_config = AgentConfig(
+            fleet=fleet, vehicle=vehicle, scenario=scenario, role=role, share=share, frames=frames, fps=fps,
+            epoch_ns=epoch_ns, seed=seed, world_seed=world_seed, max_age_s=max_age, sync_wait_s=sync_wait,
+            hint_rate_hz=hint_rate, image_encoding=image_encoding, use_attitude=imu, attitude_sigmas=imu_sigmas,
+            wait_for=tuple(v.strip() for v in wait_for.split(",") if v.strip()), wait_timeout_s=wait_timeout,
+            time_budget_s=time_budget)
+        console = Console(stderr=True)
+
+        def emit(record: dict) -> None:
+            if as_json:
+                emit_json(record)
+            elif record["event"] in ("ready", "join", "leave"):
+                console.print(f"{record['event']}: {record.get('vehicle')}")
+            elif record["event"] == "frame" and record.get("estimate", True) is not None:
+                e = record["error"]
+                console.print(f"frame {record['frame']}: views {','.join(record['views'])} "
+                              f"error {e['position'] * 100:.1f} cm {max(e['roll'], e['pitch'], e['yaw']):.2f}° "
+                              f"{'good' if record['good'] else 'not converged'} {record['seconds'] * 1e3:.0f} ms")
+
+        with stop_on_signals() as stop:
+            summary = run_agent(_options(mode, connect, listen, config, no_multicast), agent_config, stop, emit)
+        if as_json:
+            emit_json(summary)
+        else:
+            Console().print(summary_table(summary))
+
+
+__all__ = ["register", "summary_table"]

@@ -1,0 +1,112 @@
+"""The fleet's frame clock and a vehicle's simulated camera.
+
+Every agent of a fleet acquires frame ``n`` at ``epoch_ns + n / fps`` (wall clock, ns since the Unix
+epoch), so two vehicles' frames of the same instant carry the same ``stamp_ns`` and a receiver can pair
+them (the feature sets of eq. 4 must describe the same instant for a moving target). The default
+epoch is 0: any two agents with synchronised clocks agree on frame numbers without talking.
+A scenario has a finite number of frames; frame ``n`` shows scenario frame ``n mod frames``.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from evopose import Camera
+from evopose.features import colour_ranges, detect_colour_marks
+from scenarios.render import render_frame
+from scenarios.world import Scenario
+
+NS = 1_000_000_000
+
+
+@dataclass(frozen=True)
+class FrameClock:
+    """Frame ``n`` is due at ``epoch_ns + round(n * 1e9 / fps)``."""
+
+    fps: float
+    epoch_ns: int = 0
+
+    def __post_init__(self) -> None:
+        if not self.fps > 0:
+            raise ValueError(f"fps must be > 0, got {self.fps}")
+
+    def stamp_ns(self, n: int) -> int:
+        return self.epoch_ns + round(n * NS / self.fps)
+
+    def index_at(self, t_ns: int) -> int:
+        """The last frame due at or before ``t_ns``."""
+        return int(np.floor((t_ns - self.epoch_ns) * self.fps / NS))
+
+    def index_of(self, stamp_ns: int) -> int | None:
+        """The frame whose stamp is ``stamp_ns`` (within 1 ms), or None if it is not a frame stamp."""
+        n = round((stamp_ns - self.epoch_ns) * self.fps / NS)
+        return n if abs(self.stamp_ns(n) - stamp_ns) <= 1_000_000 else None
+
+    def wait_next(self, after: int | None, stop: threading.Event) -> int | None:
+        """Sleep until the frame after ``after`` is due (the newest due frame if we are late); None if stopped.
+
+        When ``after`` is None the next frame to come is waited for.
+        """
+        now = time.time_ns()
+        due = self.index_at(now)
+        n = due + 1 if after is None else max(after + 1, due)
+        delay = (self.stamp_ns(n) - now) / NS
+        if delay > 0 and stop.wait(delay):
+            return None
+        return None if stop.is_set() else n
+
+
+@dataclass(frozen=True)
+class Frame:
+    """One acquired frame.
+
+    Attributes
+    ----------
+    index : int
+        Fleet frame number (see :class:`FrameClock`).
+    scene_frame : int
+        The scenario frame shown.
+    stamp_ns : int
+        Acquisition time, ns since the Unix epoch.
+    image : array (H, W, 3) uint8, BGR
+    camera : Camera
+        With its ``world_from_camera`` at acquisition.
+    points : array (N, 2)
+        Extracted feature points (mark centres), pixels.
+    truth : array (6,)
+        ``world_from_target`` ground truth, for evaluation only.
+    """
+
+    index: int
+    scene_frame: int
+    stamp_ns: int
+    image: np.ndarray
+    camera: Camera
+    points: np.ndarray
+    truth: np.ndarray
+
+
+class SimulatedCamera:
+    """A vehicle's camera in a scenario: renders the frame, extracts the target's colour marks."""
+
+    def __init__(self, scenario: Scenario, vehicle: str) -> None:
+        self.scenario = scenario
+        self.vehicle = scenario.vehicle(vehicle).name
+        self.ranges = colour_ranges(scenario.model.palette)
+
+    def scene_frame(self, index: int) -> int:
+        return index % self.scenario.frames
+
+    def acquire(self, index: int, stamp_ns: int) -> Frame:
+        scene = self.scene_frame(index)
+        rendered = render_frame(self.scenario, scene, self.vehicle)
+        return Frame(index, scene, stamp_ns, rendered.image, rendered.camera, self.extract(rendered.image),
+                     self.scenario.target_pose(scene))
+
+    def extract(self, image: np.ndarray) -> np.ndarray:
+        """The target's colour marks in a BGR image (own or a team-mate's raw frame), shape (N, 2)."""
+        return detect_colour_marks(image, self.ranges).points
