@@ -180,7 +180,7 @@ class VehicleAgent:
         self.team = TeamViews()
         self._hints: list[np.ndarray] = []
         self._hints_lock = threading.Lock()
-        self._last_hint_s = 0.0
+        self._next_hint_s = 0.0
         self._started_ns = 0
 
     # -- set-up -----------------------------------------------------------------------------
@@ -343,9 +343,11 @@ class VehicleAgent:
         self._publish_hint(state.best_pose)
 
     def _publish_hint(self, pose: np.ndarray) -> None:
-        now = time.monotonic()
-        if now - self._last_hint_s >= 1.0 / self.config.hint_rate_hz:
-            self._last_hint_s = now
+        """Send ``pose`` as a hint unless that would exceed ``hint_rate_hz`` (a schedule, not a minimum gap, so that
+        a late wake-up does not lower the rate)."""
+        now, period = time.monotonic(), 1.0 / self.config.hint_rate_hz
+        if now >= self._next_hint_s:
+            self._next_hint_s = max(self._next_hint_s + period, now - period)
             self.bus.publish_hint(pose)
             self.record.hints_published += 1
 
@@ -361,7 +363,7 @@ class VehicleAgent:
             if estimate is None:
                 return
             self._publish_hint(estimate.pose)
-            stop.wait(max(0.0, self._last_hint_s + period - time.monotonic()))
+            stop.wait(max(0.0, self._next_hint_s - time.monotonic()))
 
     def publish_estimate(self, n: int, stamp: int, estimate: Estimate, inputs: list[str], seconds: float,
                          truth: np.ndarray, points: int, knowledge: list[Knowledge]) -> None:

@@ -1,0 +1,109 @@
+"""CooperativeEstimator without Zenoh: views from two vehicles (eq. 4), IMU knowledge (eq. 3), hints, tracking,
+between-frame generations; and the pairing of team-mates' frames by stamp."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from agents.frames import FrameClock, SimulatedCamera
+from agents.team_views import MateView, TeamViews, build_views, camera_from_info, camera_info, own_view
+from evopose.cooperative import CooperativeEstimator, Knowledge
+from evopose.pose import wrap_angle
+from scenarios.world import load_scenario
+
+
+@pytest.fixture(scope="module")
+def exp2():
+    scenario = load_scenario("exp2")
+    frames = {v: SimulatedCamera(scenario, v).acquire(0, 0) for v in ("H1", "H2")}
+    return scenario, frames
+
+
+def _views(frames, vehicles):
+    return build_views([own_view(v, 0, frames[v].camera, frames[v].points) for v in vehicles])
+
+
+def _estimator(scenario, seed=0):
+    return CooperativeEstimator(scenario.model.evopose_model(), scenario.bounds(), seed=seed)
+
+
+def _position_error(pose, truth):
+    return float(np.linalg.norm(np.asarray(pose)[:3] - truth[:3]))
+
+
+def test_two_views_in_either_order_give_one_pose(exp2):
+    scenario, frames = exp2
+    views_a, names_a = _views(frames, ("H1", "H2"))
+    views_b, names_b = _views(frames, ("H2", "H1"))
+    assert names_a == names_b == ["H1", "H2"] and [v.weight for v in views_a] == [0.5, 0.5]
+    a = _estimator(scenario).estimate(views_a, frame=3)
+    b = _estimator(scenario).estimate(views_b, frame=3)
+    assert a.good and a.solved and np.array_equal(a.pose, b.pose)
+    assert _position_error(a.pose, frames["H1"].truth) < 0.02
+
+
+def test_tracking_follows_and_reports_quality(exp2):
+    scenario, frames = exp2
+    estimator = _estimator(scenario)
+    views, _ = _views(frames, ("H1",))
+    first = estimator.estimate(views, frame=0)
+    second = estimator.estimate(views, frame=1)
+    assert first.solved and not second.solved and second.solution.stop_reason == "tracked"
+    assert 0.5 < second.quality <= 1.0
+    assert _position_error(second.pose, frames["H1"].truth) < 0.05
+
+
+def test_knowledge_holds_the_attitude_within_its_tolerance(exp2):
+    """Eq. (3): with roll, pitch and yaw known within 0.5 degrees the pose stays in that box."""
+    scenario, frames = exp2
+    truth = frames["H1"].truth
+    offset = np.deg2rad(0.4)
+    knowledge = [Knowledge(n, float(truth[3 + i] + offset), np.deg2rad(0.5)) for i, n in enumerate(("roll", "pitch",
+                                                                                                     "yaw"))]
+    views, _ = _views(frames, ("H1",))
+    estimate = _estimator(scenario).estimate(views, knowledge=knowledge)
+    delta = wrap_angle(estimate.pose[3:] - (truth[3:] + offset))
+    assert np.all(np.abs(delta) <= np.deg2rad(0.5) + 1e-9)
+    with pytest.raises(ValueError, match="knowledge of .heading.: expected one of"):
+        Knowledge("heading", 0.0)
+
+
+def test_a_bad_hint_is_discarded_and_a_good_one_kept(exp2):
+    scenario, frames = exp2
+    views, _ = _views(frames, ("H2",))
+    truth = frames["H2"].truth
+    estimator = _estimator(scenario)
+    estimator.estimate(views, frame=0)
+    bad = truth + np.array([1.5, -1.0, 0.3, 0.0, 0.0, 2.0])
+    for _ in range(5):
+        estimate = estimator.generation(bad[None])
+    assert _position_error(estimate.pose, truth) < 0.05 and not estimate.solution.from_hint
+
+
+def test_generations_never_worsen_the_fitness(exp2):
+    scenario, frames = exp2
+    estimator = _estimator(scenario)
+    assert estimator.generation() is None  # nothing to improve before the first estimate
+    views, _ = _views(frames, ("H1",))
+    estimator.estimate(views)
+    history = [estimator.generation().solution.fitness for _ in range(20)]
+    assert all(b <= a for a, b in zip(history, history[1:]))
+
+
+def test_camera_round_trip_and_pairing_by_stamp(exp2):
+    scenario, frames = exp2
+    cam = frames["H1"].camera
+    back = camera_from_info(camera_info(cam))
+    assert np.allclose(back.world_from_camera, cam.world_from_camera, atol=1e-12)
+    clock = FrameClock(10.0, epoch_ns=1_000)
+    assert clock.stamp_ns(25) == 1_000 + 2_500_000_000 and clock.index_of(clock.stamp_ns(25)) == 25
+    assert clock.index_of(clock.stamp_ns(25) + 5_000_000) is None
+    team = TeamViews()
+    info = camera_info(cam)
+    for n in range(12):  # keeps the last 8
+        team.add(MateView("H2", clock.stamp_ns(n), info, np.zeros((4, 2), np.float32)))
+    now = clock.stamp_ns(11)
+    assert team.sharing({"H2"}, now, 1.0) == {"H2"} and team.sharing(set(), now, 1.0) == set()
+    assert set(team.at(clock.stamp_ns(9), {"H2"})) == {"H2"} and team.at(clock.stamp_ns(2), {"H2"}) == {}
+    assert team.newest({"H2"}, now + 5 * 10**9, 1.0) == {}
