@@ -20,7 +20,7 @@ from evopose.fitness import FitnessKind
 from protocol import ProtocolError
 from scenarios.errors import WorldError
 
-from . import cli_agent, cli_fleet, cli_world
+from . import cli_agent, cli_fleet, cli_scenario, cli_world
 from .fleet_errors import FleetError
 from .problem_file import ProblemFileError
 from .services import solve_file, solve_image
@@ -38,6 +38,7 @@ def evopose() -> None:
 
 cli_fleet.register(app)
 cli_agent.register(app)
+cli_scenario.register(app)
 cli_world.register(app)
 
 

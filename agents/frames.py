@@ -49,11 +49,11 @@ class FrameClock:
     def wait_next(self, after: int | None, stop: threading.Event) -> int | None:
         """Sleep until the frame after ``after`` is due (the newest due frame if we are late); None if stopped.
 
-        When ``after`` is None the next frame to come is waited for.
+        When ``after`` is None the next frame to come (frame 0 at the earliest) is waited for.
         """
         now = time.time_ns()
         due = self.index_at(now)
-        n = due + 1 if after is None else max(after + 1, due)
+        n = max(due + 1, 0) if after is None else max(after + 1, due)
         delay = (self.stamp_ns(n) - now) / NS
         if delay > 0 and stop.wait(delay):
             return None

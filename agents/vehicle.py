@@ -237,7 +237,7 @@ class VehicleAgent:
                 break
             if n is not None and nxt > n + 1:
                 self.record.late_frames += nxt - n - 1
-            n = max(nxt, 0)
+            n = nxt
             if not self._started_ns:
                 self._started_ns = self.clock.stamp_ns(n)
             step(n)

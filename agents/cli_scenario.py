@@ -1,0 +1,124 @@
+"""``evopose scenario list | show | run``: the shipped fleet scenarios, and running one as separate processes."""
+
+from __future__ import annotations
+
+import json
+import math
+import sys
+from typing import Annotated
+
+import typer
+from rich.console import Console
+from rich.table import Table
+
+from scenarios.fleet import fleet_scenario_names, load_fleet_scenario
+
+from .fleet_services import emit_json
+from .results import rows
+from .scenario_runner import DEFAULT_ENDPOINT, run_scenario
+from .shutdown import stop_on_signals
+
+scenario_app = typer.Typer(name="scenario", help="Fleet scenarios: list, show, run, compose.", no_args_is_help=True)
+
+
+def _fmt(value: float, sd: float, scale: float = 1.0, digits: int = 2) -> str:
+    if value is None or (isinstance(value, float) and math.isnan(value)):
+        return "-"
+    return f"{value * scale:.{digits}f} ({sd * scale:.{digits}f})"
+
+
+def results_table(result_rows: list[dict], title: str) -> Table:
+    """Roll/pitch/yaw error (deg), X/Y/Z error (cm), σ over runs, time to the first good pose, traffic."""
+    table = Table(title=title, title_justify="left")
+    for name in ("variant", "vehicle", "runs", "roll °", "pitch °", "yaw °", "X cm", "Y cm", "Z cm",
+                 "first good s", "good", "sent"):
+        table.add_column(name, justify="left" if name in ("variant", "vehicle", "sent") else "right")
+    for r in result_rows:
+        sent = ", ".join(f"{t} {v['rate_hz']:.0f}/s × {v['bytes_per_message']:.0f} B"
+                         for t, v in sorted(r["traffic"].items()))
+        table.add_row(r["variant"], r["vehicle"], str(r["runs"]),
+                      *(_fmt(r[n], r[f"{n}_sd"]) for n in ("roll", "pitch", "yaw")),
+                      *(_fmt(r[n], r[f"{n}_sd"], 100, 1) for n in ("x", "y", "z")),
+                      _fmt(r["first_good_s"], r["first_good_sd"], 1, 3), f"{r['good_fraction']:.0%}", sent or "-")
+    return table
+
+
+@scenario_app.command("list")
+def list_command(as_json: Annotated[bool, typer.Option("--json")] = False) -> None:
+    """The shipped fleet scenarios."""
+    items = []
+    for name in fleet_scenario_names():
+        s = load_fleet_scenario(name)
+        items.append({"name": name, "description": s.spec.description, "world": s.world.name,
+                      "variants": [v.name for v in s.spec.variants]})
+    if as_json:
+        print(json.dumps(items))
+        return
+    table = Table(title="fleet scenarios", title_justify="left")
+    for col in ("name", "world", "variants", "description"):
+        table.add_column(col)
+    for item in items:
+        table.add_row(item["name"], item["world"], ", ".join(item["variants"]), item["description"])
+    Console().print(table)
+
+
+@scenario_app.command("show")
+def show_command(name: Annotated[str, typer.Argument(help="Scenario name or file.")],
+                 as_json: Annotated[bool, typer.Option("--json")] = False) -> None:
+    """One fleet scenario: its world, frames, and each variant's agents."""
+    s = load_fleet_scenario(name)
+    doc = {"name": s.name, "file": str(s.path), "world": str(s.world_path), "frames": s.frames, "fps": s.fps,
+           "router": s.spec.router, "description": s.spec.description, "paper": s.spec.paper,
+           "variants": [{"name": v.name, "agents": [a.model_dump() for a in v.agents]} for v in s.spec.variants]}
+    if as_json:
+        print(json.dumps(doc))
+        return
+    console = Console()
+    console.print(f"[bold]{s.name}[/bold]: {s.spec.description}\nworld {s.world_path} ({s.world.name}), "
+                  f"{s.frames} frames at {s.fps:g} fps, {'router' if s.spec.router else 'peer to peer'}")
+    for v in s.spec.variants:
+        console.print(f"  variant [bold]{v.name}[/bold]:")
+        for a in v.agents:
+            console.print(f"    evopose agent {' '.join(a.cli_args())}")
+
+
+@scenario_app.command("run")
+def run_command(
+    name: Annotated[str, typer.Argument(help="Scenario name or file.")],
+    runs: Annotated[int, typer.Option(min=1, help="Runs per variant (each with other seeds).")] = 1,
+    frames: Annotated[int | None, typer.Option(min=1, help="Frames per run (default: the scenario's).")] = None,
+    seed: Annotated[int, typer.Option(min=0, help="Search seed of run 0.")] = 0,
+    variant: Annotated[list[str] | None, typer.Option(help="Run only this variant (repeatable).")] = None,
+    listen: Annotated[str, typer.Option("--listen", help="Where the fleet can be reached from outside.")]
+    = DEFAULT_ENDPOINT,
+    as_json: Annotated[bool, typer.Option("--json", help="One JSON object with every run's summaries.")] = False,
+) -> None:
+    """Start every agent of the scenario as its own process, run, stop them all, print the results."""
+    scenario = load_fleet_scenario(name)
+    console = Console(stderr=True)
+    with stop_on_signals() as stop:
+        if as_json:
+            records = run_scenario(scenario, runs=runs, frames=frames, seed=seed, endpoint=listen,
+                                   variants=variant, stop=stop)
+        else:
+            with console.status(f"{scenario.name}: starting") as status:
+                def progress(p: dict) -> None:
+                    status.update(f"{scenario.name} / {p['variant']}: run {p['run'] + 1} of {runs}, "
+                                  f"frame {p['frames']} of {frames or scenario.frames}")
+
+                def finished(record: dict) -> None:
+                    console.print(f"{record['variant']} run {record['run'] + 1}/{runs} done")
+
+                records = run_scenario(scenario, runs=runs, frames=frames, seed=seed, endpoint=listen,
+                                       variants=variant, stop=stop, on_run=finished, on_progress=progress)
+    result_rows = rows(records)
+    if as_json:
+        emit_json({"scenario": scenario.name, "interrupted": stop.is_set(), "rows": result_rows, "runs": records})
+        return
+    Console(width=None if sys.stdout.isatty() else 200).print(results_table(result_rows, f"{scenario.name}: mean error (σ over runs)"))
+    if stop.is_set():
+        console.print("interrupted: every agent was stopped")
+
+
+def register(app: typer.Typer) -> None:
+    app.add_typer(scenario_app, name="scenario")

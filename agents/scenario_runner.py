@@ -1,0 +1,181 @@
+"""``evopose scenario run``: every agent of a fleet scenario as its own process, for one or more runs.
+
+Per run, the agents get one fleet name, one frame clock (``--epoch-ns`` a few seconds ahead, so that all
+start at the same frame), the run's seeds (search seed ``seed + run``, world seed ``world seed + run``: each
+run sees other noise and IMU biases) and ``--frames N``; each ends with a JSON summary. Networking: the
+first agent listens on the scenario's endpoint (default ``tcp/127.0.0.1:7447``) and the others connect to
+it, peer to peer; with ``router: true`` a router listens there and every agent joins it as a client. An
+outside program (``evopose meter --connect tcp/127.0.0.1:7447``) can watch the traffic there.
+
+Every child is stopped, whatever happens: a crashed agent ends the run (the others get SIGTERM), Ctrl-C
+stops them all, and anything still alive after a grace period is killed.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+from scenarios.fleet import FleetScenario, VariantSpec
+
+from .fleet_errors import FleetError
+
+#: Where a scenario's fleet can be reached from outside by default.
+DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"
+#: Frame 0 of a run is this far in the future when the agents are started (imports, warm-up).
+START_MARGIN_S = 6.0
+#: Seconds an agent gets to stop after SIGTERM before it is killed.
+GRACE_S = 5.0
+
+
+class ScenarioRunError(FleetError):
+    """A run could not be completed (an agent crashed or timed out)."""
+
+
+@dataclass
+class AgentProcess:
+    """One running ``evopose agent``: its stdout JSON lines are collected by a thread."""
+
+    vehicle: str
+    popen: subprocess.Popen
+    records: list = field(default_factory=list)
+    stderr: str = ""
+
+    def __post_init__(self) -> None:
+        self._reader = threading.Thread(target=self._read, daemon=True)
+        self._reader.start()
+
+    def _read(self) -> None:
+        for line in self.popen.stdout:
+            try:
+                self.records.append(json.loads(line))
+            except ValueError:
+                continue
+
+    @property
+    def summary(self) -> dict | None:
+        for record in reversed(self.records):
+            if record.get("event") == "summary":
+                return record
+        return None
+
+    def frames_done(self) -> int:
+        return sum(1 for r in self.records if r.get("event") in ("frame",))
+
+    def finish(self, timeout: float) -> None:
+        try:
+            _, err = self.popen.communicate(timeout=timeout)
+            self.stderr = err or ""
+        except subprocess.TimeoutExpired:
+            pass
+        self._reader.join(1.0)
+
+
+def agent_command(scenario: FleetScenario, agent_args: list[str], *, fleet: str, frames: int, epoch_ns: int,
+                  seed: int, world_seed: int, network: list[str], wait_for: list[str]) -> list[str]:
+    """The command line of one agent of a run."""
+    return [sys.executable, "-m", "agents.cli", "agent", "--scenario", str(scenario.world_path), "--fleet", fleet,
+            *agent_args, "--frames", str(frames), "--fps", f"{scenario.fps:g}", "--epoch-ns", str(epoch_ns),
+            "--seed", str(seed), "--world-seed", str(world_seed), "--wait-for", ",".join(wait_for), "--json",
+            *network]
+
+
+def _stop_all(procs: list, sig: int = signal.SIGTERM) -> None:
+    for proc in procs:
+        if proc.poll() is None:
+            try:
+                proc.send_signal(sig)
+            except ProcessLookupError:
+                pass
+    deadline = time.monotonic() + GRACE_S
+    for proc in procs:
+        try:
+            proc.wait(max(deadline - time.monotonic(), 0.05))
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait(5)
+
+
+def run_variant(scenario: FleetScenario, variant: VariantSpec, run: int, *, frames: int, seed: int,
+                endpoint: str, stop: threading.Event, on_progress: Callable[[dict], None] | None = None) -> dict:
+    """One run of one variant: start its agents (and router), wait for their summaries, stop everything."""
+    fleet = f"{scenario.name}-{variant.name}-{run}".replace("+", "-")[:64]
+    epoch_ns = time.time_ns() + int(START_MARGIN_S * 1e9)
+    vehicles = [a.vehicle for a in variant.agents]
+    base = ["--no-multicast"]
+    router = None
+    children: list[subprocess.Popen] = []
+    procs: list[AgentProcess] = []
+    env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+    try:
+        if scenario.spec.router:
+            router = subprocess.Popen([sys.executable, "-m", "agents.cli", "router", "--listen", endpoint,
+                                       "--no-multicast", "--json"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                      text=True, env=env)
+            children.append(router)
+            if not router.stdout.readline():
+                raise ScenarioRunError(f"the router did not start: {router.stderr.read().strip()[-300:]}")
+        for i, agent in enumerate(variant.agents):
+            if scenario.spec.router:
+                network = [*base, "--mode", "client", "--connect", endpoint]
+            elif i == 0:
+                network = [*base, "--listen", endpoint]
+            else:
+                network = [*base, "--connect", endpoint]
+            cmd = agent_command(scenario, agent.cli_args(), fleet=fleet, frames=frames, epoch_ns=epoch_ns,
+                                seed=seed + run, world_seed=scenario.world.seed + run, network=network,
+                                wait_for=[v for v in vehicles if v != agent.vehicle])
+            popen = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+            children.append(popen)
+            procs.append(AgentProcess(agent.vehicle, popen))
+        deadline = time.monotonic() + START_MARGIN_S + frames / scenario.fps * 3 + 60
+        while not stop.is_set():
+            if all(p.popen.poll() is not None for p in procs):
+                break
+            crashed = [p for p in procs if p.popen.poll() not in (None, 0)]
+            if crashed:
+                break
+            if time.monotonic() > deadline:
+                raise ScenarioRunError(f"run {run} of {scenario.name}/{variant.name} did not finish in time")
+            if on_progress is not None:
+                on_progress({"run": run, "variant": variant.name,
+                             "frames": min(p.frames_done() for p in procs if p.vehicle in vehicles)})
+            stop.wait(0.25)
+    finally:
+        _stop_all(children)
+        for proc in procs:
+            proc.finish(GRACE_S)
+    crashed = [p for p in procs if p.popen.returncode not in (0, None) and p.summary is None]
+    if crashed and not stop.is_set():
+        details = "; ".join(f"{p.vehicle} exited {p.popen.returncode}: {p.stderr.strip().splitlines()[-1:] or ''}"
+                            for p in crashed)
+        raise ScenarioRunError(f"run {run} of {scenario.name}/{variant.name}: {details}")
+    return {"scenario": scenario.name, "variant": variant.name, "run": run, "fleet": fleet, "interrupted": stop.is_set(),
+            "agents": {p.vehicle: p.summary for p in procs}}
+
+
+def run_scenario(scenario: FleetScenario, *, runs: int = 1, frames: int | None = None, seed: int = 0,
+                 endpoint: str = DEFAULT_ENDPOINT, variants: list[str] | None = None, stop: threading.Event,
+                 on_run: Callable[[dict], None] | None = None,
+                 on_progress: Callable[[dict], None] | None = None) -> list[dict]:
+    """Every run of every (chosen) variant; returns one record per run (see :func:`run_variant`)."""
+    chosen = [scenario.variant(v) for v in variants] if variants else scenario.spec.variants
+    results = []
+    for variant in chosen:
+        for run in range(runs):
+            if stop.is_set():
+                return results
+            record = run_variant(scenario, variant, run, frames=frames or scenario.frames, seed=seed,
+                                 endpoint=endpoint, stop=stop, on_progress=on_progress)
+            results.append(record)
+            if on_run is not None:
+                on_run(record)
+    return results
+
