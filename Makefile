@@ -4,7 +4,7 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test bench examples install clean lock
+.PHONY: demo test bench examples install clean lock compose
 
 $(STAMP): pyproject.toml constraints.txt
 	$(PYTHON) -m venv $(VENV)
@@ -33,6 +33,16 @@ bench: $(STAMP)
 # Re-pin every dependency to what is installed in the venv now.
 lock: $(STAMP)
 	$(PY) -m pip freeze --exclude-editable | grep -v '^evopose' > constraints.txt
+
+# Regenerate docker-compose.yml (exp2a-features) and compose/<scenario>.yml for every shipped fleet scenario.
+compose: $(STAMP)
+	$(VENV)/bin/evopose scenario compose exp2a-features --out docker-compose.yml
+	mkdir -p compose
+	rm -f compose/*.yml
+	for f in scenarios/fleet/*.yaml; do \
+		name=$$(basename $$f .yaml); \
+		$(VENV)/bin/evopose scenario compose $$name --context .. --out compose/$$name.yml || exit 1; \
+	done
 
 clean:
 	rm -rf $(VENV) *.egg-info

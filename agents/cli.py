@@ -39,6 +39,7 @@ def evopose() -> None:
 cli_fleet.register(app)
 cli_agent.register(app)
 cli_scenario.register(app)
+cli_scenario.register_report(app)
 cli_world.register(app)
 
 

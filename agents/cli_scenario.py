@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import math
 import sys
+from pathlib import Path
 from typing import Annotated
 
 import typer
@@ -13,6 +14,7 @@ from rich.table import Table
 
 from scenarios.fleet import fleet_scenario_names, load_fleet_scenario
 
+from .compose import DEFAULT_IMAGE, compose_yaml
 from .fleet_services import emit_json
 from .results import rows
 from .scenario_runner import DEFAULT_ENDPOINT, run_scenario
@@ -120,5 +122,45 @@ def run_command(
         console.print("interrupted: every agent was stopped")
 
 
+@scenario_app.command("compose")
+def compose_command(
+    name: Annotated[str, typer.Argument(help="Scenario name or file.")],
+    variant: Annotated[str | None, typer.Option(help="The variant to run (default: the first).")] = None,
+    out: Annotated[Path | None, typer.Option("--out", metavar="FILE", help="Write here, not to stdout.")] = None,
+    image: Annotated[str, typer.Option(help="Image of every service.")] = DEFAULT_IMAGE,
+    context: Annotated[str, typer.Option(help="Build context relative to the file (.. for compose/).")] = ".",
+) -> None:
+    """A docker-compose file of the scenario: a Zenoh router, and one service per agent joining it."""
+    text = compose_yaml(load_fleet_scenario(name), variant, image=image, context=context)
+    if out is None:
+        sys.stdout.write(text)
+    else:
+        out.write_text(text, encoding="utf-8")
+
+
 def register(app: typer.Typer) -> None:
     app.add_typer(scenario_app, name="scenario")
+
+
+def register_report(app: typer.Typer) -> None:
+    """Add ``evopose report`` to ``app``."""
+    from pathlib import Path
+
+    from .report import write_report
+
+    @app.command("report")
+    def report_command(
+        runs: Annotated[int, typer.Option(min=1, help="Runs per variant.")] = 10,
+        frames: Annotated[int | None, typer.Option(min=1, help="Frames per run (default: each scenario's).")] = None,
+        seed: Annotated[int, typer.Option(min=0, help="Search seed of run 0.")] = 0,
+        out: Annotated[Path, typer.Option(help="Directory for report.md and the figures.")] = Path("report"),
+        listen: Annotated[str, typer.Option("--listen", help="Where each scenario's fleet listens.")]
+        = DEFAULT_ENDPOINT,
+    ) -> None:
+        """Run the paper's experiments and write report.md: Tables I and II, bandwidth, Fig. 6, findings."""
+        console = Console(stderr=True)
+        with stop_on_signals() as stop:
+            path = write_report(out, runs=runs, frames=frames, seed=seed, endpoint=listen, stop=stop,
+                                on_run=lambda r: console.print(f"{r['scenario']} / {r['variant']}: run "
+                                                               f"{r['run'] + 1} of {runs} done"))
+        print(path)
