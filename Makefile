@@ -15,7 +15,7 @@ $(STAMP): pyproject.toml constraints.txt
 install: $(STAMP)
 
 demo: $(STAMP)
-	$(VENV)/bin/evopose solve examples/pioneer_clutter.yaml
+	$(VENV)/bin/evopose scenario run exp2a-features
 
 test: $(STAMP)
 	$(PY) -m pytest -q

@@ -1,0 +1,112 @@
+"""Fleet scenarios: the shipped files validate, `evopose scenario run` starts every agent as a process, is
+watchable from outside at its endpoint, prints results, and leaves nothing running (also on SIGINT)."""
+
+from __future__ import annotations
+
+import json
+import signal
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from agents.cli import main
+from agents.results import agreement, rows
+from scenarios.errors import ScenarioError
+from scenarios.fleet import fleet_scenario_names, load_fleet_scenario
+from tests.fleet_procs import Proc, free_port
+
+
+def running_with(text: str) -> list[int]:
+    """PIDs of live processes whose command line contains ``text``."""
+    pids = []
+    for cmdline in Path("/proc").glob("[0-9]*/cmdline"):
+        try:
+            if text in cmdline.read_bytes().replace(b"\0", b" ").decode(errors="replace"):
+                pids.append(int(cmdline.parent.name))
+        except OSError:
+            continue
+    return pids
+
+
+def test_shipped_scenarios_validate_and_name_the_paper_experiments():
+    assert set(fleet_scenario_names()) == {"exp1-airship", "exp2-solo", "exp2a-features", "exp2b-hints", "exp2-raw"}
+    exp1 = load_fleet_scenario("exp1-airship")
+    assert [v.name for v in exp1.spec.variants] == ["EvoPose", "EvoPose+IMU"]
+    shares = {n: {a.share for a in load_fleet_scenario(n).spec.variants[0].agents if a.vehicle.startswith("H")}
+              for n in ("exp2-solo", "exp2a-features", "exp2b-hints", "exp2-raw")}
+    assert shares == {"exp2-solo": {"none"}, "exp2a-features": {"features"}, "exp2b-hints": {"hint"},
+                      "exp2-raw": {"raw"}}
+
+
+@pytest.mark.parametrize("body, message", [
+    ("world: exp2\nvariants: [{name: a, agents: [{vehicle: H7}]}]", "variants[0].agents[0].vehicle: 'H7' is not in"),
+    ("world: exp2\nvariants: [{name: a, agents: [{vehicle: H1, share: smoke}]}]", "variants[0].agents[0].share"),
+    ("world: exp2\nvariants: [{name: a, agents: [{vehicle: H1, colour: red}]}]", "colour"),
+    ("world: nowhere\nvariants: [{name: a, agents: [{vehicle: H1}]}]", "world:"),
+])
+def test_a_bad_scenario_file_gets_one_line_naming_the_field(tmp_path, body, message, capsys):
+    path = tmp_path / "bad.yaml"
+    path.write_text("name: bad\n" + body + "\n")
+    with pytest.raises(ScenarioError) as err:
+        load_fleet_scenario(path)
+    assert message in str(err.value) and "\n" not in str(err.value)
+    assert main(["scenario", "run", str(path)]) == 2
+    assert capsys.readouterr().err.startswith("error: ")
+
+
+def test_scenario_run_is_watchable_and_leaves_nothing_running():
+    port = free_port()
+    endpoint = f"tcp/127.0.0.1:{port}"
+    runner = Proc([sys.executable, "-m", "agents.cli", "scenario", "run", "exp2a-features", "--frames", "25",
+                   "--listen", endpoint, "--json"])
+    meter = Proc([sys.executable, "-m", "agents.cli", "meter", "--connect", endpoint, "--no-multicast", "--json",
+                  "--duration", "30"])
+    try:
+        rate = meter.next_record(40, lambda r: r.get("type") == "rate" and r["key"].endswith("/H2/features"))
+        assert 300 < rate["size_mean"] < 1000
+        result = runner.next_record(90, lambda r: "rows" in r)
+        assert runner.wait(10) == 0
+    finally:
+        meter.kill()
+        runner.kill()
+    by_vehicle = {r["vehicle"]: r for r in result["rows"]}
+    assert set(by_vehicle) == {"H1", "H2"} and all(r["good_fraction"] > 0.8 for r in by_vehicle.values())
+    assert agreement(result["runs"], "H1", "H2")["position_max"] <= 0.01
+    assert [r["vehicle"] for r in rows(result["runs"])] == [r["vehicle"] for r in result["rows"]]
+    assert running_with(endpoint) == []
+
+
+def test_sigint_stops_every_agent_of_a_running_scenario():
+    port = free_port()
+    endpoint = f"tcp/127.0.0.1:{port}"
+    runner = Proc([sys.executable, "-m", "agents.cli", "scenario", "run", "exp2b-hints", "--frames", "10000",
+                   "--listen", endpoint, "--json"])
+    try:
+        agents = 0
+        for _ in range(200):  # wait until the three agents run (the runner's own command line names the endpoint too)
+            agents = len(running_with(endpoint)) - 1
+            if agents >= 3:
+                break
+            time.sleep(0.1)
+        assert agents >= 3
+        time.sleep(8)  # past frame 0
+        code, seconds = runner.stop(signal.SIGINT, timeout=20)
+        result = runner.next_record(5, lambda r: "rows" in r)
+    finally:
+        runner.kill()
+    assert code == 0 and seconds < 15 and result["interrupted"]
+    assert running_with(endpoint) == []
+    summaries = result["runs"][0]["agents"]
+    assert summaries["H1"]["frames"] > 0 and summaries["H1"]["traffic"]["sent"]["hint"] > 0
+
+
+def test_scenario_list_and_show(capsys):
+    assert main(["scenario", "list", "--json"]) == 0
+    listed = json.loads(capsys.readouterr().out)
+    assert {item["name"] for item in listed} == set(fleet_scenario_names())
+    assert main(["scenario", "show", "exp2b-hints", "--json"]) == 0
+    shown = json.loads(capsys.readouterr().out)
+    assert shown["variants"][0]["agents"][0] == {"vehicle": "H1", "role": None, "share": "hint", "imu": True,
+                                                  "hint_rate": 200.0, "image_encoding": "raw"}
