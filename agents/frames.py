@@ -79,6 +79,8 @@ class Frame:
         Extracted feature points (mark centres), pixels.
     truth : array (6,)
         ``world_from_target`` ground truth, for evaluation only.
+    render_s : float
+        Seconds the simulation took to render the image (what a real camera would not cost).
     """
 
     index: int
@@ -88,6 +90,7 @@ class Frame:
     camera: Camera
     points: np.ndarray
     truth: np.ndarray
+    render_s: float = 0.0
 
 
 class SimulatedCamera:
@@ -103,9 +106,11 @@ class SimulatedCamera:
 
     def acquire(self, index: int, stamp_ns: int) -> Frame:
         scene = self.scene_frame(index)
+        t0 = time.perf_counter()
         rendered = render_frame(self.scenario, scene, self.vehicle)
+        render_s = time.perf_counter() - t0
         return Frame(index, scene, stamp_ns, rendered.image, rendered.camera, self.extract(rendered.image),
-                     self.scenario.target_pose(scene))
+                     self.scenario.target_pose(scene), render_s)
 
     def extract(self, image: np.ndarray) -> np.ndarray:
         """The target's colour marks in a BGR image (own or a team-mate's raw frame), shape (N, 2)."""

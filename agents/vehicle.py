@@ -46,6 +46,9 @@ ROLES = ("uav", "ground-station", "airship", "target")
 SHARES = ("none", "raw", "features", "hint")
 ENCODINGS = ("raw", "jpeg", "png")
 CAMERA_ROLES = ("uav", "ground-station")
+#: Share modes in which a vehicle keeps improving its own estimate between frames (generations on the last
+#: views). Not with raw images or features: there every vehicle must compute the same pose from the same data.
+IDLE_GENERATIONS = ("none", "hint")
 #: IMU random stream of the scenario's target (as in scenarios.render's ground truth).
 TARGET_IMU_STREAM = 1000
 
@@ -145,6 +148,7 @@ class RunRecord:
     solves: int = 0
     late_frames: int = 0
     first_good_s: float | None = None
+    first_confirmed_s: float | None = None
     first_solve_s: float | None = None
     first_history: list = field(default_factory=list)
     errors: list = field(default_factory=list)      # per good frame: pose_error dict
@@ -182,6 +186,7 @@ class VehicleAgent:
         self._hints_lock = threading.Lock()
         self._next_hint_s = 0.0
         self._started_ns = 0
+        self._image_ready: float | None = None  # perf_counter when the first frame's image existed
 
     # -- set-up -----------------------------------------------------------------------------
 
@@ -215,8 +220,9 @@ class VehicleAgent:
     # -- the loop ---------------------------------------------------------------------------
 
     def run(self, stop: threading.Event) -> dict:
-        if self.config.wait_for:
-            ok = self.bus.wait_for_teammates(self.config.wait_for, self.config.wait_timeout_s)
+        mates = [v for v in self.config.wait_for if v != self.config.vehicle]
+        if mates:
+            ok = self.bus.wait_for_teammates(mates, self.config.wait_timeout_s)
             self.emit({"event": "teammates", "vehicle": self.config.vehicle, "ready": ok,
                        "alive": sorted(self.bus.teammates())})
         step = {"airship": self.airship_frame, "target": self.target_frame}.get(self.role, None)
@@ -242,7 +248,7 @@ class VehicleAgent:
                 self._started_ns = self.clock.stamp_ns(n)
             step(n)
             self.record.frames += 1
-            if camera_loop and self.config.share == "hint":
+            if camera_loop and self.config.share in IDLE_GENERATIONS:
                 self.improve_until(self.clock.stamp_ns(n + 1), stop)
         return self.summary()
 
@@ -264,7 +270,10 @@ class VehicleAgent:
 
     def camera_frame(self, n: int) -> None:
         stamp = self.clock.stamp_ns(n)
+        t_acquire = time.perf_counter()
         frame = self.camera.acquire(n, stamp)
+        if self._image_ready is None:
+            self._image_ready = t_acquire + frame.render_s
         mine = own_view(self.config.vehicle, stamp, frame.camera, frame.points)
         self.share_frame(frame, mine)
         views, inputs = build_views([mine, *self.paired_views(stamp)])
@@ -282,6 +291,8 @@ class VehicleAgent:
         seconds = time.perf_counter() - t0
         self.record.frame_seconds.append(seconds)
         self.record.views_used.append(len(views))
+        if estimate.good_after_s is not None and self.record.first_good_s is None:
+            self.record.first_good_s = t0 + estimate.good_after_s - self._image_ready
         self.publish_estimate(n, stamp, estimate, inputs, seconds, frame.truth, len(frame.points), knowledge)
 
     def share_frame(self, frame, mine) -> None:
@@ -352,18 +363,22 @@ class VehicleAgent:
             self.record.hints_published += 1
 
     def improve_until(self, due_ns: int, stop: threading.Event) -> None:
-        """Hint mode, between frames: generations on the last views with the hints that arrive; each new best
-        goes out as a hint at up to ``hint_rate_hz``."""
+        """Between frames: generations on the last views (with the hints that arrive, in hint mode, where each new
+        best goes out as a hint) at up to ``hint_rate_hz``."""
         period = 1.0 / self.config.hint_rate_hz
         while not stop.is_set():
             remaining = (due_ns - time.time_ns()) / NS
             if remaining <= period:
                 return
-            estimate = self.estimator.generation(self.take_hints())
+            hint_mode = self.config.share == "hint"
+            estimate = self.estimator.generation(self.take_hints() if hint_mode else None)
             if estimate is None:
                 return
-            self._publish_hint(estimate.pose)
-            stop.wait(max(0.0, self._next_hint_s - time.monotonic()))
+            if hint_mode:
+                self._publish_hint(estimate.pose)
+                stop.wait(max(0.0, self._next_hint_s - time.monotonic()))
+            else:
+                stop.wait(period)
 
     def publish_estimate(self, n: int, stamp: int, estimate: Estimate, inputs: list[str], seconds: float,
                          truth: np.ndarray, points: int, knowledge: list[Knowledge]) -> None:
@@ -377,8 +392,8 @@ class VehicleAgent:
         if estimate.good:
             rec.good += 1
             rec.errors.append(error)
-            if rec.first_good_s is None:
-                rec.first_good_s = (time.time_ns() - self._started_ns) / NS
+            if rec.first_confirmed_s is None:
+                rec.first_confirmed_s = time.perf_counter() - self._image_ready
         rec.last_pose, rec.last_error = [float(v) for v in sol.pose], error
         target = self.scenario.spec.target.name
         self.bus.publish(PoseEstimate(**self.bus.header(Topic.POSE, stamp), target=target,

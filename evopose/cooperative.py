@@ -18,6 +18,7 @@ Pure numpy: no I/O, no Zenoh.
 
 from __future__ import annotations
 
+import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
@@ -73,11 +74,16 @@ class Estimate:
         Match quality in [0, 1], 1 best: one minus the mean normalised view term (robust fitness).
     solved : bool
         The pose was searched from scratch (first frame, or tracking was lost).
+    good_after_s : float or None
+        Seconds into this estimate at which the best individual was first *good* — the paper's "time to
+        a good pose": fitness under a threshold (here the search's confident match quality, or almost
+        every visible mark matched one to one). A search goes on after that to confirm the pose.
     """
 
     solution: Solution
     quality: float
     solved: bool
+    good_after_s: float | None = None
 
     @property
     def pose(self) -> np.ndarray:
@@ -149,16 +155,34 @@ class CooperativeEstimator:
         if not views:
             raise ValueError("estimate needs at least one view")
         problem = self.problem(views, knowledge, hints)
+        t0 = time.perf_counter()
         if self.last is not None:
             solution = track(self.last, list(views), problem=problem, options=self.options,
                              seed=np.random.default_rng([self.seed, frame]), lost_quality=self.lost_quality,
                              hints=problem.hints if len(problem.hints) else None)
             solved = solution.stop_reason != "tracked"
+            good_after = solution.seconds if solution.converged else None
         else:
+            scale = PoseObjective(problem, self.options.fitness, self.options.tau).fitness_scale()
+            good_after = None
+
+            def watch(state) -> None:
+                nonlocal good_after
+                if good_after is None and self._good_now(state.best_fitness, state.best_unmatched, scale):
+                    good_after = time.perf_counter() - t0
+                if on_generation is not None:
+                    on_generation(state)
+
             solution = solve(problem, self.options, seed=np.random.default_rng([self.seed, frame]),
-                             hint_source=hint_source, on_generation=on_generation)
+                             hint_source=hint_source, on_generation=watch)
             solved = True
-        return self._keep(solution, problem, solved)
+            if not solution.converged:
+                good_after = None
+        return self._keep(solution, problem, solved, good_after)
+
+    def _good_now(self, fitness: float, unmatched: float, scale: float | None) -> bool:
+        o = self.options
+        return scale is None or fitness <= o.confident_quality * scale or unmatched <= o.confident_unmatched
 
     def generation(self, hints: np.ndarray | None = None) -> Estimate | None:
         """One generation on the last frame's views: the best, mutated children and ``hints`` (H, 6), refined;
@@ -187,7 +211,7 @@ class CooperativeEstimator:
             self.last = solution
         return Estimate(self.last, self._quality(self.last.pose), False)
 
-    def _keep(self, solution: Solution, problem: PoseProblem, solved: bool) -> Estimate:
+    def _keep(self, solution: Solution, problem: PoseProblem, solved: bool, good_after: float | None) -> Estimate:
         self._objective = PoseObjective(solution.problem or problem, self.options.fitness, self.options.tau)
         if len(solution.view_weights) == self._objective.n_views and np.any(solution.view_weights > 0):
             self._objective.weights = np.asarray(solution.view_weights, float).copy()  # the step rule's (eq. 4)
@@ -196,7 +220,7 @@ class CooperativeEstimator:
         self.last = solution if solution.converged else None
         if self.last is None:
             self._objective = None
-        return Estimate(solution, quality, solved)
+        return Estimate(solution, quality, solved, good_after)
 
     def _quality(self, pose: np.ndarray) -> float:
         objective = self._objective

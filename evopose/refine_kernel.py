@@ -250,6 +250,50 @@ def fitness_one(s, model, normals, use_normals, intr, cfw, weights, taus, pts, o
 
 
 @nb.njit(cache=True, fastmath=_FASTMATH, nogil=True)
+def _bounded_step(H, g, s, lo, hi, periodic, step_free, lam, A, clamp):  # pragma: no cover - compiled
+    """The damped Gauss–Newton step (6,) that respects the box: a parameter the step would push past its bound
+    (eq. 3 makes boxes narrow) is held at that bound and the others are solved given it (an active set),
+    so that the position still moves while an angle sits at the edge of its IMU interval."""
+    held = np.zeros(6, np.bool_)
+    delta = np.zeros(6)
+    for _ in range(7):
+        for i in range(6):
+            clamp[i] = delta[i] if held[i] else 0.0
+        for i in range(6):
+            active = step_free[i] and not held[i]
+            for j in range(6):
+                A[i, j] = H[i, j] if (active and step_free[j] and not held[j]) else 0.0
+            if active:
+                A[i, i] += lam * H[i, i] + 1e-12
+        rhs = np.zeros(6)
+        for i in range(6):
+            if step_free[i] and not held[i]:
+                rhs[i] = -g[i]
+                for j in range(6):
+                    if held[j]:
+                        rhs[i] -= H[i, j] * clamp[j]
+            else:
+                A[i, i] = 1.0
+        solved = np.linalg.solve(A, rhs)
+        again = False
+        for d in range(6):
+            if held[d]:
+                solved[d] = clamp[d]
+            elif not step_free[d]:
+                solved[d] = 0.0
+            elif not periodic[d]:
+                v = s[d] + solved[d]
+                if v < lo[d] or v > hi[d]:
+                    held[d] = True
+                    solved[d] = (lo[d] if v < lo[d] else hi[d]) - s[d]
+                    again = True
+        delta = solved
+        if not again:
+            break
+    return delta
+
+
+@nb.njit(cache=True, fastmath=_FASTMATH, nogil=True)
 def refine_population(poses, fitness, lo, hi, periodic, free, model, normals, use_normals, intr, cfw,
                       weights, taus, sigmas, pts, offsets, robust, kinds, scales, outlier,
                       damping):  # pragma: no cover - compiled
@@ -283,6 +327,7 @@ def refine_population(poses, fitness, lo, hi, periodic, free, model, normals, us
     s = np.empty(6)
     s_try = np.empty(6)
     step_free = np.empty(6, np.bool_)
+    clamp = np.empty(6)
     for n in range(N):
         for d in range(6):
             s[d] = poses[n, d]
@@ -324,15 +369,7 @@ def refine_population(poses, fitness, lo, hi, periodic, free, model, normals, us
             for i in range(6):
                 for j in range(i):
                     H[j, i] = H[i, j]
-            for i in range(6):
-                for j in range(6):
-                    A[i, j] = H[i, j] if (step_free[i] and step_free[j]) else 0.0
-                if step_free[i]:
-                    A[i, i] += lam * H[i, i] + 1e-12
-                else:
-                    A[i, i] = 1.0
-                    g[i] = 0.0
-            delta = np.linalg.solve(A, -g)
+            delta = _bounded_step(H, g, s, lo, hi, periodic, step_free, lam, A, clamp)
             for d in range(6):
                 s_try[d] = s[d] + delta[d]
             _to_bounds(s_try, lo, hi, periodic)
