@@ -102,8 +102,8 @@ def test_hints_are_24_bytes_flow_above_100_hz_and_improve_on_flying_alone(teams)
         assert traffic["received"]["hint"] > 100 * seconds * 0.9
         assert "hint" not in alone[vehicle]["traffic"]["sent"]
     # Table II (b): H2 gains most from its team-mate; H1, already the more precise alone, is no worse
-    assert hinted["H2"]["error_position"] < 0.7 * alone["H2"]["error_position"], (hinted["H2"], alone["H2"])
-    assert hinted["H1"]["error_position"] < 1.3 * alone["H1"]["error_position"], (hinted["H1"], alone["H1"])
+    assert hinted["H2"]["error_position"] < 0.8 * alone["H2"]["error_position"], (hinted["H2"], alone["H2"])
+    assert hinted["H1"]["error_position"] < 1.25 * alone["H1"]["error_position"], (hinted["H1"], alone["H1"])
 
 
 def test_raw_images_cost_thousands_of_times_a_feature_set(teams):
