@@ -8,7 +8,7 @@ import numpy as np
 
 from .fitness import PoseObjective
 from .problem import PoseProblem, View
-from .refine import TRACK_SCHEDULE, annealing, refine
+from .refine import TRACK_HARD_SCHEDULE, TRACK_SCHEDULE, annealing, refine
 from .search import GOOD_REASONS, EvoPose, EvoPoseState, SearchOptions, Solution
 
 #: Truncation distance of the coarse fitness used to screen random starts, in units of tau.
@@ -164,6 +164,9 @@ def track(previous: Solution, new_views: list[View] | tuple[View, ...], *, probl
         starts = np.concatenate([starts, np.atleast_2d(hints)])
     fit0 = objective(starts)
     pose, fit = refine(objective, starts, fit0, schedule=TRACK_SCHEDULE)
+    pose_hard, fit_hard = refine(objective, starts, fit0, schedule=TRACK_HARD_SCHEDULE)
+    better = fit_hard < fit
+    pose[better], fit[better] = pose_hard[better], fit_hard[better]
     i = int(np.argmin(fit))
     terms = objective.view_terms(pose[i][None])[0]
     quality = float(np.sum(objective.base_weights * terms / objective.taus) / np.sum(objective.base_weights))
