@@ -90,6 +90,8 @@ def run_command(
     runs: Annotated[int, typer.Option(min=1, help="Runs per variant (each with other seeds).")] = 1,
     frames: Annotated[int | None, typer.Option(min=1, help="Frames per run (default: the scenario's).")] = None,
     seed: Annotated[int, typer.Option(min=0, help="Search seed of run 0.")] = 0,
+    fps: Annotated[float | None, typer.Option(min=0.1, max=1000, help="Camera rate (default: the scenario's).")]
+    = None,
     variant: Annotated[list[str] | None, typer.Option(help="Run only this variant (repeatable).")] = None,
     listen: Annotated[str, typer.Option("--listen", help="Where the fleet can be reached from outside.")]
     = DEFAULT_ENDPOINT,
@@ -101,7 +103,7 @@ def run_command(
     with stop_on_signals() as stop:
         if as_json:
             records = run_scenario(scenario, runs=runs, frames=frames, seed=seed, endpoint=listen,
-                                   variants=variant, stop=stop)
+                                   variants=variant, stop=stop, fps=fps)
         else:
             with console.status(f"{scenario.name}: starting") as status:
                 def progress(p: dict) -> None:
@@ -112,7 +114,7 @@ def run_command(
                     console.print(f"{record['variant']} run {record['run'] + 1}/{runs} done")
 
                 records = run_scenario(scenario, runs=runs, frames=frames, seed=seed, endpoint=listen,
-                                       variants=variant, stop=stop, on_run=finished, on_progress=progress)
+                                       variants=variant, stop=stop, on_run=finished, on_progress=progress, fps=fps)
     result_rows = rows(records)
     if as_json:
         emit_json({"scenario": scenario.name, "interrupted": stop.is_set(), "rows": result_rows, "runs": records})

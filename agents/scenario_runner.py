@@ -78,11 +78,11 @@ class AgentProcess:
         self._reader.join(1.0)
 
 
-def agent_command(scenario: FleetScenario, agent_args: list[str], *, fleet: str, frames: int, epoch_ns: int,
-                  seed: int, world_seed: int, network: list[str], wait_for: list[str]) -> list[str]:
+def agent_command(scenario: FleetScenario, agent_args: list[str], *, fleet: str, frames: int, fps: float,
+                  epoch_ns: int, seed: int, world_seed: int, network: list[str], wait_for: list[str]) -> list[str]:
     """The command line of one agent of a run."""
     return [sys.executable, "-m", "agents.cli", "agent", "--scenario", str(scenario.world_path), "--fleet", fleet,
-            *agent_args, "--frames", str(frames), "--fps", f"{scenario.fps:g}", "--epoch-ns", str(epoch_ns),
+            *agent_args, "--frames", str(frames), "--fps", f"{fps:g}", "--epoch-ns", str(epoch_ns),
             "--seed", str(seed), "--world-seed", str(world_seed), "--wait-for", ",".join(wait_for), "--json",
             *network]
 
@@ -104,8 +104,10 @@ def _stop_all(procs: list, sig: int = signal.SIGTERM) -> None:
 
 
 def run_variant(scenario: FleetScenario, variant: VariantSpec, run: int, *, frames: int, seed: int,
-                endpoint: str, stop: threading.Event, on_progress: Callable[[dict], None] | None = None) -> dict:
+                endpoint: str, stop: threading.Event, on_progress: Callable[[dict], None] | None = None,
+                fps: float | None = None) -> dict:
     """One run of one variant: start its agents (and router), wait for their summaries, stop everything."""
+    fps = fps or scenario.fps
     fleet = f"{scenario.name}-{variant.name}-{run}".replace("+", "-")[:64]
     epoch_ns = time.time_ns() + int(START_MARGIN_S * 1e9)
     vehicles = [a.vehicle for a in variant.agents]
@@ -129,13 +131,13 @@ def run_variant(scenario: FleetScenario, variant: VariantSpec, run: int, *, fram
                 network = [*base, "--listen", endpoint]
             else:
                 network = [*base, "--connect", endpoint]
-            cmd = agent_command(scenario, agent.cli_args(), fleet=fleet, frames=frames, epoch_ns=epoch_ns,
+            cmd = agent_command(scenario, agent.cli_args(), fleet=fleet, frames=frames, fps=fps, epoch_ns=epoch_ns,
                                 seed=seed + run, world_seed=scenario.world.seed + run, network=network,
                                 wait_for=[v for v in vehicles if v != agent.vehicle])
             popen = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
             children.append(popen)
             procs.append(AgentProcess(agent.vehicle, popen))
-        deadline = time.monotonic() + START_MARGIN_S + frames / scenario.fps * 3 + 60
+        deadline = time.monotonic() + START_MARGIN_S + frames / fps * 3 + 60
         while not stop.is_set():
             if all(p.popen.poll() is not None for p in procs):
                 break
@@ -163,6 +165,7 @@ def run_variant(scenario: FleetScenario, variant: VariantSpec, run: int, *, fram
 
 def run_scenario(scenario: FleetScenario, *, runs: int = 1, frames: int | None = None, seed: int = 0,
                  endpoint: str = DEFAULT_ENDPOINT, variants: list[str] | None = None, stop: threading.Event,
+                 fps: float | None = None,
                  on_run: Callable[[dict], None] | None = None,
                  on_progress: Callable[[dict], None] | None = None) -> list[dict]:
     """Every run of every (chosen) variant; returns one record per run (see :func:`run_variant`)."""
@@ -173,7 +176,7 @@ def run_scenario(scenario: FleetScenario, *, runs: int = 1, frames: int | None =
             if stop.is_set():
                 return results
             record = run_variant(scenario, variant, run, frames=frames or scenario.frames, seed=seed,
-                                 endpoint=endpoint, stop=stop, on_progress=on_progress)
+                                 endpoint=endpoint, stop=stop, on_progress=on_progress, fps=fps)
             results.append(record)
             if on_run is not None:
                 on_run(record)

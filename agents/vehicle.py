@@ -23,6 +23,7 @@ import math
 import statistics
 import threading
 import time
+from collections import deque
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -138,37 +139,63 @@ def pose_dict(pose: np.ndarray) -> dict:
     return {n: float(v) for n, v in zip(("x", "y", "z", "roll", "pitch", "yaw"), pose)}
 
 
+#: Recent values kept for medians and percentiles (bounded: an agent's memory must not grow with its frames).
+RECENT = 4096
+
+
+class ErrorTotals:
+    """Running mean and max of each error component over the good frames (constant memory)."""
+
+    def __init__(self) -> None:
+        self.count = 0
+        self.sums: dict[str, float] = {}
+        self.maxima: dict[str, float] = {}
+
+    def add(self, error: dict) -> None:
+        self.count += 1
+        for name, value in error.items():
+            self.sums[name] = self.sums.get(name, 0.0) + value
+            self.maxima[name] = max(self.maxima.get(name, 0.0), value)
+
+    def summary(self) -> dict:
+        out = {}
+        for name, total in self.sums.items():
+            out[f"error_{name}"] = total / self.count
+            out[f"error_{name}_max"] = self.maxima[name]
+        return out
+
+
 @dataclass
 class RunRecord:
-    """What an agent measured over its run (the summary)."""
+    """What an agent measured over its run (the summary); constant memory however long it runs."""
 
     frames: int = 0
     estimates: int = 0
     good: int = 0
     solves: int = 0
     late_frames: int = 0
+    multi_view_frames: int = 0
     first_good_s: float | None = None
     first_confirmed_s: float | None = None
     first_solve_s: float | None = None
     first_history: list = field(default_factory=list)
-    errors: list = field(default_factory=list)      # per good frame: pose_error dict
-    frame_seconds: list = field(default_factory=list)
     hints_published: int = 0
     hints_used: int = 0
-    views_used: list = field(default_factory=list)
     last_pose: list | None = None
     last_error: dict | None = None
+    errors: ErrorTotals = field(default_factory=ErrorTotals)
+    frame_seconds: deque = field(default_factory=lambda: deque(maxlen=RECENT))
+    mate_latency_s: deque = field(default_factory=lambda: deque(maxlen=RECENT))  # team-mates' data: arrival - stamp
 
     def summary(self) -> dict:
-        out = {k: v for k, v in asdict(self).items() if k not in ("errors", "frame_seconds", "views_used")}
-        if self.errors:
-            for name in self.errors[0]:
-                values = [e[name] for e in self.errors]
-                out[f"error_{name}"] = statistics.fmean(values)
-                out[f"error_{name}_max"] = max(values)
+        out = {k: v for k, v in asdict(self).items() if k not in ("errors", "frame_seconds", "mate_latency_s")}
+        out.update(self.errors.summary())
         if self.frame_seconds:
             out["frame_seconds_median"] = statistics.median(self.frame_seconds)
-        out["multi_view_frames"] = sum(1 for n in self.views_used if n > 1)
+        if self.mate_latency_s:
+            latency = np.array(self.mate_latency_s)
+            out["mate_latency_median_s"] = float(np.median(latency))
+            out["mate_latency_p95_s"] = float(np.percentile(latency, 95))
         return out
 
 
@@ -290,7 +317,7 @@ class VehicleAgent:
             on_generation=self._publish_generation if hint_mode else None)
         seconds = time.perf_counter() - t0
         self.record.frame_seconds.append(seconds)
-        self.record.views_used.append(len(views))
+        self.record.multi_view_frames += len(views) > 1
         if estimate.good_after_s is not None and self.record.first_good_s is None:
             self.record.first_good_s = t0 + estimate.good_after_s - self._image_ready
         self.publish_estimate(n, stamp, estimate, inputs, seconds, frame.truth, len(frame.points), knowledge)
@@ -321,6 +348,7 @@ class VehicleAgent:
         def poll(timeout: float) -> None:
             rx = self.bus.recv(topic, timeout=timeout)
             while rx is not None:
+                self.record.mate_latency_s.append((rx.received_ns - rx.stamp_ns) / NS)
                 try:
                     self.team.add(mate_view(rx.vehicle, rx.message, self.camera.extract))
                 except ValueError as err:  # a frame that does not decode: count it, carry on
@@ -391,7 +419,7 @@ class VehicleAgent:
         error = pose_error(sol.pose, truth)
         if estimate.good:
             rec.good += 1
-            rec.errors.append(error)
+            rec.errors.add(error)
             if rec.first_confirmed_s is None:
                 rec.first_confirmed_s = time.perf_counter() - self._image_ready
         rec.last_pose, rec.last_error = [float(v) for v in sol.pose], error
@@ -437,7 +465,7 @@ class VehicleAgent:
                     self.record.last_pose, self.record.last_error = list(message.pose), error
                     if message.converged:
                         self.record.good += 1
-                        self.record.errors.append(error)
+                        self.record.errors.add(error)
                         if self.record.first_good_s is None:
                             self.record.first_good_s = (rx.received_ns - self._started_ns) / NS
                     self.emit({"event": "own-pose", "vehicle": self.config.vehicle, "from": rx.vehicle,

@@ -31,6 +31,8 @@ from .refine import TRACK_SCHEDULE, refine
 from .search import SearchOptions, Solution
 from .solver import solve, track
 
+#: Fitness values kept in a solution's history by :meth:`CooperativeEstimator.generation` (bounded memory).
+HISTORY_KEPT = 256
 #: Children of the best per :meth:`CooperativeEstimator.generation`.
 GENERATION_CHILDREN = 4
 #: Mutation step of those children: fraction of the target's distance (position), radians (angles).
@@ -207,7 +209,7 @@ class CooperativeEstimator:
                                        view_terms=self._objective.view_terms(candidates[i][None])[0],
                                        from_hint=i > GENERATION_CHILDREN,
                                        generations=self.last.generations + 1,
-                                       history=[*self.last.history, float(fitness[i])])
+                                       history=[*self.last.history[-HISTORY_KEPT + 1:], float(fitness[i])])
             self.last = solution
         return Estimate(self.last, self._quality(self.last.pose), False)
 
