@@ -67,7 +67,9 @@ def register(app: typer.Typer) -> None:
         image_encoding: Annotated[str, typer.Option(help=f"Shared images: {', '.join(ENCODINGS)}.")] = "raw",
         imu: Annotated[bool, typer.Option("--imu/--no-imu", help="Ground station: hold the attitude within the "
                                                                  "airship's IMU reading (eq. 3).")] = True,
-        imu_sigmas: Annotated[float, typer.Option(help="IMU tolerance, in its standard deviations.")] = 3.0,
+        imu_sigmas: Annotated[float, typer.Option(
+            help="IMU tolerance eps of eq. (3), in the reading's standard deviations (1: the paper's interval of the "
+                 "IMU's precision).")] = 1.0,
         wait_for: Annotated[str, typer.Option(help="Comma-separated team-mates to wait for before frame 0.")] = "",
         wait_timeout: Annotated[float, typer.Option(min=0, help="How long to wait for them, s.")] = 10.0,
         time_budget: Annotated[float | None, typer.Option(min=0, help="Seconds per search from scratch.")] = None,

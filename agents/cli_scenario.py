@@ -114,7 +114,8 @@ def run_command(
                     console.print(f"{record['variant']} run {record['run'] + 1}/{runs} done")
 
                 records = run_scenario(scenario, runs=runs, frames=frames, seed=seed, endpoint=listen,
-                                       variants=variant, stop=stop, on_run=finished, on_progress=progress, fps=fps)
+                                       variants=variant, stop=stop, on_run=finished, on_progress=progress,
+                                       fps=fps)
     result_rows = rows(records)
     if as_json:
         emit_json({"scenario": scenario.name, "interrupted": stop.is_set(), "rows": result_rows, "runs": records})

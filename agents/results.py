@@ -62,7 +62,8 @@ def traffic_rates(summaries: list[dict]) -> dict[str, dict]:
             if topic == "stats" or not count:
                 continue
             per_topic.setdefault(topic, []).append((count / seconds, s["traffic"]["bytes_sent"][topic] / count))
-    return {topic: {"rate_hz": statistics.fmean(r for r, _ in v), "bytes_per_message": statistics.fmean(b for _, b in v),
+    return {topic: {"rate_hz": statistics.fmean(r for r, _ in v),
+                    "bytes_per_message": statistics.fmean(b for _, b in v),
                     "bytes_per_s": statistics.fmean(r * b for r, b in v)} for topic, v in per_topic.items()}
 
 
@@ -77,5 +78,5 @@ def agreement(records: list[dict], a: str, b: str) -> dict:
         position.append(float(np.linalg.norm(pa[:3] - pb[:3])))
         d = (pa[3:] - pb[3:] + np.pi) % (2 * np.pi) - np.pi
         angle.append(float(np.degrees(np.max(np.abs(d)))))
-    return {"runs": len(position), "position_mean": _mean_sd(position)[0], "position_max": max(position, default=float("nan")),
-            "angle_max": max(angle, default=float("nan"))}
+    return {"runs": len(position), "position_mean": _mean_sd(position)[0],
+            "position_max": max(position, default=float("nan")), "angle_max": max(angle, default=float("nan"))}

@@ -159,8 +159,8 @@ def run_variant(scenario: FleetScenario, variant: VariantSpec, run: int, *, fram
         details = "; ".join(f"{p.vehicle} exited {p.popen.returncode}: {p.stderr.strip().splitlines()[-1:] or ''}"
                             for p in crashed)
         raise ScenarioRunError(f"run {run} of {scenario.name}/{variant.name}: {details}")
-    return {"scenario": scenario.name, "variant": variant.name, "run": run, "fleet": fleet, "interrupted": stop.is_set(),
-            "agents": {p.vehicle: p.summary for p in procs}}
+    return {"scenario": scenario.name, "variant": variant.name, "run": run, "fleet": fleet,
+            "interrupted": stop.is_set(), "agents": {p.vehicle: p.summary for p in procs}}
 
 
 def run_scenario(scenario: FleetScenario, *, runs: int = 1, frames: int | None = None, seed: int = 0,

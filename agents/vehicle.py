@@ -75,7 +75,7 @@ class AgentConfig:
     hint_rate_hz: float = 200.0
     image_encoding: str = "raw"
     use_attitude: bool = True
-    attitude_sigmas: float = 3.0
+    attitude_sigmas: float = 1.0
     wait_for: tuple[str, ...] = ()
     wait_timeout_s: float = 10.0
     time_budget_s: float | None = None

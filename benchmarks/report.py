@@ -13,7 +13,7 @@ from pathlib import Path
 RESULTS = Path(__file__).resolve().parent / "results"
 ROOT = Path(__file__).resolve().parents[1]
 #: Order of the sections in BENCHMARKS.md (others follow alphabetically).
-ORDER = ("solvers", "kernels", "features", "footprint")
+ORDER = ("solvers", "kernels", "features", "fleet", "footprint")
 
 INTRO = """# Benchmarks
 

@@ -1,0 +1,114 @@
+"""Fleet throughput side by side: each share mode of Experiment 2 run as real processes over Zenoh on loopback.
+
+Per configuration (scenario, camera rate) and helicopter: the camera rate it sustained (frames processed per
+second of the run; a frame is skipped when the previous one is not done in time), the messages and bytes per
+second it sent on its share topic, the latency of its team-mate's data (arrival - acquisition stamp, which
+includes the sender's rendering and extraction), the median time of an estimate, the time to the first good
+pose and the mean position error. Writes ``benchmarks/results/fleet.md``.
+
+    .venv/bin/python -m benchmarks.bench_fleet [--runs 3] [--seconds 10]
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import socket
+import statistics
+import threading
+import time
+from pathlib import Path
+
+from agents.scenario_runner import run_scenario
+from scenarios.fleet import load_fleet_scenario
+
+
+
+def free_endpoint() -> str:
+    """A loopback endpoint on a port nobody listens on now."""
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        return f"tcp/127.0.0.1:{sock.getsockname()[1]}"
+
+RESULTS = Path(__file__).resolve().parent / "results" / "fleet.md"
+CONFIGS = (("exp2-solo", 10.0), ("exp2a-features", 10.0), ("exp2a-features", 30.0), ("exp2b-hints", 10.0),
+           ("exp2b-hints", 30.0), ("exp2-raw", 10.0), ("exp2-raw", 30.0))
+SHARE_TOPIC = {"none": None, "features": "features", "hint": "hint", "raw": "image"}
+
+
+def measure(name: str, fps: float, runs: int, seconds: float) -> list[dict]:
+    scenario = load_fleet_scenario(name)
+    frames = int(round(seconds * fps))
+    records = run_scenario(scenario, runs=runs, frames=frames, seed=0, endpoint=free_endpoint(), fps=fps,
+                           stop=threading.Event())
+    rows = []
+    for vehicle in ("H1", "H2"):
+        summaries = [r["agents"][vehicle] for r in records if r["agents"].get(vehicle)]
+        share = summaries[0]["share"]
+        topic = SHARE_TOPIC[share]
+
+        def mean(key: str, values=None) -> float:
+            values = [s.get(key) for s in summaries] if values is None else values
+            values = [v for v in values if v is not None]
+            return statistics.fmean(values) if values else float("nan")
+
+        duration = [s["frames"] / fps + s["late_frames"] / fps for s in summaries]
+        sustained = mean("", [s["frames"] / d for s, d in zip(summaries, duration)])
+        sent = [s["traffic"]["sent"].get(topic, 0) for s in summaries] if topic else [0]
+        sent_bytes = [s["traffic"]["bytes_sent"].get(topic, 0) for s in summaries] if topic else [0]
+        rows.append({
+            "scenario": name, "fps": fps, "vehicle": vehicle, "share": share, "runs": len(summaries),
+            "sustained_fps": sustained, "late": mean("late_frames"),
+            "msgs_per_s": statistics.fmean(n / d for n, d in zip(sent, duration)) if topic else 0.0,
+            "bytes_per_msg": (sum(sent_bytes) / sum(sent)) if topic and sum(sent) else 0.0,
+            "latency_ms": 1e3 * mean("mate_latency_median_s"), "latency_p95_ms": 1e3 * mean("mate_latency_p95_s"),
+            "estimate_ms": 1e3 * mean("frame_seconds_median"), "first_good_ms": 1e3 * mean("first_good_s"),
+            "error_mm": 1e3 * mean("error_position")})
+    return rows
+
+
+def bps(row: dict) -> float:
+    """Bytes per second a row's vehicle sent on its share topic."""
+    return row["msgs_per_s"] * row["bytes_per_msg"]
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--runs", type=int, default=3)
+    parser.add_argument("--seconds", type=float, default=10.0, help="Length of each run (camera time).")
+    args = parser.parse_args()
+    started = time.time()
+    rows = []
+    for name, fps in CONFIGS:
+        rows += measure(name, fps, args.runs, args.seconds)
+        print(f"{name} at {fps:g} fps done", flush=True)
+    lines = ["## Fleet throughput (Experiment 2, real processes over Zenoh on loopback)", "",
+             f"`.venv/bin/python -m benchmarks.bench_fleet --runs {args.runs} --seconds {args.seconds:g}` "
+             f"({time.strftime('%Y-%m-%d', time.gmtime(started))}, {platform.machine()}, {os.cpu_count()} cores shared "
+             "by the three agent processes of each run and whatever else the machine ran). Mean over runs; "
+             "latency: a team-mate's data from its acquisition stamp to arrival (includes the sender's rendering, "
+             "~16 ms, and extraction).", "",
+             "| scenario | camera fps | vehicle | share | sustained fps | skipped frames | sent msgs/s | bytes/msg | "
+             "team-mate latency median / p95, ms | estimate median, ms | first good pose, ms | position error, mm |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        lines.append(f"| {r['scenario']} | {r['fps']:g} | {r['vehicle']} | {r['share']} | {r['sustained_fps']:.1f} | "
+                     f"{r['late']:.1f} | {r['msgs_per_s']:.1f} | {r['bytes_per_msg']:,.0f} | "
+                     f"{r['latency_ms']:.1f} / {r['latency_p95_ms']:.1f} | {r['estimate_ms']:.2f} | "
+                     f"{r['first_good_ms']:.0f} | {r['error_mm']:.2f} |")
+    by = {(r["scenario"], r["fps"], r["vehicle"]): r for r in rows}
+    raw, feat, hint = by.get(("exp2-raw", 10.0, "H1")), by.get(("exp2a-features", 10.0, "H1")), by.get(
+        ("exp2b-hints", 10.0, "H1"))
+    if raw and feat and hint:
+        lines += ["", f"Per message, a raw frame is {raw['bytes_per_msg'] / feat['bytes_per_msg']:,.0f}x a feature set "
+                  f"and a feature set {feat['bytes_per_msg'] / hint['bytes_per_msg']:.0f}x a hint; in bytes per "
+                  f"second raw images cost {bps(raw) / bps(feat):,.0f}x feature sets, and hints at "
+                  f"{hint['msgs_per_s']:.0f} Hz {bps(hint) / bps(feat):.1f}x."]
+    RESULTS.parent.mkdir(parents=True, exist_ok=True)
+    RESULTS.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    print("\n".join(lines))
+
+
+if __name__ == "__main__":
+    main()
