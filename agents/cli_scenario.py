@@ -120,7 +120,8 @@ def run_command(
     if as_json:
         emit_json({"scenario": scenario.name, "interrupted": stop.is_set(), "rows": result_rows, "runs": records})
         return
-    Console(width=None if sys.stdout.isatty() else 200).print(results_table(result_rows, f"{scenario.name}: mean error (σ over runs)"))
+    table = results_table(result_rows, f"{scenario.name}: mean error (σ over runs)")
+    Console(width=None if sys.stdout.isatty() else 200).print(table)
     if stop.is_set():
         console.print("interrupted: every agent was stopped")
 
