@@ -156,8 +156,8 @@ def run_variant(scenario: FleetScenario, variant: VariantSpec, run: int, *, fram
             proc.finish(GRACE_S)
     crashed = [p for p in procs if p.popen.returncode not in (0, None) and p.summary is None]
     if crashed and not stop.is_set():
-        details = "; ".join(f"{p.vehicle} exited {p.popen.returncode}: {p.stderr.strip().splitlines()[-1:] or ''}"
-                            for p in crashed)
+        details = "; ".join(f"{p.vehicle} exited {p.popen.returncode}"
+                            + (f" ({p.stderr.strip().splitlines()[-1]})" if p.stderr.strip() else "") for p in crashed)
         raise ScenarioRunError(f"run {run} of {scenario.name}/{variant.name}: {details}")
     return {"scenario": scenario.name, "variant": variant.name, "run": run, "fleet": fleet,
             "interrupted": stop.is_set(), "agents": {p.vehicle: p.summary for p in procs}}

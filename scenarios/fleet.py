@@ -155,7 +155,13 @@ def load_fleet_scenario(name_or_path: str | Path) -> FleetScenario:
     known = {v.name for v in world.vehicles} | {world.spec.target.name}
     for i, variant in enumerate(spec.variants):
         for j, agent in enumerate(variant.agents):
+            where = f"{path}: variants[{i}].agents[{j}]"
             if agent.vehicle not in known:
-                raise ScenarioError(f"{path}: variants[{i}].agents[{j}].vehicle: {agent.vehicle!r} is not in world "
+                raise ScenarioError(f"{where}.vehicle: {agent.vehicle!r} is not in world "
                                     f"{world.name!r} (vehicles: {', '.join(sorted(known))})")
+            is_target = agent.vehicle == world.spec.target.name
+            if agent.role is not None and (agent.role in ("airship", "target")) != is_target:
+                raise ScenarioError(f"{where}.role: {agent.vehicle} {'is the target' if is_target else 'has a camera'}"
+                                    f"; its role is {'airship or target' if is_target else 'uav or ground-station'}, "
+                                    f"not {agent.role!r}")
     return FleetScenario(spec, world, path, world_path)

@@ -4,6 +4,7 @@ watchable from outside at its endpoint, prints results, and leaves nothing runni
 from __future__ import annotations
 
 import json
+import os
 import signal
 import sys
 import time
@@ -45,6 +46,7 @@ def test_shipped_scenarios_validate_and_name_the_paper_experiments():
     ("world: exp2\nvariants: [{name: a, agents: [{vehicle: H1, share: smoke}]}]", "variants[0].agents[0].share"),
     ("world: exp2\nvariants: [{name: a, agents: [{vehicle: H1, colour: red}]}]", "colour"),
     ("world: nowhere\nvariants: [{name: a, agents: [{vehicle: H1}]}]", "world:"),
+    ("world: exp2\nvariants: [{name: a, agents: [{vehicle: pioneer, role: uav}]}]", "agents[0].role: pioneer is the"),
 ])
 def test_a_bad_scenario_file_gets_one_line_naming_the_field(tmp_path, body, message, capsys):
     path = tmp_path / "bad.yaml"
@@ -110,3 +112,27 @@ def test_scenario_list_and_show(capsys):
     shown = json.loads(capsys.readouterr().out)
     assert shown["variants"][0]["agents"][0] == {"vehicle": "H1", "role": None, "share": "hint", "imu": True,
                                                   "hint_rate": 200.0, "image_encoding": "raw"}
+
+
+def test_a_crashed_agent_ends_the_run_with_one_line_and_stops_the_others():
+    port = free_port()
+    endpoint = f"tcp/127.0.0.1:{port}"
+    runner = Proc([sys.executable, "-m", "agents.cli", "scenario", "run", "exp2a-features", "--frames", "10000",
+                   "--listen", endpoint, "--json"])
+    try:
+        victim = []
+        for _ in range(300):
+            victim = [pid for pid in running_with(endpoint) if pid in running_with("--vehicle H2 ")]
+            if victim:
+                break
+            time.sleep(0.1)
+        assert victim
+        time.sleep(8)  # running
+        os.kill(victim[0], signal.SIGKILL)
+        code = runner.wait(30)
+    finally:
+        runner.kill()
+    err = runner.popen.stderr.read()
+    assert code == 2 and err.startswith("error: run 0 of exp2a-features/H1+H2: H2 exited -9"), err
+    assert err.count("\n") == 1
+    assert running_with(endpoint) == []
