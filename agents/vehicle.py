@@ -37,6 +37,7 @@ from protocol import Attitude, FeatureSet, ImageFrame, PoseEstimate, Topic, chec
 from scenarios.world import Scenario, build_scenario, load_scenario
 
 from .bus import FleetBus, Received
+from .memory import pin_mmap_threshold, release_free_memory
 from .fleet_errors import FleetError
 from .frames import NS, FrameClock, SimulatedCamera
 from .team_views import (TeamViews, attitude_knowledge, build_views, camera_info, encode_image, mate_view,
@@ -286,6 +287,7 @@ class VehicleAgent:
         if views:
             CooperativeEstimator(self.estimator.model, self.estimator.bounds,
                                  SearchOptions(max_generations=1, min_starts=1)).estimate(views)
+        release_free_memory()  # what the one-off work (ground texture, compilation) freed
 
     def summary(self) -> dict:
         return {"event": "summary", "vehicle": self.config.vehicle, "role": self.role, "share": self.config.share,
@@ -484,6 +486,7 @@ class VehicleAgent:
 def run_agent(options: SessionOptions, config: AgentConfig, stop: threading.Event, emit: Emit) -> dict:
     """Open the bus and run the vehicle until ``stop`` or ``config.frames``; returns the summary."""
     config.check()
+    pin_mmap_threshold()
     scenario = load_world(config)
     role = resolve_role(scenario, config.vehicle, config.role)
     if role in CAMERA_ROLES:
