@@ -91,7 +91,9 @@ def register(app: typer.Typer) -> None:
                 emit_json(record)
             elif record["event"] in ("ready", "join", "leave"):
                 console.print(f"{record['event']}: {record.get('vehicle')}")
-            elif record["event"] == "frame" and record.get("estimate", True) is not None:
+            elif record["event"] == "no-estimate":
+                console.print(f"frame {record['frame']}: {record['reason']} ({record['points']})")
+            elif record["event"] == "frame":
                 e = record["error"]
                 console.print(f"frame {record['frame']}: views {','.join(record['views'])} "
                               f"error {e['position'] * 100:.1f} cm {max(e['roll'], e['pitch'], e['yaw']):.2f}° "

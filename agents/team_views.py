@@ -107,8 +107,11 @@ class TeamViews:
     def add(self, view: MateView) -> None:
         self._by_mate.setdefault(view.vehicle, deque(maxlen=KEEP_PER_MATE)).append(view)
 
-    def forget(self, vehicle: str) -> None:
-        self._by_mate.pop(vehicle, None)
+    def keep_only(self, vehicles: Iterable[str]) -> None:
+        """Forget the views of every team-mate not in ``vehicles`` (those that left)."""
+        keep = set(vehicles)
+        for mate in [m for m in self._by_mate if m not in keep]:
+            del self._by_mate[mate]
 
     def sharing(self, alive: Iterable[str], now_ns: int, max_age_s: float) -> set[str]:
         """Live team-mates whose newest view is fresh: those worth waiting for."""

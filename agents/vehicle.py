@@ -309,8 +309,8 @@ class VehicleAgent:
         knowledge = self.knowledge()
         t0 = time.perf_counter()
         if not views:
-            self.emit({"event": "frame", "vehicle": self.config.vehicle, "frame": n, "points": len(frame.points),
-                       "estimate": None, "reason": "too few points"})
+            self.emit({"event": "no-estimate", "vehicle": self.config.vehicle, "frame": n,
+                       "points": len(frame.points), "reason": "too few image points"})
             return
         hint_mode = self.config.share == "hint"
         estimate = self.estimator.estimate(
@@ -360,8 +360,7 @@ class VehicleAgent:
 
         poll(0)
         alive = self.bus.teammates()
-        for gone in set(self.team._by_mate) - alive:
-            self.team.forget(gone)
+        self.team.keep_only(alive)
         expected = self.team.sharing(alive, stamp_ns, max_age + self.period_s)
         deadline = time.monotonic() + self.sync_wait_s
         wait_until(lambda: set(self.team.at(stamp_ns, expected)) >= expected, deadline, poll)
