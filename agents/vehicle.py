@@ -248,11 +248,6 @@ class VehicleAgent:
     # -- the loop ---------------------------------------------------------------------------
 
     def run(self, stop: threading.Event) -> dict:
-        mates = [v for v in self.config.wait_for if v != self.config.vehicle]
-        if mates:
-            ok = self.bus.wait_for_teammates(mates, self.config.wait_timeout_s)
-            self.emit({"event": "teammates", "vehicle": self.config.vehicle, "ready": ok,
-                       "alive": sorted(self.bus.teammates())})
         step = {"airship": self.airship_frame, "target": self.target_frame}.get(self.role, None)
         camera_loop = step is None
         if camera_loop:
@@ -262,6 +257,11 @@ class VehicleAgent:
                                                   seed=self.config.seed)
             step = self.camera_frame
             self.warm_up()
+        mates = [v for v in self.config.wait_for if v != self.config.vehicle]
+        if mates:
+            ok = self.bus.wait_for_teammates(mates, self.config.wait_timeout_s)
+            self.emit({"event": "teammates", "vehicle": self.config.vehicle, "ready": ok,
+                       "alive": sorted(self.bus.teammates())})
         self.emit({"event": "ready", "vehicle": self.config.vehicle, "role": self.role, "share": self.config.share,
                    "fps": self.clock.fps})
         n = None
