@@ -32,7 +32,7 @@ DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"
 #: Frame 0 of a run is this far in the future when the agents are started (imports, warm-up).
 START_MARGIN_S = 6.0
 #: Seconds an agent gets to stop after SIGTERM before it is killed.
-GRACE_S = 5.0
+GRACE_S = 10.0
 
 
 class ScenarioRunError(FleetError):

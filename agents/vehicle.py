@@ -213,8 +213,12 @@ class VehicleAgent:
         self._hints: list[np.ndarray] = []
         self._hints_lock = threading.Lock()
         self._next_hint_s = 0.0
+        self._hint_send_lock = threading.Lock()
+        #: Held while the estimator is used: by the frame loop (per-frame estimate) and by the improver thread.
+        self._estimator_lock = threading.Lock()
         self._started_ns = 0
         self._image_ready: float | None = None  # perf_counter when the first frame's image existed
+        self._done = threading.Event()
 
     # -- set-up -----------------------------------------------------------------------------
 
@@ -240,10 +244,8 @@ class VehicleAgent:
     def take_hints(self) -> np.ndarray | None:
         with self._hints_lock:
             hints, self._hints = self._hints, []
-        if not hints:
-            return None
-        self.record.hints_used += len(hints)
-        return np.array(hints)
+            self.record.hints_used += len(hints)
+        return np.array(hints) if hints else None
 
     # -- the loop ---------------------------------------------------------------------------
 
@@ -264,6 +266,18 @@ class VehicleAgent:
                        "alive": sorted(self.bus.teammates())})
         self.emit({"event": "ready", "vehicle": self.config.vehicle, "role": self.role, "share": self.config.share,
                    "fps": self.clock.fps})
+        improver = None
+        if camera_loop and self.config.share in IDLE_GENERATIONS:
+            improver = threading.Thread(target=self.improve, args=(stop,), name="improver", daemon=True)
+            improver.start()
+        try:
+            return self._loop(step, stop)
+        finally:
+            self._done.set()
+            if improver is not None:
+                improver.join(2.0)
+
+    def _loop(self, step, stop: threading.Event) -> dict:
         n = None
         while not stop.is_set() and (self.config.frames is None or self.record.frames < self.config.frames):
             nxt = self.clock.wait_next(n, stop)
@@ -276,8 +290,6 @@ class VehicleAgent:
                 self._started_ns = self.clock.stamp_ns(n)
             step(n)
             self.record.frames += 1
-            if camera_loop and self.config.share in IDLE_GENERATIONS:
-                self.improve_until(self.clock.stamp_ns(n + 1), stop)
         return self.summary()
 
     def warm_up(self) -> None:
@@ -313,10 +325,11 @@ class VehicleAgent:
                        "points": len(frame.points), "reason": "too few image points"})
             return
         hint_mode = self.config.share == "hint"
-        estimate = self.estimator.estimate(
-            views, knowledge=knowledge, hints=self.take_hints() if hint_mode else None, frame=n,
-            hint_source=self.take_hints if hint_mode else None,
-            on_generation=self._publish_generation if hint_mode else None)
+        with self._estimator_lock:
+            estimate = self.estimator.estimate(
+                views, knowledge=knowledge, hints=self.take_hints() if hint_mode else None, frame=n,
+                hint_source=self.take_hints if hint_mode else None,
+                on_generation=self._publish_generation if hint_mode else None)
         seconds = time.perf_counter() - t0
         self.record.frame_seconds.append(seconds)
         self.record.multi_view_frames += len(views) > 1
@@ -385,29 +398,30 @@ class VehicleAgent:
     def _publish_hint(self, pose: np.ndarray) -> None:
         """Send ``pose`` as a hint unless that would exceed ``hint_rate_hz`` (a schedule, not a minimum gap, so that
         a late wake-up does not lower the rate)."""
-        now, period = time.monotonic(), 1.0 / self.config.hint_rate_hz
-        if now >= self._next_hint_s:
+        period = 1.0 / self.config.hint_rate_hz
+        with self._hint_send_lock:
+            now = time.monotonic()
+            if now < self._next_hint_s:
+                return
             self._next_hint_s = max(self._next_hint_s + period, now - period)
             self.bus.publish_hint(pose)
             self.record.hints_published += 1
 
-    def improve_until(self, due_ns: int, stop: threading.Event) -> None:
-        """Between frames: generations on the last views (with the hints that arrive, in hint mode, where each new
-        best goes out as a hint) at up to ``hint_rate_hz``."""
+    def improve(self, stop: threading.Event) -> None:
+        """The improver thread: generations on the latest views, with the hints that arrive (hint mode, where each
+        new best goes out as a hint), at up to ``hint_rate_hz``, also while the frame loop renders the next image.
+        The compiled kernels release the GIL, so this runs beside the frame loop on another core."""
         period = 1.0 / self.config.hint_rate_hz
-        while not stop.is_set():
-            remaining = (due_ns - time.time_ns()) / NS
-            if remaining <= period:
-                return
-            hint_mode = self.config.share == "hint"
-            estimate = self.estimator.generation(self.take_hints() if hint_mode else None)
-            if estimate is None:
-                return
-            if hint_mode:
+        hint_mode = self.config.share == "hint"
+        next_s = time.monotonic()
+        while not stop.is_set() and not self._done.is_set():
+            with self._estimator_lock:
+                estimate = self.estimator.generation(self.take_hints() if hint_mode else None)
+            if estimate is not None and hint_mode:
                 self._publish_hint(estimate.pose)
-                stop.wait(max(0.0, self._next_hint_s - time.monotonic()))
-            else:
-                stop.wait(period)
+            now = time.monotonic()
+            next_s = max(next_s + period, now - period)
+            self._done.wait(max(0.0, next_s - now) if estimate is not None else 0.01)
 
     def publish_estimate(self, n: int, stamp: int, estimate: Estimate, inputs: list[str], seconds: float,
                          truth: np.ndarray, points: int, knowledge: list[Knowledge]) -> None:
