@@ -111,7 +111,8 @@ def run_command(
                                   f"frame {p['frames']} of {frames or scenario.frames}")
 
                 def finished(record: dict) -> None:
-                    console.print(f"{record['variant']} run {record['run'] + 1}/{runs} done")
+                    console.print(f"{record['variant']} run {record['run'] + 1}/{runs} done "
+                                  f"({record['seconds']:.1f} s)")
 
                 records = run_scenario(scenario, runs=runs, frames=frames, seed=seed, endpoint=listen,
                                        variants=variant, stop=stop, on_run=finished, on_progress=progress,
@@ -166,5 +167,7 @@ def register_report(app: typer.Typer) -> None:
         with stop_on_signals() as stop:
             path = write_report(out, runs=runs, frames=frames, seed=seed, endpoint=listen, stop=stop,
                                 on_run=lambda r: console.print(f"{r['scenario']} / {r['variant']}: run "
-                                                               f"{r['run'] + 1} of {runs} done"))
+                                                               f"{r['run'] + 1} of {runs} "
+                                                               + (f"failed: {r['error']}" if r.get("error") else
+                                                                  f"done in {r['seconds']:.1f} s")))
         print(path)

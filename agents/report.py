@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 import platform
+import statistics
 import threading
 import time
 from pathlib import Path
@@ -162,7 +163,7 @@ def write_report(out: Path, *, runs: int, frames: int | None, seed: int, endpoin
     for name in SCENARIOS:
         scenario = load_fleet_scenario(name)
         records += run_scenario(scenario, runs=runs, frames=frames, seed=seed, endpoint=endpoint, stop=stop,
-                                on_run=on_run)
+                                on_run=on_run, keep_going=True)
         if stop.is_set():
             break
     result_rows = rows(records)
@@ -216,6 +217,14 @@ def write_report(out: Path, *, runs: int, frames: int | None, seed: int, endpoin
               "## The paper's findings in our numbers", "", "| finding | holds | numbers |", "|---|---|---|"]
     for text, holds, numbers in findings(result_rows, agree_a, agree_b):
         lines.append(f"| {text} | {'yes' if holds else '**no**'} | {numbers} |")
+    failed = [r for r in records if r.get("error")]
+    if failed:
+        lines += ["", f"**{len(failed)} of {len(records)} runs failed** and are left out of the tables:"]
+        lines += [f"- {r['scenario']} / {r['variant']} run {r['run']}: {r['error']}" for r in failed]
+    seconds = [r["seconds"] for r in records if r.get("seconds")]
+    if seconds:
+        lines += ["", f"Wall time per run (start-up margin included): median {statistics.median(seconds):.1f} s, "
+                  f"longest {max(seconds):.1f} s."]
     if stop.is_set():
         lines += ["", "**Interrupted**: the tables hold only the runs that finished."]
     path = out / "report.md"

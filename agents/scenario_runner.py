@@ -108,6 +108,7 @@ def run_variant(scenario: FleetScenario, variant: VariantSpec, run: int, *, fram
                 fps: float | None = None) -> dict:
     """One run of one variant: start its agents (and router), wait for their summaries, stop everything."""
     fps = fps or scenario.fps
+    started = time.monotonic()
     fleet = f"{scenario.name}-{variant.name}-{run}".replace("+", "-")[:64]
     epoch_ns = time.time_ns() + int(START_MARGIN_S * 1e9)
     vehicles = [a.vehicle for a in variant.agents]
@@ -160,23 +161,34 @@ def run_variant(scenario: FleetScenario, variant: VariantSpec, run: int, *, fram
                             + (f" ({p.stderr.strip().splitlines()[-1]})" if p.stderr.strip() else "") for p in crashed)
         raise ScenarioRunError(f"run {run} of {scenario.name}/{variant.name}: {details}")
     return {"scenario": scenario.name, "variant": variant.name, "run": run, "fleet": fleet,
-            "interrupted": stop.is_set(), "agents": {p.vehicle: p.summary for p in procs}}
+            "interrupted": stop.is_set(), "seconds": time.monotonic() - started,
+            "agents": {p.vehicle: p.summary for p in procs}}
 
 
 def run_scenario(scenario: FleetScenario, *, runs: int = 1, frames: int | None = None, seed: int = 0,
                  endpoint: str = DEFAULT_ENDPOINT, variants: list[str] | None = None, stop: threading.Event,
-                 fps: float | None = None,
+                 fps: float | None = None, keep_going: bool = False,
                  on_run: Callable[[dict], None] | None = None,
                  on_progress: Callable[[dict], None] | None = None) -> list[dict]:
-    """Every run of every (chosen) variant; returns one record per run (see :func:`run_variant`)."""
+    """Every run of every (chosen) variant; returns one record per run (see :func:`run_variant`).
+
+    A run that fails raises :class:`ScenarioRunError`; with ``keep_going`` it is recorded instead, as
+    ``{"scenario", "variant", "run", "error", "agents": {}}``, and the next run starts.
+    """
     chosen = [scenario.variant(v) for v in variants] if variants else scenario.spec.variants
     results = []
     for variant in chosen:
         for run in range(runs):
             if stop.is_set():
                 return results
-            record = run_variant(scenario, variant, run, frames=frames or scenario.frames, seed=seed,
-                                 endpoint=endpoint, stop=stop, on_progress=on_progress, fps=fps)
+            try:
+                record = run_variant(scenario, variant, run, frames=frames or scenario.frames, seed=seed,
+                                     endpoint=endpoint, stop=stop, on_progress=on_progress, fps=fps)
+            except ScenarioRunError as err:
+                if not keep_going:
+                    raise
+                record = {"scenario": scenario.name, "variant": variant.name, "run": run, "error": str(err),
+                          "interrupted": False, "agents": {}}
             results.append(record)
             if on_run is not None:
                 on_run(record)
