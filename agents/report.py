@@ -110,6 +110,11 @@ def findings(result_rows: list[dict], agree_a: dict, agree_b: dict) -> list[tupl
                                                                                                h2["position"]),
                     f"H1 {h1['position'] * 100:.2f} cm, H2 {h2['position'] * 100:.2f} cm, "
                     f"H1+H2 {both['position'] * 100:.2f} cm"))
+    if h1 and h2 and both and h1["history"] and h2["history"] and both["history"]:
+        alone = 0.5 * (h1["history"][-1] + h2["history"][-1])
+        out.append(("Fig. 6: the stereo fitness (eq. 4) ends below the weighted sum of the single-view fitnesses",
+                    both["history"][-1] < alone,
+                    f"{both['history'][-1]:.3f} px vs 0.5 x H1 + 0.5 x H2 = {alone:.3f} px"))
     if h1 and h2 and h1h and h2h:
         gain1, gain2 = h1["position"] - h1h["position"], h2["position"] - h2h["position"]
         out.append(("Hints improve each helicopter", gain1 > 0 and gain2 > 0,
