@@ -31,6 +31,16 @@ def running_with(text: str) -> list[int]:
     return pids
 
 
+def wait_for(pids, timeout: float = 30.0) -> list[int]:
+    """Poll ``pids()`` until it returns a non-empty list (or ``timeout`` passes); that list."""
+    deadline = time.monotonic() + timeout
+    found = pids()
+    while not found and time.monotonic() < deadline:
+        time.sleep(0.1)
+        found = pids()
+    return found
+
+
 def test_shipped_scenarios_validate_and_name_the_paper_experiments():
     assert set(fleet_scenario_names()) == {"exp1-airship", "exp2-solo", "exp2a-features", "exp2b-hints", "exp2-raw"}
     exp1 = load_fleet_scenario("exp1-airship")
@@ -86,13 +96,8 @@ def test_sigint_stops_every_agent_of_a_running_scenario():
     runner = Proc([sys.executable, "-m", "agents.cli", "scenario", "run", "exp2b-hints", "--frames", "10000",
                    "--listen", endpoint, "--json"])
     try:
-        agents = 0
-        for _ in range(200):  # wait until the three agents run (the runner's own command line names the endpoint too)
-            agents = len(running_with(endpoint)) - 1
-            if agents >= 3:
-                break
-            time.sleep(0.1)
-        assert agents >= 3
+        # the three agents run (the runner's own command line names the endpoint too)
+        assert wait_for(lambda: running_with(endpoint) if len(running_with(endpoint)) >= 4 else [])
         time.sleep(8)  # past frame 0
         code, seconds = runner.stop(signal.SIGINT, timeout=20)
         result = runner.next_record(5, lambda r: "rows" in r)
@@ -120,12 +125,7 @@ def test_a_crashed_agent_ends_the_run_with_one_line_and_stops_the_others():
     runner = Proc([sys.executable, "-m", "agents.cli", "scenario", "run", "exp2a-features", "--frames", "10000",
                    "--listen", endpoint, "--json"])
     try:
-        victim = []
-        for _ in range(300):
-            victim = [pid for pid in running_with(endpoint) if pid in running_with("--vehicle H2 ")]
-            if victim:
-                break
-            time.sleep(0.1)
+        victim = wait_for(lambda: [pid for pid in running_with(endpoint) if pid in running_with("--vehicle H2 ")])
         assert victim
         time.sleep(8)  # running
         os.kill(victim[0], signal.SIGKILL)
