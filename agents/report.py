@@ -8,6 +8,7 @@ helicopters; then each of the paper's qualitative findings, checked against our 
 from __future__ import annotations
 
 import math
+import os
 import platform
 import statistics
 import threading
@@ -180,7 +181,7 @@ def write_report(out: Path, *, runs: int, frames: int | None, seed: int, endpoin
              "",
              f"Produced by `evopose report --runs {runs}{'' if frames is None else f' --frames {frames}'}"
              f" --seed {seed}` on {time.strftime('%Y-%m-%d', time.gmtime(started))}, "
-             f"{platform.machine()} with {__import__('os').cpu_count()} cores (shared, noisy), in "
+             f"{platform.machine()} with {os.cpu_count()} cores (shared, noisy), in "
              f"{(time.time() - started) / 60:.1f} min. Every vehicle ran as its own process over Zenoh on loopback; "
              "each run used other search seeds and another world seed (image noise, IMU bias). Errors are per run the "
              "mean absolute error over the frames with a good (converged) estimate, then mean and σ over the runs. "

@@ -45,7 +45,8 @@ class AgentProcess:
 
     vehicle: str
     popen: subprocess.Popen
-    records: list = field(default_factory=list)
+    records: list = field(default_factory=list)  #: every record but the per-frame ones (counted instead)
+    frames_done: int = 0
     stderr: str = ""
 
     def __post_init__(self) -> None:
@@ -55,9 +56,13 @@ class AgentProcess:
     def _read(self) -> None:
         for line in self.popen.stdout:
             try:
-                self.records.append(json.loads(line))
+                record = json.loads(line)
             except ValueError:
                 continue
+            if record.get("event") == "frame":
+                self.frames_done += 1
+            else:
+                self.records.append(record)
 
     @property
     def summary(self) -> dict | None:
@@ -65,9 +70,6 @@ class AgentProcess:
             if record.get("event") == "summary":
                 return record
         return None
-
-    def frames_done(self) -> int:
-        return sum(1 for r in self.records if r.get("event") in ("frame",))
 
     def finish(self, timeout: float) -> None:
         try:
@@ -149,7 +151,7 @@ def run_variant(scenario: FleetScenario, variant: VariantSpec, run: int, *, fram
                 raise ScenarioRunError(f"run {run} of {scenario.name}/{variant.name} did not finish in time")
             if on_progress is not None:
                 on_progress({"run": run, "variant": variant.name,
-                             "frames": min(p.frames_done() for p in procs if p.vehicle in vehicles)})
+                             "frames": min(p.frames_done for p in procs)})
             stop.wait(0.25)
     finally:
         _stop_all(children)

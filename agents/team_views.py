@@ -19,7 +19,7 @@ import numpy as np
 from evopose import Camera, View
 from evopose.cooperative import Knowledge
 from evopose.pose import matrix_from_pose, pose_from_matrix
-from protocol import Attitude, CameraInfo, FeatureSet, ImageFrame, unpack_points
+from protocol import Attitude, CameraInfo, FeatureSet, ImageFrame
 
 #: Frames kept per team-mate while waiting to pair them with the own frame.
 KEEP_PER_MATE = 8
@@ -83,8 +83,7 @@ def own_view(vehicle: str, stamp_ns: int, camera: Camera, points: np.ndarray) ->
     """The own frame in the same form as a team-mate's (float32 points, the wire camera), so that every vehicle
     that pairs the same frames builds exactly the same problem."""
     points = np.asarray(points, float).reshape(-1, 2).astype(np.float32)
-    info = CameraInfo.model_validate(camera_info(camera).model_dump())
-    return MateView(vehicle, stamp_ns, info, points)
+    return MateView(vehicle, stamp_ns, camera_info(camera), points)
 
 
 def build_views(views: Iterable[MateView]) -> tuple[list[View], list[str]]:

@@ -40,7 +40,7 @@ from .bus import FleetBus, Received
 from .memory import pin_mmap_threshold, release_free_memory
 from .fleet_errors import FleetError
 from .frames import NS, FrameClock, SimulatedCamera
-from .team_views import (TeamViews, attitude_knowledge, build_views, camera_info, encode_image, mate_view,
+from .team_views import (TeamViews, attitude_knowledge, build_views, encode_image, mate_view,
                          own_view, wait_until)
 from .zenoh_config import SessionOptions
 
@@ -92,11 +92,11 @@ class AgentConfig:
             raise FleetError(f"--share must be one of {', '.join(SHARES)}, got {self.share!r}")
         if self.image_encoding not in ENCODINGS:
             raise FleetError(f"--image-encoding must be one of {', '.join(ENCODINGS)}, got {self.image_encoding!r}")
-        for name in ("fps", "hint_rate_hz", "max_age_s", "attitude_sigmas"):
+        for name, option in (("fps", "--fps"), ("hint_rate_hz", "--hint-rate"), ("max_age_s", "--max-age"),
+                             ("attitude_sigmas", "--imu-sigmas")):
             value = getattr(self, name)
             if value is not None and not (math.isfinite(value) and value > 0):
-                raise FleetError(f"--{name.replace('_hz', '-rate').replace('_s', '').replace('_', '-')} "
-                                 f"must be a number > 0, got {value}")
+                raise FleetError(f"{option} must be a number > 0, got {value}")
 
 
 def load_world(config: AgentConfig) -> Scenario:

@@ -41,6 +41,13 @@ def wait_for(pids, timeout: float = 30.0) -> list[int]:
     return found
 
 
+def start_endless_run(scenario: str) -> tuple[Proc, str]:
+    """`evopose scenario run SCENARIO` with frames enough never to end by itself, on a free endpoint."""
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    return Proc([sys.executable, "-m", "agents.cli", "scenario", "run", scenario, "--frames", "10000", "--listen",
+                 endpoint, "--json"]), endpoint
+
+
 def test_shipped_scenarios_validate_and_name_the_paper_experiments():
     assert set(fleet_scenario_names()) == {"exp1-airship", "exp2-solo", "exp2a-features", "exp2b-hints", "exp2-raw"}
     exp1 = load_fleet_scenario("exp1-airship")
@@ -91,10 +98,7 @@ def test_scenario_run_is_watchable_and_leaves_nothing_running():
 
 
 def test_sigint_stops_every_agent_of_a_running_scenario():
-    port = free_port()
-    endpoint = f"tcp/127.0.0.1:{port}"
-    runner = Proc([sys.executable, "-m", "agents.cli", "scenario", "run", "exp2b-hints", "--frames", "10000",
-                   "--listen", endpoint, "--json"])
+    runner, endpoint = start_endless_run("exp2b-hints")
     try:
         # the three agents run (the runner's own command line names the endpoint too)
         assert wait_for(lambda: running_with(endpoint) if len(running_with(endpoint)) >= 4 else [])
@@ -120,10 +124,7 @@ def test_scenario_list_and_show(capsys):
 
 
 def test_a_crashed_agent_ends_the_run_with_one_line_and_stops_the_others():
-    port = free_port()
-    endpoint = f"tcp/127.0.0.1:{port}"
-    runner = Proc([sys.executable, "-m", "agents.cli", "scenario", "run", "exp2a-features", "--frames", "10000",
-                   "--listen", endpoint, "--json"])
+    runner, endpoint = start_endless_run("exp2a-features")
     try:
         victim = wait_for(lambda: [pid for pid in running_with(endpoint) if pid in running_with("--vehicle H2 ")])
         assert victim
