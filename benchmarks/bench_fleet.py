@@ -20,7 +20,7 @@ import threading
 import time
 from pathlib import Path
 
-from agents.scenario_runner import run_scenario
+from agents.experiments.runner import run_scenario
 from scenarios.fleet import load_fleet_scenario
 
 

@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from agents.problem_file import problem_to_dict
+from agents.problem.problem_file import problem_to_dict
 from benchmarks.problems import SyntheticProblem, make_problem
 from evopose.pose import PARAM_NAMES
 

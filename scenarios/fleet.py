@@ -28,7 +28,7 @@ from typing import Annotated, Literal
 
 from pydantic import Field, model_validator
 
-from .documents import Strict, read_yaml_mapping, validate
+from .documents import Strict, read_mapping, validate
 from .errors import ScenarioError
 from .world import SCENARIOS_DIR, Scenario, load_scenario
 
@@ -142,7 +142,7 @@ def load_fleet_scenario(name_or_path: str | Path) -> FleetScenario:
         One line naming the file and the field.
     """
     path = resolve_fleet_path(name_or_path)
-    spec = validate(FleetScenarioSpec, read_yaml_mapping(path, ScenarioError), path, ScenarioError)
+    spec = validate(FleetScenarioSpec, read_mapping(path, ScenarioError), path, ScenarioError)
     world_path = Path(spec.world)
     if not world_path.suffix:
         world_path = SCENARIOS_DIR / f"{spec.world}.yaml"

@@ -28,7 +28,7 @@ from pydantic import Field, field_validator, model_validator
 
 from evopose import Model
 
-from .documents import Strict, read_yaml_mapping, validate
+from .documents import Strict, read_mapping, validate
 from .errors import ModelFileError
 from .mesh import Mesh, box_mesh, ellipsoid_mesh, polygon_mesh
 
@@ -180,5 +180,5 @@ def load_model(path: str | Path) -> TargetModel:
         One line naming the file and the offending field.
     """
     path = resolve_model_path(path)
-    document = read_yaml_mapping(path, ModelFileError)
+    document = read_mapping(path, ModelFileError)
     return model_from_spec(validate(ModelFileSpec, document, path, ModelFileError))

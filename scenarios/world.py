@@ -40,7 +40,7 @@ from pydantic import Field, model_validator
 from evopose import Bounds, Camera
 from evopose.pose import PARAM_NAMES, matrix_from_pose
 
-from .documents import Strict, read_yaml_mapping, validate
+from .documents import Strict, read_mapping, validate
 from .errors import FrameError, ModelFileError, ScenarioError
 from .sensors import GpsModel, ImuModel
 from .target import TargetModel, load_model, resolve_model_path
@@ -349,6 +349,6 @@ def load_scenario(path: str | Path) -> Scenario:
         One line naming the file and the offending field.
     """
     path = resolve_scenario_path(path)
-    document = read_yaml_mapping(path, ScenarioError)
+    document = read_mapping(path, ScenarioError)
     spec = validate(ScenarioSpec, document, path, ScenarioError)
     return build_scenario(spec, path.parent, path)

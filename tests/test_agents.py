@@ -11,7 +11,7 @@ import time
 import numpy as np
 import pytest
 
-from agents.cli import main
+from agents.cli.main import main
 from tests.fleet_procs import Proc, free_port
 
 FEATURE_SIZE = range(100, 1000)

@@ -10,10 +10,11 @@ import typer
 import typer.main
 import yaml
 
-from agents.cli import app, main
-from agents.compose import compose_document, compose_yaml
-from agents.vehicle import ENCODINGS, ROLES, SHARES, resolve_role
-from agents.zenoh_config import SessionOptions, make_config
+from agents.cli.main import app, main
+from agents.experiments.compose import compose_document, compose_yaml
+from agents.vehicle.agent import resolve_role
+from agents.vehicle.config import ENCODINGS, ROLES, SHARES
+from agents.transport.session import SessionOptions, make_config
 from scenarios.fleet import fleet_scenario_names, load_fleet_scenario
 from scenarios.world import load_scenario
 

@@ -6,8 +6,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from agents.frames import FrameClock, SimulatedCamera
-from agents.team_views import MateView, TeamViews, build_views, camera_from_info, camera_info, own_view
+from agents.vehicle.frames import FrameClock, SimulatedCamera
+from agents.vehicle.team_views import MateView, TeamViews, build_views, camera_from_info, camera_info, own_view
 from evopose.cooperative import CooperativeEstimator, Knowledge
 from evopose.pose import wrap_angle
 from scenarios.world import load_scenario

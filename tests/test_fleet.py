@@ -10,7 +10,7 @@ import time
 
 import pytest
 
-from agents.cli import main
+from agents.cli.main import main
 from tests.fleet_procs import Fleet, free_port
 
 RAW_FRAME = 640 * 480 * 3
@@ -90,8 +90,8 @@ def test_meter_matches_what_was_sent(fleet):
 
 ATTACKER = """
 import json, time, numpy as np, protocol as p
-from agents.bus import FleetBus
-from agents.zenoh_config import SessionOptions
+from agents.transport.bus import FleetBus
+from agents.transport.session import SessionOptions
 rng = np.random.default_rng(0)
 options = SessionOptions(mode="client", connect=({endpoint!r},), multicast=False)
 with FleetBus.open(options, {fleet!r}, "evil") as bus:

@@ -10,7 +10,7 @@ import pytest
 import yaml
 from scipy.spatial.transform import Rotation
 
-from agents.problem_file import ProblemFileError, load_problem, problem_to_dict, solution_to_dict
+from agents.problem.problem_file import ProblemFileError, load_problem, problem_to_dict, solution_to_dict
 from benchmarks.problems import make_problem
 from evopose import Camera, PoseProblem, SearchOptions, Solution, View
 from examples.make_examples import EXAMPLES, EXAMPLES_DIR, render

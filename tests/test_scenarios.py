@@ -12,8 +12,8 @@ from pathlib import Path
 
 import pytest
 
-from agents.cli import main
-from agents.results import agreement, rows
+from agents.cli.main import main
+from agents.experiments.results import agreement, rows
 from scenarios.errors import ScenarioError
 from scenarios.fleet import fleet_scenario_names, load_fleet_scenario
 from tests.fleet_procs import Proc, free_port

@@ -1,4 +1,4 @@
-"""``evopose agent``: one vehicle of the fleet as its own process (a thin wrapper over agents.vehicle)."""
+"""``evopose agent``: one vehicle of the fleet as its own process (a thin wrapper over :mod:`agents.vehicle`)."""
 
 from __future__ import annotations
 
@@ -9,10 +9,9 @@ import typer
 from rich.console import Console
 from rich.table import Table
 
-from .cli_fleet import ConfigFile, Connect, Listen, Mode, NoMulticast, _options
-from .fleet_services import emit_json
-from .shutdown import stop_on_signals
-from .vehicle import ENCODINGS, ROLES, SHARES, AgentConfig, run_agent
+from agents.cli.options import ConfigFile, Connect, Listen, Mode, NoMulticast, emit_json, session_options
+from agents.cli.signals import stop_on_signals
+from agents.vehicle.config import ENCODINGS, ROLES, SHARES, AgentConfig
 
 
 def summary_table(summary: dict) -> Table:
@@ -78,6 +77,8 @@ def register(app: typer.Typer) -> None:
         no_multicast: NoMulticast = False,
     ) -> None:
         """Run one vehicle: acquire, extract, share, estimate (eq. 1-4 and hints), publish; until stopped."""
+        from agents.vehicle.agent import run_agent
+
         agent_config = AgentConfig(
             fleet=fleet, vehicle=vehicle, scenario=scenario, role=role, share=share, frames=frames, fps=fps,
             epoch_ns=epoch_ns, seed=seed, world_seed=world_seed, max_age_s=max_age, sync_wait_s=sync_wait,
@@ -100,7 +101,7 @@ def register(app: typer.Typer) -> None:
                               f"{'good' if record['good'] else 'not converged'} {record['seconds'] * 1e3:.0f} ms")
 
         with stop_on_signals() as stop:
-            summary = run_agent(_options(mode, connect, listen, config, no_multicast), agent_config, stop, emit)
+            summary = run_agent(session_options(mode, connect, listen, config, no_multicast), agent_config, stop, emit)
         if as_json:
             emit_json(summary)
         else:

@@ -1,11 +1,12 @@
 """The fleet commands: ``evopose router``, ``meter``, ``publish`` and ``listen``; thin wrappers over fleet_services.
 
-Registered on the main typer app by :func:`register` (called from agents/cli.py).
+Registered on the main typer app by :func:`register` (called from agents/cli/main.py).
 """
 
 from __future__ import annotations
 
 import json
+import math
 import sys
 from pathlib import Path
 from typing import Annotated
@@ -14,36 +15,43 @@ import typer
 from rich.console import Console
 from rich.table import Table
 
-from protocol import Topic
+from agents.cli.options import (ConfigFile, Connect, Fleet, Listen, Mode, NoMulticast, Vehicle, emit_json,
+                                session_options)
+from agents.cli.signals import stop_on_signals
+from agents.errors import FleetError
 
-from .fleet_errors import FleetError
-from .fleet_services import PAYLOADS, PublishSpec, emit_json, run_listener, run_meter, run_publisher, run_router
-from .meter import format_period, human_rate, human_size
-from .shutdown import stop_on_signals
-from .zenoh_config import SessionOptions
-
-Connect = Annotated[list[str] | None, typer.Option("--connect", "-e", metavar="ENDPOINT",
-                                                   help="Endpoint to connect to, e.g. tcp/10.0.0.1:7447 (repeatable).")]
-Listen = Annotated[list[str] | None, typer.Option("--listen", "-l", metavar="ENDPOINT",
-                                                  help="Endpoint to listen on, e.g. tcp/0.0.0.0:7447 (repeatable).")]
-Mode = Annotated[str | None, typer.Option(help="Zenoh mode: peer, client or router.")]
-ConfigFile = Annotated[Path | None, typer.Option("--config", metavar="FILE",
-                                                 help="Zenoh JSON5 config file (default: $ZENOH_CONFIG).")]
-NoMulticast = Annotated[bool, typer.Option("--no-multicast", help="Turn multicast scouting off.")]
-Fleet = Annotated[str, typer.Option(help="Fleet name.")]
-Vehicle = Annotated[str, typer.Option(help="This vehicle's name.")]
+#: Topics a command can name (protocol.Topic's values; kept here so that --help does not import the protocol).
+TOPICS = ("image", "features", "hint", "attitude", "pose", "stats")
+#: What ``publish --payload`` can send.
+PAYLOADS = ("valid", "garbage", "oversized", "truncated")
 
 
-def _options(mode, connect, listen, config, no_multicast) -> SessionOptions:
-    return SessionOptions(mode=mode, connect=tuple(connect or ()), listen=tuple(listen or ()), config_file=config,
-                          multicast=not no_multicast)
+def _topics(text: str) -> tuple:
+    from protocol import Topic
 
-
-def _topics(text: str) -> tuple[Topic, ...]:
     try:
         return tuple(Topic(name.strip()) for name in text.split(",") if name.strip())
     except ValueError:
         raise FleetError(f"--topics must be names from {', '.join(t.value for t in Topic)}, got {text!r}") from None
+
+
+def human_rate(bytes_per_s: float) -> str:
+    """``123 B/s``, ``12.3 KB/s`` or ``1.23 MB/s`` (powers of 1000, like ``ros2 topic bw``)."""
+    for unit, scale in (("MB/s", 1e6), ("KB/s", 1e3)):
+        if bytes_per_s >= scale:
+            return f"{bytes_per_s / scale:.3g} {unit}"
+    return f"{bytes_per_s:.0f} B/s"
+
+
+def human_size(size: float) -> str:
+    for unit, scale in (("MB", 1e6), ("KB", 1e3)):
+        if size >= scale:
+            return f"{size / scale:.3g} {unit}"
+    return f"{size:.0f} B"
+
+
+def format_period(seconds: float | None) -> str:
+    return "-" if seconds is None or math.isnan(seconds) else f"{seconds * 1e3:.2f} ms"
 
 
 def meter_table(records: list[dict]) -> Table:
@@ -82,7 +90,9 @@ def register(app: typer.Typer) -> None:
                        no_multicast: NoMulticast = False,
                        as_json: Annotated[bool, typer.Option("--json", help="Print JSON lines.")] = False) -> None:
         """Run a Zenoh router (a Python session in router mode) until SIGINT/SIGTERM."""
-        options = _options("router", connect, listen or ["tcp/0.0.0.0:7447"], config, no_multicast)
+        options = session_options("router", connect, listen or ["tcp/0.0.0.0:7447"], config, no_multicast)
+        from agents.tools.runners import run_router
+
         console = Console(stderr=True)
 
         def ready(info: dict) -> None:
@@ -105,6 +115,8 @@ def register(app: typer.Typer) -> None:
                       as_json: Annotated[bool, typer.Option("--json", help="One JSON object per key per second.")]
                       = False) -> None:
         """Print per key, once a second, the rate, period statistics, bandwidth and message sizes."""
+        from agents.tools.runners import run_meter
+
         console = Console(width=None if sys.stdout.isatty() else 160)
 
         def emit(records: list[dict]) -> None:
@@ -115,7 +127,7 @@ def register(app: typer.Typer) -> None:
                 console.print(meter_table(records))
 
         with stop_on_signals() as stop:
-            summary = run_meter(_options(mode, connect, listen, config, no_multicast), stop, emit, fleet=fleet,
+            summary = run_meter(session_options(mode, connect, listen, config, no_multicast), stop, emit, fleet=fleet,
                                 window=window, duration=duration)
         if as_json:
             emit_json({"type": "summary", **summary})
@@ -126,7 +138,7 @@ def register(app: typer.Typer) -> None:
 
     @app.command("publish")
     def publish_command(fleet: Fleet, vehicle: Vehicle,
-                        topic: Annotated[Topic, typer.Option(help="What to send.")] = Topic.HINT,
+                        topic: Annotated[str, typer.Option(help=f"What to send: {', '.join(TOPICS)}.")] = "hint",
                         rate: Annotated[float, typer.Option(min=0, help="Messages per second (0: flat out).")] = 10.0,
                         count: Annotated[int | None, typer.Option(min=0, help="Stop after N messages.")] = None,
                         duration: Annotated[float | None, typer.Option(min=0, help="Stop after S seconds.")] = None,
@@ -143,9 +155,15 @@ def register(app: typer.Typer) -> None:
         """Send well-formed (or deliberately bad) messages of one topic at a rate: a test and demo tool."""
         if payload not in PAYLOADS:
             raise FleetError(f"--payload must be one of {', '.join(PAYLOADS)}, got {payload!r}")
-        spec = PublishSpec(topic, rate, count, duration, payload, points, width, height, seed)
+        from protocol import Topic
+
+        from agents.tools.runners import PublishSpec, run_publisher
+
+        if topic not in TOPICS:
+            raise FleetError(f"--topic must be one of {', '.join(TOPICS)}, got {topic!r}")
+        spec = PublishSpec(Topic(topic), rate, count, duration, payload, points, width, height, seed)
         with stop_on_signals() as stop:
-            emit_json(run_publisher(_options(mode, connect, listen, config, no_multicast), stop, fleet, vehicle,
+            emit_json(run_publisher(session_options(mode, connect, listen, config, no_multicast), stop, fleet, vehicle,
                                     spec, wait_s=wait, stay=stay))
 
     @app.command("listen")
@@ -157,6 +175,8 @@ def register(app: typer.Typer) -> None:
                        connect: Connect = None, listen: Listen = None, mode: Mode = None, config: ConfigFile = None,
                        no_multicast: NoMulticast = False) -> None:
         """Join the fleet as a receiving vehicle; print join/leave events and, at the end, the counters (JSON)."""
+        from agents.tools.runners import run_listener
+
         with stop_on_signals() as stop:
-            emit_json(run_listener(_options(mode, connect, listen, config, no_multicast), stop, fleet, vehicle,
-                                   _topics(topics), duration=duration, max_age_s=max_age))
+            emit_json(run_listener(session_options(mode, connect, listen, config, no_multicast), stop, fleet, vehicle,
+                                   _topics(topics), duration=duration, max_age_s=max_age, emit=emit_json))

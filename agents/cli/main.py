@@ -16,14 +16,13 @@ import typer
 from rich.console import Console
 from rich.table import Table
 
-from evopose.fitness import FitnessKind
-from protocol import ProtocolError
-from scenarios.errors import WorldError
+from agents.cli import agent as agent_commands
+from agents.cli import fleet as fleet_commands
+from agents.cli import scenario as scenario_commands
+from agents.cli import world as world_commands
 
-from . import cli_agent, cli_fleet, cli_scenario, cli_world
-from .fleet_errors import FleetError
-from .problem_file import ProblemFileError
-from .services import solve_file, solve_image
+#: The fitness kinds of evopose.fitness.FitnessKind: robust (truncated, scale-aware) or the paper's eq. (1).
+FITNESS_KINDS = ("robust", "paper")
 
 #: Exit code of a malformed input or a bad command-line argument.
 USAGE_ERROR = 2
@@ -36,11 +35,11 @@ def evopose() -> None:
     """EvoPose Fleet: cooperative 6-DOF pose estimation by evolutionary search."""
 
 
-cli_fleet.register(app)
-cli_agent.register(app)
-cli_scenario.register(app)
-cli_scenario.register_report(app)
-cli_world.register(app)
+fleet_commands.register(app)
+agent_commands.register(app)
+scenario_commands.register(app)
+scenario_commands.register_report(app)
+world_commands.register(app)
 
 
 @app.command("solve")
@@ -50,7 +49,7 @@ def solve_command(
     as_json: Annotated[bool, typer.Option("--json", help="Print one JSON object instead of a table.")] = False,
     seed: Annotated[int | None, typer.Option(min=0, help="Random seed; overrides the file's seed.")] = None,
     time_budget: Annotated[float | None, typer.Option(min=0, help="Wall-time budget in seconds.")] = None,
-    fitness: Annotated[FitnessKind | None, typer.Option(help="Fitness: robust or the paper's eq. (1).")] = None,
+    fitness: Annotated[str | None, typer.Option(help="Fitness: robust or the paper's eq. (1) (paper).")] = None,
     image: Annotated[Path | None, typer.Option(help="Solve from this image instead of a problem file "
                                                     "(needs --model and --camera).")] = None,
     model: Annotated[str | None, typer.Option(help="Target-model file (or shipped name) for --image.")] = None,
@@ -60,6 +59,10 @@ def solve_command(
                                                       "the model projected at the estimate.")] = None,
 ) -> None:
     """Find the pose of the model in the views of PROBLEM (or in one --image)."""
+    from agents.problem.solve import solve_file, solve_image
+
+    if fitness is not None and fitness not in FITNESS_KINDS:
+        raise typer.BadParameter(f"must be one of {', '.join(FITNESS_KINDS)}, got {fitness!r}", param_hint="--fitness")
     if image is not None:
         if problem is not None or model is None or camera is None:
             raise typer.BadParameter("--image needs --model and --camera, and no PROBLEM", param_hint="--image")
@@ -98,16 +101,35 @@ def _fail(message: str, code: int) -> int:
     return code
 
 
+def _usage_errors() -> tuple[type[BaseException], ...]:
+    """The errors that mean a bad input or argument. Imported only on the error path: the modules that
+    raise them are loaded by then, and ``--help`` stays light."""
+    from protocol.errors import ProtocolError
+    from scenarios.documents import DocumentError
+    from scenarios.errors import WorldError
+
+    from agents.errors import FleetError
+    from agents.problem.problem_file import ProblemFileError
+
+    return ProblemFileError, FleetError, ProtocolError, WorldError, DocumentError
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run the CLI on ``argv`` (default: ``sys.argv[1:]``) and return the exit code."""
     try:
         code = app(args=argv, prog_name="evopose", standalone_mode=False)
-    except (ProblemFileError, FleetError, ProtocolError, WorldError) as err:
-        return _fail(str(err), USAGE_ERROR)
     except typer.TyperException as err:
         return _fail(err.format_message(), err.exit_code)
     except typer.Abort:
         return _fail("aborted", 1)
+    except MemoryError:
+        return _fail("out of memory: the input is too large (see the documented problem-size limits)", USAGE_ERROR)
+    except RecursionError:
+        return _fail("input nested too deeply", USAGE_ERROR)
+    except Exception as err:  # noqa: BLE001 - one line for a usage error, the traceback for a bug
+        if isinstance(err, _usage_errors()):
+            return _fail(str(err), USAGE_ERROR)
+        raise
     return code if isinstance(code, int) else 0
 
 

@@ -12,13 +12,9 @@ import typer
 from rich.console import Console
 from rich.table import Table
 
-from scenarios.fleet import fleet_scenario_names, load_fleet_scenario
-
-from .compose import DEFAULT_IMAGE, compose_yaml
-from .fleet_services import emit_json
-from .results import rows
-from .scenario_runner import DEFAULT_ENDPOINT, run_scenario
-from .shutdown import stop_on_signals
+from agents.cli.options import emit_json
+from agents.cli.signals import stop_on_signals
+from agents.experiments import DEFAULT_ENDPOINT, DEFAULT_IMAGE
 
 scenario_app = typer.Typer(name="scenario", help="Fleet scenarios: list, show, run, compose.", no_args_is_help=True)
 
@@ -48,6 +44,8 @@ def results_table(result_rows: list[dict], title: str) -> Table:
 @scenario_app.command("list")
 def list_command(as_json: Annotated[bool, typer.Option("--json")] = False) -> None:
     """The shipped fleet scenarios."""
+    from scenarios.fleet import fleet_scenario_names, load_fleet_scenario
+
     items = []
     for name in fleet_scenario_names():
         s = load_fleet_scenario(name)
@@ -68,6 +66,8 @@ def list_command(as_json: Annotated[bool, typer.Option("--json")] = False) -> No
 def show_command(name: Annotated[str, typer.Argument(help="Scenario name or file.")],
                  as_json: Annotated[bool, typer.Option("--json")] = False) -> None:
     """One fleet scenario: its world, frames, and each variant's agents."""
+    from scenarios.fleet import load_fleet_scenario
+
     s = load_fleet_scenario(name)
     doc = {"name": s.name, "file": str(s.path), "world": str(s.world_path), "frames": s.frames, "fps": s.fps,
            "router": s.spec.router, "description": s.spec.description, "paper": s.spec.paper,
@@ -98,6 +98,11 @@ def run_command(
     as_json: Annotated[bool, typer.Option("--json", help="One JSON object with every run's summaries.")] = False,
 ) -> None:
     """Start every agent of the scenario as its own process, run, stop them all, print the results."""
+    from scenarios.fleet import load_fleet_scenario
+
+    from agents.experiments.results import rows
+    from agents.experiments.runner import run_scenario
+
     scenario = load_fleet_scenario(name)
     console = Console(stderr=True)
     with stop_on_signals() as stop:
@@ -136,6 +141,10 @@ def compose_command(
     context: Annotated[str, typer.Option(help="Build context relative to the file (.. for compose/).")] = ".",
 ) -> None:
     """A docker-compose file of the scenario: a Zenoh router, and one service per agent joining it."""
+    from scenarios.fleet import load_fleet_scenario
+
+    from agents.experiments.compose import compose_yaml
+
     text = compose_yaml(load_fleet_scenario(name), variant, image=image, context=context)
     if out is None:
         sys.stdout.write(text)
@@ -149,9 +158,6 @@ def register(app: typer.Typer) -> None:
 
 def register_report(app: typer.Typer) -> None:
     """Add ``evopose report`` to ``app``."""
-    from pathlib import Path
-
-    from .report import write_report
 
     @app.command("report")
     def report_command(
@@ -163,6 +169,8 @@ def register_report(app: typer.Typer) -> None:
         = DEFAULT_ENDPOINT,
     ) -> None:
         """Run the paper's experiments and write report.md: Tables I and II, bandwidth, Fig. 6, findings."""
+        from agents.experiments.report import write_report
+
         console = Console(stderr=True)
         with stop_on_signals() as stop:
             path = write_report(out, runs=runs, frames=frames, seed=seed, endpoint=listen, stop=stop,

@@ -1,8 +1,8 @@
 """World commands of the ``evopose`` CLI: ``render`` (what a vehicle sees) and ``features`` (image -> points).
 
-Registered on :data:`agents.cli.app`; thin commands that call one service function each
-(:mod:`agents.world_services`). Input problems raise :class:`scenarios.errors.WorldError`, which
-``agents.cli.main`` turns into one ``error: ...`` line and exit code 2.
+Registered on :data:`agents.cli.main.app`; thin commands that call one service function each
+(:mod:`agents.tools.world`). Input problems raise :class:`scenarios.errors.WorldError`, which
+``agents.cli.main.main`` turns into one ``error: ...`` line and exit code 2.
 """
 
 from __future__ import annotations
@@ -13,8 +13,6 @@ from typing import Annotated
 
 import typer
 from rich.console import Console
-
-from .world_services import image_features, render_to_files
 
 
 def render_command(
@@ -29,6 +27,8 @@ def render_command(
     as_json: Annotated[bool, typer.Option("--json", help="Print the ground truth as JSON.")] = False,
 ) -> None:
     """Render what a vehicle's camera sees at a frame, with its ground truth (target pose, visible marks)."""
+    from agents.tools.world import render_to_files
+
     result = render_to_files(scenario, frame, out, vehicle=vehicle, truth_path=truth, clean=clean)
     if as_json:
         print(json.dumps(result))
@@ -46,6 +46,8 @@ def features_command(
     as_json: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
 ) -> None:
     """Extract the feature points of an image (colour marks, or corners)."""
+    from agents.tools.world import image_features
+
     result = image_features(image, model=model, corners=corners)
     if as_json:
         print(json.dumps(result))

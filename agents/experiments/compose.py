@@ -21,12 +21,13 @@ from scenarios.errors import ScenarioError
 from scenarios.fleet import FleetScenario
 from scenarios.world import SCENARIOS_DIR
 
+from agents.experiments import DEFAULT_IMAGE
+
 #: The directory holding the ``scenarios`` package: the repository root in a checkout (the build context).
 REPO_ROOT = SCENARIOS_DIR.parent
 #: The router's port, inside the compose network and on the host's loopback.
 ROUTER_PORT = 7447
 ROUTER_SERVICE = "router"
-DEFAULT_IMAGE = "evopose-fleet"
 
 _SERVICE_NAME = re.compile(r"^[a-z0-9][a-z0-9_.-]*$")
 #: Is the router's port open yet? Zenoh clients fail at once when it is not, so the agents wait for this.

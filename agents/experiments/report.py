@@ -17,8 +17,9 @@ from pathlib import Path
 
 from scenarios.fleet import load_fleet_scenario
 
-from .results import agreement, rows
-from .scenario_runner import DEFAULT_ENDPOINT, run_scenario
+from agents.experiments.results import agreement, rows
+from agents.experiments import DEFAULT_ENDPOINT
+from agents.experiments.runner import run_scenario
 
 SCENARIOS = ("exp1-airship", "exp2-solo", "exp2a-features", "exp2b-hints", "exp2-raw")
 

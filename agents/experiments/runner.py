@@ -25,10 +25,10 @@ from dataclasses import dataclass, field
 
 from scenarios.fleet import FleetScenario, VariantSpec
 
-from .fleet_errors import FleetError
+from agents.errors import FleetError
+from agents.experiments import DEFAULT_ENDPOINT
 
 #: Where a scenario's fleet can be reached from outside by default.
-DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"
 #: Frame 0 of a run is this far in the future when the agents are started (imports, warm-up).
 START_MARGIN_S = 6.0
 #: Seconds an agent gets to stop after SIGTERM before it is killed.

@@ -1,24 +1,22 @@
-"""Service functions of the world commands (``render``, ``features``) and of solving from images.
+"""Images for the pose-problem contract: reading and writing image files, finding the marks in them,
+a search box from one camera, and an overlay of a solution.
 
-Each returns plain data; input problems raise :class:`scenarios.errors.WorldError` subclasses whose
-one-line message the CLI prints as ``error: ...`` with exit code 2.
+Input problems raise :class:`scenarios.errors.WorldError` subclasses whose one-line message the CLI
+prints as ``error: ...`` with exit code 2. Nothing here renders: the simulator is not imported.
 """
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import cv2
 import numpy as np
 
 from evopose import Bounds, Camera, Model
-from evopose.features import MarkDetections, colour_ranges, detect_colour_marks, detect_corners
+from evopose.features import MarkDetections, colour_ranges, detect_colour_marks
 from evopose.pose import matrix_from_pose
 from scenarios.errors import ImageError, WorldError
-from scenarios.render import render_frame
 from scenarios.target import MODELS_DIR, TargetModel, load_model
-from scenarios.world import load_scenario
 
 #: Colours searched when no model is given: the union of the shipped models' palettes.
 SHIPPED_MODELS = ("pioneer", "airship")
@@ -60,49 +58,9 @@ def write_image(path: str | Path, image: np.ndarray) -> Path:
     return path
 
 
-def render_to_files(scenario: str | Path, frame: int, out: str | Path, *, vehicle: str | None = None,
-                    truth_path: str | Path | None = None, clean: bool = False) -> dict:
-    """Render ``frame`` of ``scenario`` as seen by ``vehicle``; write the PNG and its ground truth JSON.
-
-    The truth goes to ``truth_path`` or beside the image (``frame.png`` -> ``frame.json``).
-    Returns the truth mapping, with ``image`` and ``truth`` paths added.
-    """
-    world = load_scenario(scenario)
-    rendered = render_frame(world, frame, vehicle, clean=clean)
-    image_path = write_image(out, rendered.image)
-    truth_path = Path(truth_path) if truth_path is not None else image_path.with_suffix(".json")
-    truth = rendered.truth.to_dict()
-    k = rendered.camera
-    truth["camera"] = {"fx": k.fx, "fy": k.fy, "cx": k.cx, "cy": k.cy, "width": k.width, "height": k.height,
-                       "distortion": k.distortion.tolist(), "world_from_camera": truth["camera_pose"]}
-    truth["model"] = world.model.name
-    try:
-        truth_path.write_text(json.dumps(truth, indent=1), encoding="utf-8")
-    except OSError as err:
-        raise ImageError(f"{truth_path}: cannot write: {err.strerror or err}") from None
-    return {**truth, "image": str(image_path), "truth": str(truth_path)}
-
-
 def detect_marks(image: np.ndarray, palette: dict | None = None) -> MarkDetections:
     """Colour marks of ``palette`` (default: every shipped model's colours) in a BGR image."""
     return detect_colour_marks(image, colour_ranges(palette or default_palette()))
-
-
-def image_features(image_path: str | Path, *, model: str | Path | None = None, corners: bool = False,
-                   max_corners: int = 200) -> dict:
-    """The feature points of an image file: colour marks (of ``model``'s palette) or corners.
-
-    Returns ``{"image", "width", "height", "method", "count", "points": [[u, v], ...], "colours": [...]}``.
-    """
-    image = read_image(image_path)
-    out: dict = {"image": str(image_path), "width": int(image.shape[1]), "height": int(image.shape[0])}
-    if corners:
-        pts = detect_corners(image, max_corners=max_corners)
-        return {**out, "method": "corners", "count": len(pts), "points": pts.tolist()}
-    palette = load_model(model).palette if model is not None else None
-    det = detect_marks(image, palette)
-    return {**out, "method": "colour-marks", "count": len(det), "points": det.points.tolist(),
-            "colours": det.colours()}
 
 
 def frustum_bounds(camera: Camera, model: Model, points: np.ndarray) -> Bounds:
@@ -156,5 +114,5 @@ def draw_overlay(image: np.ndarray | None, camera: Camera, model: Model, pose: n
     return canvas
 
 
-__all__ = ["WorldError", "default_palette", "detect_marks", "draw_overlay", "frustum_bounds", "image_features",
-           "read_image", "render_to_files", "write_image"]
+__all__ = ["WorldError", "default_palette", "detect_marks", "draw_overlay", "frustum_bounds", "read_image",
+           "write_image"]

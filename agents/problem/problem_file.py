@@ -23,9 +23,9 @@ from evopose.pose import PARAM_NAMES, pose_from_matrix, quaternion_from_euler
 
 from scenarios.errors import WorldError
 from scenarios.target import TargetModel, load_model, resolve_model_path
+from scenarios.documents import UnknownKey, describe, read_mapping, validation_message
 
-from .documents import DocumentError, UnknownKey, describe, read_mapping, validation_message
-from .world_services import detect_marks, read_image
+from agents.problem.images import detect_marks, read_image
 
 #: Range searched for an angle the file does not mention: a full turn.
 FULL_TURN = (-math.pi, math.pi)
@@ -332,11 +332,7 @@ def parse_problem(document: dict, base: str | Path | None = None) -> tuple[PoseP
 
 def read_problem(path: str | Path) -> ProblemInputs:
     """Read a YAML or JSON pose-problem file with its images; see :func:`parse_inputs`."""
-    try:
-        document = read_mapping(path)
-    except DocumentError as err:
-        raise ProblemFileError(str(err)) from None
-    return parse_inputs(document, Path(path).parent)
+    return parse_inputs(read_mapping(path, ProblemFileError), Path(path).parent)
 
 
 def load_problem(path: str | Path) -> tuple[PoseProblem, SearchOptions, int | None]:

@@ -10,7 +10,7 @@ import numpy as np
 from evopose import PoseProblem, SearchOptions, View, solve
 from evopose.fitness import FitnessKind
 
-from .problem_file import CameraSpec, ProblemFileError, ProblemInputs, read_problem, solution_to_dict
+from agents.problem.problem_file import CameraSpec, ProblemFileError, ProblemInputs, read_problem, solution_to_dict
 
 
 def solve_file(path: str | Path, *, seed: int | None = None, time_budget: float | None = None,
@@ -40,17 +40,11 @@ def solve_image(image: str | Path, model: str | Path, camera: str | Path, *, see
     from scenarios.errors import WorldError
     from scenarios.target import load_model
 
-    from .documents import DocumentError, read_mapping
-    from .documents import validation_message
-    from .world_services import detect_marks, frustum_bounds, read_image
-    from pydantic import ValidationError
+    from scenarios.documents import read_mapping, validate
 
-    try:
-        spec = CameraSpec.model_validate(read_mapping(camera))
-    except DocumentError as err:
-        raise ProblemFileError(str(err)) from None
-    except ValidationError as err:
-        raise ProblemFileError(f"{camera}: {validation_message(err)}") from None
+    from agents.problem.images import detect_marks, frustum_bounds, read_image
+
+    spec = validate(CameraSpec, read_mapping(camera, ProblemFileError), camera, ProblemFileError)
     cam = spec.to_camera()
     target = load_model(model)
     picture = read_image(image)
@@ -73,7 +67,7 @@ def _solve_inputs(inputs: ProblemInputs, seed, time_budget, fitness, overlay) ->
     solution = solve(inputs.problem, options, seed=inputs.seed if seed is None else seed)
     result = solution_to_dict(solution)
     if overlay is not None:
-        from .world_services import draw_overlay, write_image
+        from agents.problem.images import draw_overlay, write_image
 
         view = inputs.problem.views[0]
         canvas = draw_overlay(inputs.images[0], view.camera, inputs.problem.model, np.asarray(solution.pose),

@@ -8,7 +8,6 @@ size x rate) and mean/min/max payload size; at the end, totals and the agents' o
 
 from __future__ import annotations
 
-import math
 import statistics
 import threading
 import time
@@ -107,22 +106,3 @@ class Meter:
     def close(self) -> None:
         self._subscriber.undeclare()
         self._collect_stats()
-
-
-def human_rate(bytes_per_s: float) -> str:
-    """``123 B/s``, ``12.3 KB/s`` or ``1.23 MB/s`` (powers of 1000, like ``ros2 topic bw``)."""
-    for unit, scale in (("MB/s", 1e6), ("KB/s", 1e3)):
-        if bytes_per_s >= scale:
-            return f"{bytes_per_s / scale:.3g} {unit}"
-    return f"{bytes_per_s:.0f} B/s"
-
-
-def human_size(size: float) -> str:
-    for unit, scale in (("MB", 1e6), ("KB", 1e3)):
-        if size >= scale:
-            return f"{size / scale:.3g} {unit}"
-    return f"{size:.0f} B"
-
-
-def format_period(seconds: float | None) -> str:
-    return "-" if seconds is None or math.isnan(seconds) else f"{seconds * 1e3:.2f} ms"

@@ -1,13 +1,11 @@
 """Service functions behind the fleet commands (router, meter, publish, listen); each returns plain data.
 
 Each opens the process's single Zenoh session, runs until ``stop`` is set (SIGINT/SIGTERM, see
-:mod:`agents.shutdown`) or its duration/count is reached, and always closes what it declared.
+:mod:`agents.cli.signals`) or its duration/count is reached, and always closes what it declared.
 """
 
 from __future__ import annotations
 
-import json
-import sys
 import threading
 import time
 from collections.abc import Callable
@@ -18,17 +16,10 @@ import numpy as np
 from protocol import (SIZE_LIMITS, Attitude, CameraInfo, FeatureSet, Hint, ImageFrame, Payload, PoseEstimate,
                       Topic, check_name, encode)
 
-from .bus import FleetBus
-from .meter import Meter
-from .zenoh_config import SessionOptions, open_session
+from agents.transport.bus import FleetBus
+from agents.tools.meter import Meter
+from agents.transport.session import SessionOptions, open_session
 
-PAYLOADS = ("valid", "garbage", "oversized", "truncated")
-
-
-def emit_json(record: dict) -> None:
-    """Print one JSON object on its own line, flushed (for pipes and tests)."""
-    sys.stdout.write(json.dumps(record) + "\n")
-    sys.stdout.flush()
 
 
 # -- router ------------------------------------------------------------------------------------
@@ -91,7 +82,7 @@ class PublishSpec:
     rate_hz: float = 10.0
     count: int | None = None
     duration: float | None = None
-    payload: str = "valid"  #: one of PAYLOADS
+    payload: str = "valid"  #: valid, garbage, oversized or truncated
     points: int = 30
     width: int = 640
     height: int = 480
@@ -166,7 +157,7 @@ def run_publisher(options: SessionOptions, stop: threading.Event, fleet: str, ve
 
 def run_listener(options: SessionOptions, stop: threading.Event, fleet: str, vehicle: str,
                  topics: tuple[Topic, ...], *, duration: float | None = None, max_age_s: float | None = 1.0,
-                 emit: Callable[[dict], None] = emit_json) -> dict:
+                 emit: Callable[[dict], None]) -> dict:
     """Receive ``topics`` from the team-mates as ``vehicle``, emitting join/leave events; returns the counters."""
     started = time.monotonic()
     with FleetBus.open(options, fleet, vehicle, max_age_s=max_age_s, stats_period_s=1.0,

@@ -43,8 +43,8 @@ from protocol import (QOS, SIZE_LIMITS, Message, Payload, ProtocolError, Stats, 
                       alive_selector, check_name, check_topic, decode_sample, encode, encode_hint,
                       parse_alive_key, topic_key, topic_selector)
 
-from .traffic import RateLimitedLog, TrafficCounters
-from .zenoh_config import SessionOptions, open_session
+from agents.transport.traffic import RateLimitedLog, TrafficCounters
+from agents.transport.session import SessionOptions, open_session
 
 log = logging.getLogger("evopose.bus")
 

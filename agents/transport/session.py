@@ -16,7 +16,7 @@ from pathlib import Path
 
 import zenoh
 
-from .fleet_errors import BusConfigError
+from agents.errors import BusConfigError
 
 MODES = ("peer", "client", "router")
 _ENDPOINT = re.compile(r"[a-z][a-z0-9\-]*/\S+")

@@ -1,0 +1,1 @@
+"""Fleet and world tools: router, meter, publish and listen (:mod:`.runners`, :mod:`.meter`); render and features."""

@@ -1,0 +1,66 @@
+"""What ``evopose agent`` runs: the vehicle's configuration and the names of roles and share modes.
+
+Light on purpose (no numpy, no Zenoh): the CLI imports it to build its options.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+from agents.errors import FleetError
+
+ROLES = ("uav", "ground-station", "airship", "target")
+SHARES = ("none", "raw", "features", "hint")
+ENCODINGS = ("raw", "jpeg", "png")
+CAMERA_ROLES = ("uav", "ground-station")
+#: Share modes in which a vehicle keeps improving its own estimate between frames (generations on the last
+#: views). Not with raw images or features: there every vehicle must compute the same pose from the same data.
+IDLE_GENERATIONS = ("none", "hint")
+#: IMU random stream of the scenario's target (as in scenarios.render's ground truth).
+TARGET_IMU_STREAM = 1000
+
+
+@dataclass(frozen=True)
+class AgentConfig:
+    """What ``evopose agent`` runs; see the CLI's help for each field."""
+
+    fleet: str
+    vehicle: str
+    scenario: str | Path
+    role: str | None = None
+    share: str = "none"
+    frames: int | None = None
+    fps: float | None = None
+    epoch_ns: int = 0
+    seed: int = 0
+    world_seed: int | None = None
+    max_age_s: float = 1.0
+    sync_wait_s: float | None = None
+    hint_rate_hz: float = 200.0
+    image_encoding: str = "raw"
+    use_attitude: bool = True
+    attitude_sigmas: float = 1.0
+    wait_for: tuple[str, ...] = ()
+    wait_timeout_s: float = 10.0
+    time_budget_s: float | None = None
+
+    def check(self) -> None:
+        """Raise :class:`FleetError` naming the first bad field."""
+        from protocol.keys import check_name
+
+        check_name(self.fleet, "fleet"), check_name(self.vehicle, "vehicle")
+        for name in self.wait_for:
+            check_name(name, "--wait-for vehicle")
+        if self.role is not None and self.role not in ROLES:
+            raise FleetError(f"--role must be one of {', '.join(ROLES)}, got {self.role!r}")
+        if self.share not in SHARES:
+            raise FleetError(f"--share must be one of {', '.join(SHARES)}, got {self.share!r}")
+        if self.image_encoding not in ENCODINGS:
+            raise FleetError(f"--image-encoding must be one of {', '.join(ENCODINGS)}, got {self.image_encoding!r}")
+        for name, option in (("fps", "--fps"), ("hint_rate_hz", "--hint-rate"), ("max_age_s", "--max-age"),
+                             ("attitude_sigmas", "--imu-sigmas")):
+            value = getattr(self, name)
+            if value is not None and not (math.isfinite(value) and value > 0):
+                raise FleetError(f"{option} must be a number > 0, got {value}")
