@@ -4,7 +4,7 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test bench examples install clean lock compose
+.PHONY: demo test bench bench-footprint examples install clean lock compose
 
 $(STAMP): pyproject.toml constraints.txt
 	$(PYTHON) -m venv $(VENV)
@@ -28,6 +28,13 @@ examples: $(STAMP)
 bench: $(STAMP)
 	NUMBA_NUM_THREADS=1 $(PY) -m benchmarks.run_solvers
 	NUMBA_NUM_THREADS=1 $(PY) -m benchmarks.bench_kernels
+	$(PY) -m benchmarks.bench_features
+	$(PY) -m benchmarks.bench_fleet
+	$(PY) -m benchmarks.report
+
+# Three agent pairs for 10 minutes each (30 min): memory and CPU over time.
+bench-footprint: $(STAMP)
+	$(PY) -m benchmarks.bench_footprint --minutes 10
 	$(PY) -m benchmarks.report
 
 # Re-pin every dependency to what is installed in the venv now.

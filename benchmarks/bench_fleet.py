@@ -12,8 +12,6 @@ pose and the mean position error. Writes ``benchmarks/results/fleet.md``.
 from __future__ import annotations
 
 import argparse
-import os
-import platform
 import socket
 import statistics
 import threading
@@ -22,6 +20,8 @@ from pathlib import Path
 
 from agents.experiments.runner import run_scenario
 from scenarios.fleet import load_fleet_scenario
+
+from .report import provenance
 
 
 
@@ -78,14 +78,13 @@ def main() -> None:
     parser.add_argument("--runs", type=int, default=3)
     parser.add_argument("--seconds", type=float, default=10.0, help="Length of each run (camera time).")
     args = parser.parse_args()
-    started = time.time()
     rows = []
     for name, fps in CONFIGS:
         rows += measure(name, fps, args.runs, args.seconds)
         print(f"{name} at {fps:g} fps done", flush=True)
     lines = ["## Fleet throughput (Experiment 2, real processes over Zenoh on loopback)", "",
              f"`.venv/bin/python -m benchmarks.bench_fleet --runs {args.runs} --seconds {args.seconds:g}` "
-             f"({time.strftime('%Y-%m-%d', time.gmtime(started))}, {platform.machine()}, {os.cpu_count()} cores shared "
+             f"({provenance()}; the cores are shared "
              "by the three agent processes of each run and whatever else the machine ran). Mean over runs; "
              "latency: a team-mate's data from its acquisition stamp to arrival (includes the sender's rendering, "
              "~16 ms, and extraction).", "",

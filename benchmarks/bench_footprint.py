@@ -42,7 +42,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .report import md_table, write_section
+from .report import code_version, md_table, write_section
 
 ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_OUT = Path(__file__).resolve().parent / "results" / "footprint.md"
@@ -127,18 +127,6 @@ def free_port() -> int:
     with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
         s.bind(("127.0.0.1", 0))
         return s.getsockname()[1]
-
-
-def code_version() -> str:
-    """The commit the agents run, and whether their code has uncommitted changes (others edit it meanwhile)."""
-    def git(*args: str) -> str:
-        try:
-            return subprocess.run(["git", *args], cwd=ROOT, capture_output=True, text=True, timeout=30).stdout.strip()
-        except (OSError, subprocess.SubprocessError):
-            return ""
-    commit = git("rev-parse", "--short", "HEAD") or "unknown commit"
-    dirty = git("status", "--porcelain", "--", "agents", "evopose", "scenarios", "protocol")
-    return f"{commit} + uncommitted changes" if dirty else commit
 
 
 def start_pair(config: Config, logs: Path) -> list[Agent]:

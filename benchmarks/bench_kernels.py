@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import platform
 import sys
 import time
 from pathlib import Path
@@ -24,7 +23,7 @@ from evopose import solve, track
 from evopose.kernels import chamfer_sums
 
 from .problems import KINDS, is_success, make_problem, observe, pose_errors
-from .report import md_table, write_section
+from .report import md_table, provenance, write_section
 
 #: Motion between frames: standard deviation per axis as a fraction of the target's size, and per angle (deg).
 #: A robot at 1 m/s filmed at 30 frames/s moves 3 cm a frame: 7 % of the Pioneer's 44 cm.
@@ -109,8 +108,8 @@ def main(argv: list[str] | None = None) -> int:
     thr = throughput(np.random.default_rng(args.seed))
     trk, steps = tracking(args.frames, args.sequences, args.seed)
     body = [f"Command: `NUMBA_NUM_THREADS=1 python -m benchmarks.bench_kernels --frames {args.frames} "
-            f"--sequences {args.sequences} --seed {args.seed}` ({platform.machine()}, Python "
-            f"{platform.python_version()}, NUMBA_NUM_THREADS={threads}; the kernels are serial either way).", "",
+            f"--sequences {args.sequences} --seed {args.seed}` ({provenance()}, "
+            f"NUMBA_NUM_THREADS={threads}; the kernels are serial either way).", "",
             "### Fitness throughput (one core)", "",
             "Point-pair distances per second, millions: population N x model points M x image points P, "
             "both matching directions of the robust eq. (1) in one pass (`evopose.kernels.chamfer_sums`) against "

@@ -7,7 +7,11 @@ Sections keep the command that produced them, so a reader can re-run any one of 
 
 from __future__ import annotations
 
+import os
+import platform
+import subprocess
 import sys
+import time
 from pathlib import Path
 
 RESULTS = Path(__file__).resolve().parent / "results"
@@ -19,8 +23,28 @@ INTRO = """# Benchmarks
 
 Measured on this project's 2-core development machine, which is shared and noisy: compare solvers
 by the ratios measured side by side in one run, not by absolute times across sections.
-`make bench` re-runs every section and re-assembles this file (`python -m benchmarks.report`).
+`make bench` re-runs every section but the agent footprint (`make bench-footprint`, 30 min) and re-assembles
+this file (`python -m benchmarks.report`). Every section names the command, the commit and the date that
+produced it.
 """
+
+
+def code_version() -> str:
+    """The commit the benchmark runs, and whether the code has uncommitted changes."""
+    def git(*args: str) -> str:
+        try:
+            return subprocess.run(["git", *args], cwd=ROOT, capture_output=True, text=True, timeout=30).stdout.strip()
+        except (OSError, subprocess.SubprocessError):
+            return ""
+    commit = git("rev-parse", "--short", "HEAD") or "unknown commit"
+    dirty = git("status", "--porcelain", "--", "agents", "evopose", "scenarios", "protocol", "benchmarks")
+    return f"{commit} + uncommitted changes" if dirty else commit
+
+
+def provenance() -> str:
+    """Where a section's numbers come from: commit, date, machine, Python, cores."""
+    return (f"code at {code_version()}, {time.strftime('%Y-%m-%d', time.gmtime())}, {platform.machine()}, "
+            f"Python {platform.python_version()}, {os.cpu_count()} cores")
 
 
 def md_table(header: list[str], rows: list[list]) -> list[str]:

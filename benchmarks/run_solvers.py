@@ -12,7 +12,6 @@ Success is the right basin: rotation error < 5 deg and position error < 5 % of t
 from __future__ import annotations
 
 import argparse
-import platform
 import sys
 import time
 from dataclasses import dataclass, field
@@ -24,7 +23,7 @@ from evopose import SearchOptions, solve
 
 from .peers import cma_solve, pnp_oracle
 from .problems import KINDS, SyntheticProblem, is_success, make_problem, pose_errors
-from .report import md_table, write_section
+from .report import md_table, provenance, write_section
 
 #: Problem groups: name -> (kinds, make_problem keyword arguments). Unset difficulty is drawn at random:
 #: distance 5-30 m, noise 0.5-2 px, missing 0-20 %, target 150-350 px wide.
@@ -158,7 +157,7 @@ def paired_ratios(result: Run) -> list[list]:
 def markdown(result: Run, args: argparse.Namespace, seconds: float) -> str:
     lines = [f"Command: `python -m benchmarks.run_solvers --per-group {args.per_group} "
              f"--cma-per-group {args.cma_per_group} --seed {args.seed}` "
-             f"({platform.machine()}, Python {platform.python_version()}, {seconds / 60:.1f} min, one process).",
+             f"({provenance()}; {seconds / 60:.1f} min, one process).",
              "",
              "Success = rotation error < 5° and position error < 5 % of the distance (modulo the grid's half-turn "
              "symmetry). Errors are medians over the problems the solver solves. IPOP-CMA-ES runs on the same robust "
