@@ -133,8 +133,28 @@ def resolve_fleet_path(name_or_path: str | Path) -> Path:
     return shipped
 
 
-def load_fleet_scenario(name_or_path: str | Path) -> FleetScenario:
+def world_names() -> list[str]:
+    """Names of the shipped worlds (``scenarios/*.yaml``), sorted."""
+    return sorted(p.stem for p in SCENARIOS_DIR.glob("*.yaml"))
+
+
+def resolve_world_path(world: str | Path, relative_to: Path | None = None) -> Path:
+    """A world given by shipped name (``exp2-paper-scale``) or by file (relative to ``relative_to``)."""
+    world_path = Path(world)
+    if not world_path.suffix:
+        world_path = SCENARIOS_DIR / f"{world}.yaml"
+        if not world_path.exists():
+            raise ScenarioError(f"no world {str(world)!r}; shipped: {', '.join(world_names())}")
+    elif not world_path.is_absolute() and relative_to is not None:
+        world_path = relative_to / world_path
+    return world_path
+
+
+def load_fleet_scenario(name_or_path: str | Path, world: str | Path | None = None) -> FleetScenario:
     """Read and check a fleet scenario: the schema, its world, and each agent against the world's vehicles.
+
+    ``world`` (a shipped world's name or a file) replaces the scenario's world: the same team on another
+    world with the same vehicle names, for example ``exp2a-features`` on ``exp2-paper-scale``.
 
     Raises
     ------
@@ -143,15 +163,13 @@ def load_fleet_scenario(name_or_path: str | Path) -> FleetScenario:
     """
     path = resolve_fleet_path(name_or_path)
     spec = validate(FleetScenarioSpec, read_mapping(path, ScenarioError), path, ScenarioError)
-    world_path = Path(spec.world)
-    if not world_path.suffix:
-        world_path = SCENARIOS_DIR / f"{spec.world}.yaml"
-    elif not world_path.is_absolute():
-        world_path = path.parent / world_path
+    where = "--world" if world is not None else f"{path}: world"
     try:
+        world_path = resolve_world_path(spec.world if world is None else world,
+                                        path.parent if world is None else None)
         world = load_scenario(world_path)
     except ScenarioError as err:
-        raise ScenarioError(f"{path}: world: {err}") from None
+        raise ScenarioError(f"{where}: {err}") from None
     known = {v.name for v in world.vehicles} | {world.spec.target.name}
     for i, variant in enumerate(spec.variants):
         for j, agent in enumerate(variant.agents):

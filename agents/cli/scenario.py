@@ -93,6 +93,9 @@ def run_command(
     fps: Annotated[float | None, typer.Option(min=0.1, max=1000, help="Camera rate (default: the scenario's).")]
     = None,
     variant: Annotated[list[str] | None, typer.Option(help="Run only this variant (repeatable).")] = None,
+    world: Annotated[str | None, typer.Option(help="Run on this world instead (a shipped name such as "
+                                                   "exp2-paper-scale, or a file) with the same vehicle names.")]
+    = None,
     listen: Annotated[str, typer.Option("--listen", help="Where the fleet can be reached from outside.")]
     = DEFAULT_ENDPOINT,
     as_json: Annotated[bool, typer.Option("--json", help="One JSON object with every run's summaries.")] = False,
@@ -103,7 +106,7 @@ def run_command(
     from agents.experiments.results import rows
     from agents.experiments.runner import run_scenario
 
-    scenario = load_fleet_scenario(name)
+    scenario = load_fleet_scenario(name, world)
     console = Console(stderr=True)
     with stop_on_signals() as stop:
         if as_json:
@@ -126,7 +129,7 @@ def run_command(
     if as_json:
         emit_json({"scenario": scenario.name, "interrupted": stop.is_set(), "rows": result_rows, "runs": records})
         return
-    table = results_table(result_rows, f"{scenario.name}: mean error (σ over runs)")
+    table = results_table(result_rows, f"{scenario.name} on {scenario.world.name}: mean error (σ over runs)")
     Console(width=None if sys.stdout.isatty() else 200).print(table)
     if stop.is_set():
         console.print("interrupted: every agent was stopped")

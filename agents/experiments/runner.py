@@ -162,7 +162,8 @@ def run_variant(scenario: FleetScenario, variant: VariantSpec, run: int, *, fram
         details = "; ".join(f"{p.vehicle} exited {p.popen.returncode}"
                             + (f" ({p.stderr.strip().splitlines()[-1]})" if p.stderr.strip() else "") for p in crashed)
         raise ScenarioRunError(f"run {run} of {scenario.name}/{variant.name}: {details}")
-    return {"scenario": scenario.name, "variant": variant.name, "run": run, "fleet": fleet,
+    return {"scenario": scenario.name, "world": scenario.world.name, "variant": variant.name, "run": run,
+            "fleet": fleet,
             "interrupted": stop.is_set(), "seconds": time.monotonic() - started,
             "agents": {p.vehicle: p.summary for p in procs}}
 
@@ -189,7 +190,8 @@ def run_scenario(scenario: FleetScenario, *, runs: int = 1, frames: int | None =
             except ScenarioRunError as err:
                 if not keep_going:
                     raise
-                record = {"scenario": scenario.name, "variant": variant.name, "run": run, "error": str(err),
+                record = {"scenario": scenario.name, "world": scenario.world.name, "variant": variant.name,
+                          "run": run, "error": str(err),
                           "interrupted": False, "agents": {}}
             results.append(record)
             if on_run is not None:
