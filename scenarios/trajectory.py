@@ -1,9 +1,11 @@
 """Vehicle and target motion: a pose at time ``t`` (seconds) from a start pose, a constant rate and a hover sway.
 
-``pose(t) = start + rate * t + amplitude * sin(2 pi t / period + phase)`` per parameter
+``pose(t) = start + drive(t) + rate * t + amplitude * sin(2 pi t / period + phase)`` per parameter
 ``(x, y, z, roll, pitch, yaw)`` (metres, radians). Zero rate and amplitude is a static pose; a
-rate is a vehicle driving or flying at constant velocity; the sway models a hovering UAV or an
-airship drifting. The motion is deterministic: noise belongs to sensors and images, not to the truth.
+rate is a vehicle moving at constant velocity; the sway models a hovering UAV or an airship drifting.
+``drive`` is a ground vehicle driving forward along its heading at ``speed`` while turning at
+``turn_rate``: an arc of radius ``speed / turn_rate`` (a straight line when it is 0). The motion is
+deterministic: noise belongs to sensors and images, not to the truth.
 """
 
 from __future__ import annotations
@@ -38,14 +40,30 @@ class Trajectory:
     sway: np.ndarray = field(default_factory=lambda: np.zeros(6))
     period: float = 4.0
     phase: np.ndarray = field(default_factory=lambda: np.array([0.0, 1.3, 2.1, 0.4, 2.9, 1.7]))
+    speed: float = 0.0
+    turn_rate: float = 0.0
 
     @property
     def is_static(self) -> bool:
-        return not (np.any(self.rate) or np.any(self.sway))
+        return not (np.any(self.rate) or np.any(self.sway) or self.speed)
+
+    def _drive(self, t: float) -> np.ndarray:
+        """Offset of the drive at ``t``: the arc from the start heading, shape (6,)."""
+        out = np.zeros(6)
+        if not self.speed:
+            return out
+        yaw0, w, v = float(self.start[5]), float(self.turn_rate), float(self.speed)
+        if abs(w) < 1e-9:
+            out[0], out[1] = v * t * np.cos(yaw0), v * t * np.sin(yaw0)
+        else:
+            out[0] = v / w * (np.sin(yaw0 + w * t) - np.sin(yaw0))
+            out[1] = -v / w * (np.cos(yaw0 + w * t) - np.cos(yaw0))
+            out[5] = w * t
+        return out
 
     def pose(self, t: float) -> np.ndarray:
         """``(x, y, z, roll, pitch, yaw)`` at time ``t``, shape (6,); angles wrapped to [-pi, pi)."""
-        s = np.asarray(self.start, float) + np.asarray(self.rate, float) * t
+        s = np.asarray(self.start, float) + self._drive(t) + np.asarray(self.rate, float) * t
         s = s + np.asarray(self.sway, float) * np.sin(2 * np.pi * t / self.period + self.phase)
         s[3:] = wrap_angle(s[3:])
         return s

@@ -21,7 +21,7 @@ vehicles:
     camera:
       intrinsics: {fx: 8000, fy: 8000, cx: 640, cy: 480, width: 1280, height: 960, distortion: [...]}
       mount: {x: 0, y: 0, z: -0.2, roll: -1.5708, pitch: 0, yaw: -1.5708}  # vehicle_from_camera
-      look_at: [0, 0, 0.1]    # optional gimbal: the camera points at this world point
+      look_at: [0, 0, 0.1]    # optional gimbal: the camera points at this world point (or: target)
 render: {noise_sigma: 2, blur_sigma: 0.7, distractors: {count: 4}, occluders: [...]}
 search: {x: [-3, 3], y: [-3, 3], z: [-0.2, 0.5]}   # the operating area, for solving
 ```
@@ -32,7 +32,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Annotated, Literal
+from typing import Any, Annotated, Literal
 
 import numpy as np
 from pydantic import Field, model_validator
@@ -71,14 +71,24 @@ class PoseSpec(Strict):
         return np.array([getattr(self, n) for n in PARAM_NAMES], float)
 
 
+class DriveSpec(Strict):
+    """A ground vehicle driving forward along its heading at ``speed`` (m/s) while turning at ``turn_rate`` (rad/s)."""
+
+    speed: Annotated[float, Field(ge=0, le=50)]
+    turn_rate: Annotated[float, Field(ge=-3, le=3)] = 0.0
+
+
 class TrajectorySpec(Strict):
     start: PoseSpec
     rate: PoseSpec = PoseSpec()
     sway: PoseSpec = PoseSpec()
     period: Annotated[float, Field(gt=0)] = 4.0
+    drive: DriveSpec | None = None
 
     def build(self) -> Trajectory:
-        return Trajectory(self.start.vector(), self.rate.vector(), self.sway.vector(), self.period)
+        speed, turn = (0.0, 0.0) if self.drive is None else (self.drive.speed, self.drive.turn_rate)
+        return Trajectory(self.start.vector(), self.rate.vector(), self.sway.vector(), self.period,
+                          speed=speed, turn_rate=turn)
 
 
 class ImuSpec(Strict):
@@ -123,7 +133,7 @@ class IntrinsicsSpec(Strict):
 class CameraRigSpec(Strict):
     intrinsics: IntrinsicsSpec
     mount: PoseSpec = PoseSpec(**FORWARD_MOUNT)
-    look_at: Vec3 | None = None
+    look_at: Vec3 | Literal["target"] | None = None
 
 
 class TargetSpec(Strict):
@@ -235,12 +245,17 @@ class Vehicle:
     camera: CameraRigSpec
     imu: ImuModel | None
     gps: GpsModel | None
+    #: The target's motion, for a gimbal that follows the target (``look_at: target``).
+    target_trajectory: Trajectory | None = None
 
     def world_from_camera(self, t: float) -> np.ndarray:
         """Camera extrinsic at time ``t``, shape (4, 4): the vehicle pose, the mount, the gimbal."""
         world_from_camera = self.trajectory.matrix(t) @ matrix_from_pose(self.camera.mount.vector())
-        if self.camera.look_at is not None:
-            world_from_camera[:3, :3] = look_at_rotation(world_from_camera[:3, 3], self.camera.look_at)
+        look_at = self.camera.look_at
+        if look_at == "target":
+            look_at = self.target_trajectory.pose(t)[:3]
+        if look_at is not None:
+            world_from_camera[:3, :3] = look_at_rotation(world_from_camera[:3, 3], look_at)
         return world_from_camera
 
     def camera_at(self, t: float) -> Camera:
@@ -324,11 +339,13 @@ def build_scenario(spec: ScenarioSpec, base: Path | None = None, path: Path | No
         model = load_model(resolve_model_path(spec.target.model, base))
     except ModelFileError as err:
         raise ScenarioError(f"{path or spec.name}: target.model: {err}") from None
+    target = spec.target.trajectory.build()
     vehicles = tuple(
         Vehicle(i, v.name, v.role, v.trajectory.build(), v.camera,
-                v.sensors.imu.build() if v.sensors.imu else None, v.sensors.gps.build() if v.sensors.gps else None)
+                v.sensors.imu.build() if v.sensors.imu else None, v.sensors.gps.build() if v.sensors.gps else None,
+                target)
         for i, v in enumerate(spec.vehicles))
-    return Scenario(spec, model, spec.target.trajectory.build(), vehicles, path)
+    return Scenario(spec, model, target, vehicles, path)
 
 
 def resolve_scenario_path(name_or_path: str | Path) -> Path:
@@ -340,8 +357,57 @@ def resolve_scenario_path(name_or_path: str | Path) -> Path:
     return shipped if shipped.exists() else p
 
 
+#: Longest chain of ``extends`` (a world extending a world extending ...).
+MAX_EXTENDS = 4
+
+
+def _merge(base: Any, override: Any) -> Any:
+    """``override`` on top of ``base``: mappings merge key by key, lists of named mappings merge by ``name``
+    (an override item changes the base item of its name, new names are appended), anything else is replaced."""
+    if isinstance(base, dict) and isinstance(override, dict):
+        out = dict(base)
+        for key, value in override.items():
+            out[key] = _merge(base[key], value) if key in base else value
+        return out
+    named = (isinstance(base, list) and isinstance(override, list)
+             and all(isinstance(i, dict) and "name" in i for i in [*base, *override]))
+    if named:
+        out = [dict(i) for i in base]
+        index = {item["name"]: k for k, item in enumerate(out)}
+        for item in override:
+            if item["name"] in index:
+                out[index[item["name"]]] = _merge(out[index[item["name"]]], item)
+            else:
+                out.append(item)
+        return out
+    return override
+
+
+def read_world_document(path: Path, depth: int = 0) -> dict:
+    """A world file's mapping with its ``extends`` resolved: ``extends: exp2`` (a shipped name, or a file relative
+    to this one) takes that world and applies this file's keys on top (see :func:`_merge`)."""
+    document = read_mapping(path, ScenarioError)
+    parent = document.pop("extends", None)
+    if parent is None:
+        return document
+    if not isinstance(parent, str):
+        raise ScenarioError(f"{path}: extends: expected a world name or file, got {type(parent).__name__}")
+    if depth >= MAX_EXTENDS:
+        raise ScenarioError(f"{path}: extends: more than {MAX_EXTENDS} levels (a cycle?)")
+    parent_path = Path(parent)
+    parent_path = (SCENARIOS_DIR / f"{parent}.yaml" if not parent_path.suffix
+                   else parent_path if parent_path.is_absolute() else path.parent / parent_path)
+    if not parent_path.is_file():
+        raise ScenarioError(f"{path}: extends: no world {parent!r}")
+    base = read_world_document(parent_path, depth + 1)
+    model = base.get("target", {}).get("model") if isinstance(base.get("target"), dict) else None
+    if isinstance(model, str) and Path(model).suffix:  # a model file of the base: relative to the base's folder
+        base["target"]["model"] = str((parent_path.parent / model).resolve())
+    return _merge(base, document)
+
+
 def load_scenario(path: str | Path) -> Scenario:
-    """Read and validate a scenario file (or a shipped scenario by name).
+    """Read and validate a scenario file (or a shipped scenario by name); ``extends`` takes another world as a base.
 
     Raises
     ------
@@ -349,6 +415,6 @@ def load_scenario(path: str | Path) -> Scenario:
         One line naming the file and the offending field.
     """
     path = resolve_scenario_path(path)
-    document = read_mapping(path, ScenarioError)
+    document = read_world_document(path)
     spec = validate(ScenarioSpec, document, path, ScenarioError)
     return build_scenario(spec, path.parent, path)
