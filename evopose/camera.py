@@ -3,7 +3,8 @@
 Frames (DESIGN.md §2): the camera uses the OpenCV optical frame (x right, y down,
 z forward); its extrinsic is ``world_from_camera``. A candidate pose is
 ``world_from_target``, so a model point reaches the image through
-``camera_from_target = inv(world_from_camera) @ world_from_target``.
+``camera_from_target = inv(world_from_camera) @ world_from_target``. The pixels come from the one
+compiled projection (:mod:`evopose.projection`), which the fitness and the refinement use too.
 """
 
 from __future__ import annotations
@@ -13,11 +14,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .pose import invert_transform, matrix_from_pose
+from .projection import FAR_AWAY_PX, MIN_DEPTH, project_points, project_poses
 
-#: Points closer than this to the camera plane (metres, along the optical axis) are not projected.
-MIN_DEPTH = 1e-3
-#: Image coordinate given to points that cannot be projected (behind the camera); far from any pixel.
-FAR_AWAY_PX = 1e6
+__all__ = ["Camera", "FAR_AWAY_PX", "MIN_DEPTH"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -64,6 +63,9 @@ class Camera:
         object.__setattr__(self, "distortion", dist)
         object.__setattr__(self, "world_from_camera", w_from_c)
         object.__setattr__(self, "_camera_from_world", invert_transform(w_from_c))
+        intrinsics = np.array([self.fx, self.fy, self.cx, self.cy, *dist], float)
+        intrinsics.flags.writeable = False
+        object.__setattr__(self, "_intrinsics", intrinsics)
 
     @classmethod
     def from_pose(cls, fx: float, fy: float, cx: float, cy: float, width: int = 640, height: int = 480,
@@ -77,6 +79,11 @@ class Camera:
     def camera_from_world(self) -> np.ndarray:
         """Inverse extrinsic, shape (4, 4)."""
         return self._camera_from_world  # type: ignore[attr-defined]
+
+    @property
+    def intrinsics(self) -> np.ndarray:
+        """``(fx, fy, cx, cy, k1, k2, p1, p2, k3)``, shape (9,), read-only: what the compiled projection takes."""
+        return self._intrinsics  # type: ignore[attr-defined]
 
     @property
     def matrix(self) -> np.ndarray:
@@ -118,23 +125,10 @@ class Camera:
             Pixels; points with depth below :data:`MIN_DEPTH` get :data:`FAR_AWAY_PX`.
         in_front : bool array, shape (...)
         """
-        z = p_cam[..., 2]
-        in_front = z > MIN_DEPTH
-        inv_z = 1.0 / np.where(in_front, z, 1.0)
-        x = p_cam[..., 0] * inv_z
-        y = p_cam[..., 1] * inv_z
-        k1, k2, p1, p2, k3 = self.distortion
-        if k1 or k2 or p1 or p2 or k3:
-            r2 = x * x + y * y
-            radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
-            xy = x * y
-            xd = x * radial + 2 * p1 * xy + p2 * (r2 + 2 * x * x)
-            yd = y * radial + p1 * (r2 + 2 * y * y) + 2 * p2 * xy
-            x, y = xd, yd
-        uv = np.empty(p_cam.shape[:-1] + (2,))
-        uv[..., 0] = np.where(in_front, self.fx * x + self.cx, FAR_AWAY_PX)
-        uv[..., 1] = np.where(in_front, self.fy * y + self.cy, FAR_AWAY_PX)
-        return uv, in_front
+        p_cam = np.asarray(p_cam, dtype=float)
+        flat = np.ascontiguousarray(p_cam.reshape(-1, 3))
+        uv, in_front = project_points(flat, self.intrinsics)
+        return uv.reshape(p_cam.shape[:-1] + (2,)), in_front.reshape(p_cam.shape[:-1])
 
     def project_population(self, poses: np.ndarray, points_target: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Project the model under every candidate pose.
@@ -149,7 +143,11 @@ class Camera:
         uv : array, shape (N, M, 2)
         in_front : bool array, shape (N, M)
         """
-        return self.project_camera_points(self.to_camera_frame(poses, points_target))
+        poses = np.ascontiguousarray(np.atleast_2d(np.asarray(poses, dtype=float)))
+        model = np.ascontiguousarray(np.asarray(points_target, dtype=float))
+        u, v, in_front = project_poses(poses, model, np.zeros((1, 3)), False, self.intrinsics,
+                                       np.ascontiguousarray(self.camera_from_world))
+        return np.stack([u, v], axis=-1), in_front
 
     def project_world(self, points_world: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Project world points, shape (K, 3) -> uv (K, 2), in_front (K,)."""

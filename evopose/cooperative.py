@@ -11,8 +11,10 @@ combines whatever the team provides:
 
 The first pose is found by :func:`evopose.solve`; later frames are tracked (eq. 2) from the last pose.
 Between frames :meth:`CooperativeEstimator.generation` runs one small generation on the latest views —
-the best so far, its mutated children and any newly arrived hints, refined and selected — so an agent
-can publish a new best (a hint) many times per camera frame, as in the paper's Experiment 2(b).
+the best so far, its mutated children and any newly arrived hints, refined and selected
+(:class:`evopose.local.LocalSearch` through :func:`evopose.loop.evolve`, the loop :func:`evopose.solve`
+uses) — so an agent can publish a new best (a hint) many times per camera frame, as in the paper's
+Experiment 2(b).
 Pure numpy: no I/O, no Zenoh.
 """
 
@@ -25,11 +27,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from .fitness import PoseObjective
+from .local import LocalSearch
+from .loop import Evaluator, evolve
+from .options import SearchOptions
 from .pose import PARAM_NAMES
 from .problem import Bounds, Model, PoseProblem, View
-from .refine import TRACK_SCHEDULE, refine
-from .search import SearchOptions, Solution
-from .solver import solve, track
+from .refine import TRACK_SCHEDULE
+from .solver import Solution, solve, track
 
 #: Fitness values kept in a solution's history by :meth:`CooperativeEstimator.generation` (bounded memory).
 HISTORY_KEPT = 256
@@ -72,18 +76,19 @@ class Estimate:
     ----------
     solution : Solution
         ``solution.pose`` is ``world_from_target`` ``(x, y, z, roll, pitch, yaw)``, shape (6,).
-    quality : float
-        Match quality in [0, 1], 1 best: one minus the mean normalised view term (robust fitness).
+    mismatch : float
+        :attr:`evopose.fitness.Match.mismatch` of the pose in [0, 1], 0 best: eq. (4) with the weights in
+        force over its value when nothing matches (robust fitness; 1 when it cannot be judged).
     solved : bool
         The pose was searched from scratch (first frame, or tracking was lost).
     good_after_s : float or None
         Seconds into this estimate at which the best individual was first *good* — the paper's "time to
-        a good pose": fitness under a threshold (here the search's confident match quality, or almost
+        a good pose": fitness under a threshold (here the search's confident mismatch, or almost
         every visible mark matched one to one). A search goes on after that to confirm the pose.
     """
 
     solution: Solution
-    quality: float
+    mismatch: float
     solved: bool
     good_after_s: float | None = None
 
@@ -109,23 +114,24 @@ class CooperativeEstimator:
     seed : int
         Seeds every search; frame ``n`` uses ``(seed, n)``, so two vehicles given the same inputs
         compute the same pose.
-    lost_quality : float
-        Tracking is lost (and the pose searched again) when the match quality drops under ``1 - lost_quality``.
+    lost_mismatch : float
+        Tracking is lost (and the pose searched again) when the mismatch exceeds this.
     """
 
     def __init__(self, model: Model, bounds: Bounds, options: SearchOptions | None = None, *, seed: int = 0,
-                 lost_quality: float = 0.5) -> None:
+                 lost_mismatch: float = 0.5) -> None:
         self.model, self.bounds = model, bounds
         self.options = options or SearchOptions()
-        self.seed, self.lost_quality = seed, lost_quality
+        self.seed, self.lost_mismatch = seed, lost_mismatch
         self.last: Solution | None = None
-        self._objective: PoseObjective | None = None
-        self._best_fitness = np.inf  # of ``last`` under ``_objective``
+        #: how the last frame's views evaluate candidates between frames (its objective: the last eq. 4 weights)
+        self._evaluator: Evaluator | None = None
+        self._best_fitness = np.inf  # of ``last`` under ``_evaluator.objective``
         self._rng = np.random.default_rng([seed, 1])
 
     def reset(self) -> None:
         """Forget the last pose: the next frame is searched from scratch."""
-        self.last, self._objective = None, None
+        self.last, self._evaluator = None, None
 
     def problem(self, views: Sequence[View], knowledge: Sequence[Knowledge] = (),
                 hints: np.ndarray | None = None) -> PoseProblem:
@@ -160,17 +166,16 @@ class CooperativeEstimator:
         t0 = time.perf_counter()
         if self.last is not None:
             solution = track(self.last, list(views), problem=problem, options=self.options,
-                             seed=np.random.default_rng([self.seed, frame]), lost_quality=self.lost_quality,
+                             seed=np.random.default_rng([self.seed, frame]), lost_mismatch=self.lost_mismatch,
                              hints=problem.hints if len(problem.hints) else None)
             solved = solution.stop_reason != "tracked"
             good_after = solution.seconds if solution.converged else None
         else:
-            scale = PoseObjective(problem, self.options.fitness, self.options.tau).fitness_scale()
             good_after = None
 
             def watch(state) -> None:
                 nonlocal good_after
-                if good_after is None and self._good_now(state.best_fitness, state.best_unmatched, scale):
+                if good_after is None and self.options.is_confident(state.best_match):
                     good_after = time.perf_counter() - t0
                 if on_generation is not None:
                     on_generation(state)
@@ -182,55 +187,44 @@ class CooperativeEstimator:
                 good_after = None
         return self._keep(solution, problem, solved, good_after)
 
-    def _good_now(self, fitness: float, unmatched: float, scale: float | None) -> bool:
-        o = self.options
-        return scale is None or fitness <= o.confident_quality * scale or unmatched <= o.confident_unmatched
-
     def generation(self, hints: np.ndarray | None = None) -> Estimate | None:
         """One generation on the last frame's views: the best, mutated children and ``hints`` (H, 6), refined;
-        the fittest becomes the best. None before the first estimate."""
-        if self.last is None or self._objective is None:
+        the fittest becomes the best if it is better. None before the first estimate."""
+        if self.last is None or self._evaluator is None:
             return None
-        best = np.asarray(self.last.pose, float)
-        scale = np.r_[np.full(3, CHILD_STEP_POSITION * max(np.linalg.norm(best[:3]), 1.0)),
-                      np.full(3, CHILD_STEP_ANGLE)]
-        children = best + self._rng.standard_normal((GENERATION_CHILDREN, 6)) * scale
-        parts = [best[None], children]
-        if hints is not None and np.size(hints):
-            parts.append(np.atleast_2d(np.asarray(hints, float)).reshape(-1, 6))
         bounds = self.last.problem.bounds if self.last.problem is not None else self.bounds
-        candidates = bounds.project(np.concatenate(parts))
-        fitness = self._objective(candidates)
-        candidates, fitness = refine(self._objective, candidates, fitness, TRACK_SCHEDULE)
-        i = int(np.argmin(fitness))
-        if fitness[i] < self._best_fitness:
-            self._best_fitness = float(fitness[i])
-            solution = self.last.with_(pose=candidates[i], fitness=float(fitness[i]),
-                                       view_terms=self._objective.view_terms(candidates[i][None])[0],
-                                       from_hint=i > GENERATION_CHILDREN,
-                                       generations=self.last.generations + 1,
-                                       history=[*self.last.history[-HISTORY_KEPT + 1:], float(fitness[i])])
-            self.last = solution
-        return Estimate(self.last, self._quality(self.last.pose), False)
+        local = LocalSearch(bounds, self._rng, children=GENERATION_CHILDREN,
+                            child_step=(CHILD_STEP_POSITION, CHILD_STEP_ANGLE))
+        state = local.start(self.last.pose, self._best_fitness)
+        if hints is not None and np.size(hints):
+            state = local.inject(state, hints)
+        run = evolve(local, state, self._evaluator)
+        if run.told.improved:
+            best = run.state
+            self._best_fitness = best.best_fitness
+            self.last = self.last.with_(pose=np.array(best.best_pose), fitness=best.best_fitness,
+                                        view_terms=self._evaluator.objective.view_terms(best.best_pose[None])[0],
+                                        from_hint=best.best_from_hint, generations=self.last.generations + 1,
+                                        history=[*self.last.history[-HISTORY_KEPT + 1:], best.best_fitness])
+        return Estimate(self.last, self._mismatch(self.last.pose), False)
 
     def _keep(self, solution: Solution, problem: PoseProblem, solved: bool, good_after: float | None) -> Estimate:
-        self._objective = PoseObjective(solution.problem or problem, self.options.fitness, self.options.tau)
-        if len(solution.view_weights) == self._objective.n_views and np.any(solution.view_weights > 0):
-            self._objective.weights = np.asarray(solution.view_weights, float).copy()  # the step rule's (eq. 4)
-        self._best_fitness = float(self._objective(np.atleast_2d(solution.pose))[0])
-        quality = self._quality(solution.pose)
+        objective = PoseObjective(solution.problem or problem, self.options.fitness, self.options.tau)
+        if len(solution.view_weights) == objective.n_views and np.any(solution.view_weights > 0):
+            objective = objective.with_weights(solution.view_weights)  # the step rule's (eq. 4)
+        self._evaluator = Evaluator(objective, exploit=(TRACK_SCHEDULE,))
+        self._best_fitness = float(objective(np.atleast_2d(solution.pose))[0])
+        mismatch = self._mismatch(solution.pose)
         self.last = solution if solution.converged else None
         if self.last is None:
-            self._objective = None
-        return Estimate(solution, quality, solved, good_after)
+            self._evaluator = None
+        return Estimate(solution, mismatch, solved, good_after)
 
-    def _quality(self, pose: np.ndarray) -> float:
-        objective = self._objective
-        if objective is None:
-            return 0.0
-        terms = objective.view_terms(np.atleast_2d(pose))[0]
-        w = objective.base_weights
-        return float(np.clip(1.0 - np.sum(w * terms / objective.taus) / np.sum(w), 0.0, 1.0))
+    def _mismatch(self, pose: np.ndarray) -> float:
+        """:attr:`Estimate.mismatch` of ``pose`` under the last frame's objective (1 when it cannot be judged)."""
+        objective = self._evaluator.objective if self._evaluator is not None else None
+        mismatch = None if objective is None else objective.mismatch(objective(np.atleast_2d(pose))[0])
+        return 1.0 if mismatch is None else float(np.clip(mismatch, 0.0, 1.0))
 
 
 __all__ = ["CooperativeEstimator", "Estimate", "Knowledge", "constrained_bounds"]

@@ -14,19 +14,25 @@
              row in both directions. Visibility uses the model normals when given.
 
 Eq. (4): ``d = sum_k W_k d^(k)``; :func:`step_weights` is the paper's step-function rule.
+
+How well a pose matches is one measure, :class:`Match`: ``mismatch`` (eq. 4 over its value when
+nothing matches) and ``unmatched`` (share of visible marks without a one-to-one match), both in
+[0, 1], 0 perfect. :class:`PoseObjective` is immutable: other weights make another objective.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import dataclasses
+from dataclasses import dataclass, field
+from functools import cached_property
 from typing import Literal
 
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .kernels import chamfer_matches, chamfer_sums
-from .pose import rotation_from_euler
+from .kernels import chamfer_matches, view_terms
 from .problem import Model, PoseProblem, View
+from .projection import project_poses
 
 FitnessKind = Literal["robust", "paper"]
 #: A view judges a pose's match only if at least this fraction of the model points is visible in it.
@@ -59,38 +65,37 @@ class ViewProjection:
 
     Attributes
     ----------
-    uv : array, shape (N, M, 2)
+    u, v : array, shape (N, M)
+        Pixels of every model point under every pose.
     usable : bool array, shape (N, M)
         In front of the camera and (with normals) facing it.
     """
 
-    uv: np.ndarray
+    u: np.ndarray
+    v: np.ndarray
     usable: np.ndarray
+
+    @property
+    def uv(self) -> np.ndarray:
+        """Pixels as pairs, shape (N, M, 2)."""
+        return np.stack([self.u, self.v], axis=-1)
 
 
 def project_into_view(model: Model, view: View, poses: np.ndarray, use_normals: bool = True) -> ViewProjection:
-    """Project the model under every pose (N, 6) into ``view``."""
+    """Project the model under every pose (N, 6) into ``view`` (:func:`evopose.projection.project_poses`)."""
     cam = view.camera
-    p_cam = cam.to_camera_frame(poses, model.points)
-    uv, usable = cam.project_camera_points(p_cam)
-    if use_normals and model.normals is not None:
-        R_cam_from_target = cam.camera_from_world[:3, :3] @ rotation_from_euler(np.atleast_2d(poses)[:, 3:])
-        n_cam = np.matmul(model.normals, np.swapaxes(R_cam_from_target, 1, 2))  # (N, M, 3)
-        usable &= np.sum(n_cam * p_cam, axis=-1) < 0.0
-    return ViewProjection(uv, usable)
+    with_normals = use_normals and model.normals is not None
+    normals = np.ascontiguousarray(model.normals) if with_normals else np.zeros((1, 3))
+    u, v, usable = project_poses(np.ascontiguousarray(np.atleast_2d(np.asarray(poses, dtype=float))),
+                                 np.ascontiguousarray(model.points), normals, with_normals, cam.intrinsics,
+                                 np.ascontiguousarray(cam.camera_from_world))
+    return ViewProjection(u, v, usable)
 
 
 def view_term(proj: ViewProjection, points: np.ndarray, kind: FitnessKind, tau: float) -> np.ndarray:
-    """Distance term ``d^(k)`` of one view for every individual, shape (N,)."""
-    u = np.ascontiguousarray(proj.uv[..., 0])
-    v = np.ascontiguousarray(proj.uv[..., 1])
-    px = np.ascontiguousarray(points[:, 0])
-    py = np.ascontiguousarray(points[:, 1])
-    robust = kind == "robust"
-    img_sum, mod_sum, n_usable = chamfer_sums(u, v, proj.usable, px, py, float(tau), robust)
-    if not robust:
-        return img_sum  # eq. (1)
-    return (img_sum + mod_sum) / (len(points) + n_usable)
+    """Distance term ``d^(k)`` of one view for every individual, shape (N,) (:func:`evopose.kernels.view_terms`)."""
+    return view_terms(proj.u, proj.v, proj.usable, np.ascontiguousarray(points[:, 0]),
+                      np.ascontiguousarray(points[:, 1]), float(tau), kind == "robust")
 
 
 def step_weights(terms: np.ndarray, weights: np.ndarray, threshold: float | np.ndarray) -> np.ndarray:
@@ -116,8 +121,73 @@ def step_weights(terms: np.ndarray, weights: np.ndarray, threshold: float | np.n
     return np.where(keep, weights, 0.0)
 
 
+
+
+@dataclass(frozen=True)
+class Match:
+    """How well a pose fits the views: the one match measure, two shares in [0, 1], 0 perfect.
+
+    Attributes
+    ----------
+    mismatch : float or None
+        Eq. (4) at the pose over its value when nothing matches, ``sum_k W_k d^(k) / sum_k W_k tau_k``
+        (robust fitness: 0 every point matched exactly, 1 nothing within tau). None for the paper's
+        eq. (1), which has no such bound.
+    unmatched : float
+        Share of the pose's visible marks without a one-to-one image match (false image points do not
+        count; 1 when unknown). See :meth:`PoseObjective.unmatched_fraction`.
+    """
+
+    mismatch: float | None = None
+    unmatched: float = 1.0
+
+
+class EvaluationCounter:
+    """Projections of the model made so far: the budget by which optimisers are compared.
+
+    The one mutable part of an objective, on purpose: an objective and those derived from it
+    (:meth:`PoseObjective.with_weights`) count into the same counter, and so does the refinement.
+    """
+
+    __slots__ = ("count",)
+
+    def __init__(self, count: int = 0) -> None:
+        self.count = int(count)
+
+    def add(self, n: int) -> None:
+        self.count += int(n)
+
+    def __repr__(self) -> str:
+        return f"EvaluationCounter({self.count})"
+
+
+@dataclass(frozen=True, eq=False)
+class Packed:
+    """An objective's views as flat arrays for the compiled kernels (:mod:`evopose.refine_kernel`).
+
+    ``intr`` (V, 9) fx, fy, cx, cy, k1, k2, p1, p2, k3; ``cfw`` (V, 4, 4) camera_from_world;
+    ``pts`` (P_total, 2) with view k's points at ``offsets[k]:offsets[k+1]``; ``model`` (M, 3);
+    ``normals`` (M, 3) (a dummy (1, 3) when unused).
+    """
+
+    intr: np.ndarray
+    cfw: np.ndarray
+    pts: np.ndarray
+    offsets: np.ndarray
+    model: np.ndarray
+    normals: np.ndarray
+    use_normals: bool
+
+
+def _read_only(a: np.ndarray) -> np.ndarray:
+    a = np.array(a, dtype=float)
+    a.flags.writeable = False
+    return a
+
+
+@dataclass(frozen=True, eq=False)
 class PoseObjective:
-    """Eq. (4) over the problem's views for whole populations.
+    """Eq. (4) over the problem's views for whole populations; immutable.
 
     Parameters
     ----------
@@ -127,25 +197,71 @@ class PoseObjective:
         Truncation distance (pixels) for the robust kind; per view automatic when None.
     tau_scale : float
         Multiplies tau (a wider tau gives a smoother landscape for screening random starts).
+    weights : array (V,), optional
+        ``W_k`` of eq. (4); the views' own weights when None. :meth:`with_weights` derives an objective
+        with other weights (the step rule's); nothing else changes an objective.
+    counter : EvaluationCounter, optional
+        Where evaluations are counted (shared by the objectives derived from this one).
+
+    Attributes
+    ----------
+    taus, spreads, base_weights, weights : arrays (V,), read-only
+        Per view: truncation distance, robust image spread of its points (pixels), its own weight and the
+        weight in force.
     """
 
-    def __init__(self, problem: PoseProblem, kind: FitnessKind = "robust", tau: float | None = None,
-                 tau_scale: float = 1.0) -> None:
-        if kind not in ("robust", "paper"):
-            raise ValueError(f"fitness kind must be 'robust' or 'paper', got {kind!r}")
-        self.problem = problem
-        self.kind: FitnessKind = kind
-        self.taus = tau_scale * np.array([auto_tau(v.points) if tau is None else float(tau) for v in problem.views])
-        self.spreads = np.array([image_spread(v.points) for v in problem.views])
-        self.base_weights = np.array([v.weight for v in problem.views], float)
-        if not np.any(self.base_weights > 0):
+    problem: PoseProblem
+    kind: FitnessKind = "robust"
+    tau: float | None = None
+    tau_scale: float = 1.0
+    weights: np.ndarray | None = None
+    counter: EvaluationCounter = field(default_factory=EvaluationCounter, repr=False)
+
+    def __post_init__(self) -> None:
+        if self.kind not in ("robust", "paper"):
+            raise ValueError(f"fitness kind must be 'robust' or 'paper', got {self.kind!r}")
+        views = self.problem.views
+        taus = [auto_tau(v.points) if self.tau is None else float(self.tau) for v in views]
+        object.__setattr__(self, "taus", _read_only(self.tau_scale * np.array(taus)))
+        object.__setattr__(self, "spreads", _read_only([image_spread(v.points) for v in views]))
+        base = _read_only([v.weight for v in views])
+        if not np.any(base > 0):
             raise ValueError("at least one view needs a weight > 0")
-        self.weights = self.base_weights.copy()
-        self.evaluations = 0
+        object.__setattr__(self, "base_weights", base)
+        weights = base if self.weights is None else _read_only(self.weights)
+        if weights.shape != base.shape or not np.all(np.isfinite(weights)) or np.any(weights < 0):
+            raise ValueError(f"weights must be {len(views)} finite numbers >= 0, got {self.weights!r}")
+        if not np.any(weights > 0):
+            raise ValueError("at least one view needs a weight > 0")
+        object.__setattr__(self, "weights", weights)
+
+    def with_weights(self, weights: np.ndarray) -> "PoseObjective":
+        """The same objective with other eq. (4) weights ``W_k`` (V,); counts into the same counter."""
+        return dataclasses.replace(self, weights=np.asarray(weights, float))
 
     @property
     def n_views(self) -> int:
         return len(self.problem.views)
+
+    @property
+    def evaluations(self) -> int:
+        """Projections of the model counted so far (:class:`EvaluationCounter`)."""
+        return self.counter.count
+
+    @cached_property
+    def packed(self) -> Packed:
+        """The views as flat arrays for the compiled refinement (computed once per objective)."""
+        views = self.problem.views
+        model = self.problem.model
+        use_normals = self.kind == "robust" and model.normals is not None
+        return Packed(
+            intr=np.ascontiguousarray([v.camera.intrinsics for v in views]),
+            cfw=np.ascontiguousarray([v.camera.camera_from_world for v in views]),
+            pts=np.ascontiguousarray(np.concatenate([v.points for v in views])),
+            offsets=np.cumsum([0] + [len(v.points) for v in views]).astype(np.int64),
+            model=np.ascontiguousarray(model.points),
+            normals=np.ascontiguousarray(model.normals) if use_normals else np.zeros((1, 3)),
+            use_normals=use_normals)
 
     def project(self, k: int, poses: np.ndarray) -> ViewProjection:
         return project_into_view(self.problem.model, self.problem.views[k], poses,
@@ -162,16 +278,32 @@ class PoseObjective:
             if only_weighted and self.weights[k] == 0:
                 continue
             out[:, k] = view_term(self.project(k, poses), view.points, self.kind, self.taus[k])
-        self.evaluations += len(poses)
+        self.counter.add(len(poses))
         return out
 
     def __call__(self, poses: np.ndarray) -> np.ndarray:
-        """Eq. (4) ``sum_k W_k d^(k)`` with the current weights, shape (N, 6) -> (N,)."""
+        """Eq. (4) ``sum_k W_k d^(k)`` with the objective's weights, shape (N, 6) -> (N,)."""
         return self.view_terms(poses, only_weighted=True) @ self.weights
 
-    def fitness_scale(self) -> float | None:
-        """Fitness of a pose that matches nothing (robust kind): ``sum_k W_k tau_k``; None for the paper's."""
+    @property
+    def no_match_fitness(self) -> float | None:
+        """Eq. (4) of a pose that matches nothing (robust kind): ``sum_k W_k tau_k``; None for the paper's."""
         return float(self.weights @ self.taus) if self.kind == "robust" else None
+
+    def mismatch(self, fitness):
+        """:attr:`Match.mismatch` of poses whose eq. (4) is ``fitness``: fitness over :attr:`no_match_fitness`.
+
+        Same shape as ``fitness``; None for the paper's kind.
+        """
+        scale = self.no_match_fitness
+        return None if scale is None else np.asarray(fitness, float) / scale
+
+    def match(self, pose: np.ndarray, fitness: float | None = None) -> Match:
+        """:class:`Match` of one pose (6,) whose eq. (4) is ``fitness`` (computed when None)."""
+        if fitness is None:
+            fitness = float(self(np.atleast_2d(pose))[0])
+        mismatch = self.mismatch(fitness)
+        return Match(None if mismatch is None else float(mismatch), self.unmatched_fraction(pose))
 
     def unmatched_fraction(self, pose: np.ndarray, min_visible_fraction: float = MIN_VISIBLE_FRACTION) -> float:
         """Share of the visible model points without a one-to-one image match at ``pose`` (6,).
@@ -180,7 +312,7 @@ class PoseObjective:
         it as its own nearest model point (mutual nearest neighbours). Unlike the fitness,
         this ignores false image points, so it tells a right pose in heavy clutter from a
         wrong one: 0 when every visible mark is matched, 1 when none is. Views are averaged
-        with their current weights; a view where fewer than ``min_visible_fraction`` of the
+        with the objective's weights; a view where fewer than ``min_visible_fraction`` of the
         model points (and at least 4) are visible counts as 1. The paper's fitness kind
         gives 1 (no truncation distance to judge a match by).
         """
@@ -194,9 +326,8 @@ class PoseObjective:
             if self.weights[k] == 0:
                 continue
             proj = self.project(k, pose)
-            u = np.ascontiguousarray(proj.uv[..., 0])
-            v = np.ascontiguousarray(proj.uv[..., 1])
-            img_nn, _, mod_nn, mod_d2 = chamfer_matches(u, v, proj.usable, np.ascontiguousarray(view.points[:, 0]),
+            img_nn, _, mod_nn, mod_d2 = chamfer_matches(proj.u, proj.v, proj.usable,
+                                                        np.ascontiguousarray(view.points[:, 0]),
                                                         np.ascontiguousarray(view.points[:, 1]))
             visible = proj.usable[0]
             n_visible = int(np.count_nonzero(visible))
@@ -205,20 +336,19 @@ class PoseObjective:
             m = np.nonzero(visible & (mod_d2[0] <= self.taus[k] ** 2))[0]
             mutual = img_nn[0, mod_nn[0, m]] == m
             out[k] = 1.0 - np.count_nonzero(mutual) / n_visible
-        self.evaluations += 1
+        self.counter.add(1)
         return float(out @ self.weights / self.weights.sum())
 
     def normalised(self, terms: np.ndarray) -> np.ndarray:
         """Terms divided by each view's truncation distance (robust kind), shape (..., V)."""
         return terms / self.taus
 
-    def apply_step_rule(self, best_pose: np.ndarray, threshold: float) -> np.ndarray:
-        """Update the view weights with :func:`step_weights` at ``best_pose``.
+    def step_rule_weights(self, best_pose: np.ndarray, threshold: float) -> np.ndarray:
+        """Eq. (4) weights by the paper's step rule (:func:`step_weights`) at ``best_pose``, shape (V,).
 
-        For the robust kind ``threshold`` is a fraction of each view's ``tau``; for the
-        paper's kind it is in pixels. Returns the new weights, shape (V,).
+        For the robust kind ``threshold`` is a fraction of each view's ``tau``; for the paper's kind it is
+        in pixels. The objective is not changed: derive one with :meth:`with_weights`.
         """
-        terms = self.view_terms(best_pose[None], only_weighted=False)[0]
+        terms = self.view_terms(np.atleast_2d(best_pose), only_weighted=False)[0]
         limit = threshold * self.taus if self.kind == "robust" else threshold
-        self.weights = step_weights(terms, self.base_weights, limit)
-        return self.weights
+        return step_weights(terms, self.base_weights, limit)

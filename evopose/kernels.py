@@ -1,10 +1,16 @@
 """Compiled inner loops: nearest-neighbour distances between projected model points and image points.
 
-One pass over the ``N x M x P`` point pairs yields both matching directions of the
-chamfer distance: for every image point its nearest projected model point (the
-``min_j |p_i - m_j(s)|`` of eq. 1) and for every model point its nearest image point.
-Squared distances are used inside the loop; a large finite sentinel stands for
-"no candidate" so that ``fastmath`` stays valid.
+The one place where eq. (1)'s distance is written: :func:`chamfer_row` makes one pass over the
+``M x P`` pairs of one pose in one view and yields both matching directions of the chamfer
+distance, for every image point its nearest projected model point (``min_j |p_i - m_j(s)|``, eq. 1)
+and for every model point its nearest image point. :func:`view_term_row` turns those sums into the
+view's term ``d^(k)`` (the paper's eq. 1, or its bounded two-sided variant). The fitness of whole
+populations (:func:`view_terms`) and the refinement's own fitness (:mod:`evopose.refine_kernel`)
+both call them, so the two cannot drift apart. :func:`nearest_row` is the one nearest-neighbour
+matching with indices (the refinement's hard steps, the unmatched-marks count).
+
+Squared distances are used inside the loops; a large finite sentinel stands for "no candidate" so
+that ``fastmath`` stays valid.
 """
 
 from __future__ import annotations
@@ -12,67 +18,99 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
+from .projection import FASTMATH as _FASTMATH
+
 #: Squared distance reported when no candidate exists (no usable model point, or unusable model point).
 NO_MATCH_D2 = 1e30
-_FASTMATH = {"nsz", "arcp", "contract", "afn", "reassoc"}
 
 
 @nb.njit(cache=True, fastmath=_FASTMATH, nogil=True)
-def chamfer_sums(u, v, usable, px, py, tau, robust):  # pragma: no cover - compiled
-    """Per-individual sums of both matching directions.
+def chamfer_row(u, v, usable, px, py, tau, robust, row):  # pragma: no cover - compiled
+    """Both matching directions of one pose in one view.
 
     Parameters
     ----------
-    u, v : float64 arrays, shape (N, M)
+    u, v : float64 arrays, shape (M,)
         Projected model points (pixels).
-    usable : bool array, shape (N, M)
-        Model points in front of the camera and facing it.
+    usable : bool array, shape (M,)
     px, py : float64 arrays, shape (P,)
         Image points.
     tau : float
         Truncation of the per-point distance (pixels) when ``robust``.
     robust : bool
-        True: bounded ``min(d, tau)``; False: the paper's plain eq. (1) sum.
+    row : float64 array, shape (>= P,)
+        Scratch.
 
     Returns
     -------
-    img_sum : (N,) sum over image points of (truncated) nearest-model distance.
-    mod_sum : (N,) sum over usable model points of truncated nearest-image distance.
-    n_usable : (N,) number of usable model points.
+    img_sum : sum over image points of the (truncated, if robust) distance to the nearest usable model point.
+    mod_sum : sum over usable model points of the truncated distance to the nearest image point.
+    n_usable : number of usable model points.
     """
-    N, M = u.shape
     P = px.shape[0]
+    tau2 = tau * tau
+    for p in range(P):
+        row[p] = NO_MATCH_D2
+    s_mod = 0.0
+    cnt = 0
+    for m in range(u.shape[0]):
+        if not usable[m]:
+            continue
+        um = u[m]
+        vm = v[m]
+        best = NO_MATCH_D2
+        for p in range(P):
+            dx = px[p] - um
+            dy = py[p] - vm
+            d2 = dx * dx + dy * dy
+            best = min(best, d2)
+            row[p] = min(row[p], d2)
+        cnt += 1
+        s_mod += np.sqrt(min(best, tau2))
+    s_img = 0.0
+    if robust:
+        for p in range(P):
+            s_img += np.sqrt(min(row[p], tau2))
+    else:
+        for p in range(P):
+            s_img += np.sqrt(row[p])
+    return s_img, s_mod, cnt
+
+
+@nb.njit(cache=True, fastmath=_FASTMATH, nogil=True)
+def view_term_row(u, v, usable, px, py, tau, robust, row):  # pragma: no cover - compiled
+    """The view's term ``d^(k)`` for one pose (pixels).
+
+    ``robust``: ``(sum_i min(d_i, tau) + sum_j min(d_j, tau)) / (P + n_usable)``, one mean over both
+    directions; otherwise the paper's eq. (1) ``sum_i min_j |p_i - m_j(s)|``.
+    """
+    s_img, s_mod, cnt = chamfer_row(u, v, usable, px, py, tau, robust, row)
+    if robust:
+        return (s_img + s_mod) / (px.shape[0] + cnt)
+    return s_img
+
+
+@nb.njit(cache=True, fastmath=_FASTMATH, nogil=True)
+def view_terms(u, v, usable, px, py, tau, robust):  # pragma: no cover - compiled
+    """:func:`view_term_row` for every pose: ``u``, ``v``, ``usable`` (N, M) -> (N,)."""
+    N = u.shape[0]
+    out = np.empty(N)
+    row = np.empty(px.shape[0])
+    for n in range(N):
+        out[n] = view_term_row(u[n], v[n], usable[n], px, py, tau, robust, row)
+    return out
+
+
+@nb.njit(cache=True, fastmath=_FASTMATH, nogil=True)
+def chamfer_sums(u, v, usable, px, py, tau, robust):  # pragma: no cover - compiled
+    """:func:`chamfer_row` for every pose: ``u``, ``v``, ``usable`` (N, M) -> img_sum, mod_sum, n_usable (N,)."""
+    N = u.shape[0]
     img_sum = np.zeros(N)
     mod_sum = np.zeros(N)
     n_usable = np.zeros(N)
-    row = np.empty(P)
-    tau2 = tau * tau
+    row = np.empty(px.shape[0])
     for n in range(N):
-        for p in range(P):
-            row[p] = NO_MATCH_D2
-        s_mod = 0.0
-        cnt = 0
-        for m in range(M):
-            if not usable[n, m]:
-                continue
-            um = u[n, m]
-            vm = v[n, m]
-            best = NO_MATCH_D2
-            for p in range(P):
-                dx = px[p] - um
-                dy = py[p] - vm
-                d2 = dx * dx + dy * dy
-                best = min(best, d2)
-                row[p] = min(row[p], d2)
-            cnt += 1
-            s_mod += np.sqrt(min(best, tau2))
-        s_img = 0.0
-        if robust:
-            for p in range(P):
-                s_img += np.sqrt(min(row[p], tau2))
-        else:
-            for p in range(P):
-                s_img += np.sqrt(row[p])
+        s_img, s_mod, cnt = chamfer_row(u[n], v[n], usable[n], px, py, tau, robust, row)
         img_sum[n] = s_img
         mod_sum[n] = s_mod
         n_usable[n] = cnt
@@ -80,8 +118,42 @@ def chamfer_sums(u, v, usable, px, py, tau, robust):  # pragma: no cover - compi
 
 
 @nb.njit(cache=True, fastmath=_FASTMATH, nogil=True)
+def nearest_row(u, v, usable, px, py, img_nn, img_d2, mod_nn, mod_d2):  # pragma: no cover - compiled
+    """Nearest neighbours in both directions for one pose in one view, with indices.
+
+    Fills ``img_nn`` / ``img_d2`` (P,): the nearest usable model point to each image point (-1 and
+    ``NO_MATCH_D2`` if none) and ``mod_nn`` / ``mod_d2`` (M,): the nearest image point to each usable
+    model point (-1 and ``NO_MATCH_D2`` if unusable). Ties go to the lowest index.
+    """
+    for p in range(px.shape[0]):
+        img_nn[p] = -1
+        img_d2[p] = NO_MATCH_D2
+    for m in range(u.shape[0]):
+        mod_nn[m] = -1
+        mod_d2[m] = NO_MATCH_D2
+        if not usable[m]:
+            continue
+        um = u[m]
+        vm = v[m]
+        best = NO_MATCH_D2
+        best_p = -1
+        for p in range(px.shape[0]):
+            dx = px[p] - um
+            dy = py[p] - vm
+            d2 = dx * dx + dy * dy
+            if d2 < best:
+                best = d2
+                best_p = p
+            if d2 < img_d2[p]:
+                img_d2[p] = d2
+                img_nn[p] = m
+        mod_nn[m] = best_p
+        mod_d2[m] = best
+
+
+@nb.njit(cache=True, fastmath=_FASTMATH, nogil=True)
 def chamfer_matches(u, v, usable, px, py):  # pragma: no cover - compiled
-    """Nearest neighbours in both directions, with indices (for local refinement).
+    """:func:`nearest_row` for every pose (N, M).
 
     Returns
     -------
@@ -92,29 +164,10 @@ def chamfer_matches(u, v, usable, px, py):  # pragma: no cover - compiled
     """
     N, M = u.shape
     P = px.shape[0]
-    img_nn = np.full((N, P), -1, np.int64)
-    img_d2 = np.full((N, P), NO_MATCH_D2)
-    mod_nn = np.full((N, M), -1, np.int64)
-    mod_d2 = np.full((N, M), NO_MATCH_D2)
+    img_nn = np.empty((N, P), np.int64)
+    img_d2 = np.empty((N, P))
+    mod_nn = np.empty((N, M), np.int64)
+    mod_d2 = np.empty((N, M))
     for n in range(N):
-        for m in range(M):
-            if not usable[n, m]:
-                continue
-            um = u[n, m]
-            vm = v[n, m]
-            best = NO_MATCH_D2
-            best_p = -1
-            for p in range(P):
-                dx = px[p] - um
-                dy = py[p] - vm
-                d2 = dx * dx + dy * dy
-                if d2 < best:
-                    best = d2
-                    best_p = p
-                if d2 < img_d2[n, p]:
-                    img_d2[n, p] = d2
-                    img_nn[n, p] = m
-            mod_nn[n, m] = best_p
-            mod_d2[n, m] = best
+        nearest_row(u[n], v[n], usable[n], px, py, img_nn[n], img_d2[n], mod_nn[n], mod_d2[n])
     return img_nn, img_d2, mod_nn, mod_d2
-

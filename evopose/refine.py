@@ -23,6 +23,8 @@ from typing import Sequence
 import numpy as np
 
 from .fitness import PoseObjective
+from .kernels import nearest_row
+from .projection import project_pose
 from .refine_kernel import refine_population
 
 #: Outlier slack of the soft matching: a pair at 2.5 sigma weighs as much as "no match".
@@ -54,22 +56,6 @@ TRACK_SCHEDULE = annealing(5, hard=5, start=0.5)
 TRACK_HARD_SCHEDULE = annealing(0, hard=8)
 
 
-class _Packed:
-    """The objective's problem as flat arrays for the compiled kernel."""
-
-    def __init__(self, objective: PoseObjective) -> None:
-        prob = objective.problem
-        views = prob.views
-        self.intr = np.array([[v.camera.fx, v.camera.fy, v.camera.cx, v.camera.cy, *v.camera.distortion]
-                              for v in views])
-        self.cfw = np.ascontiguousarray(np.array([v.camera.camera_from_world for v in views]))
-        self.pts = np.ascontiguousarray(np.concatenate([v.points for v in views]))
-        self.offsets = np.cumsum([0] + [len(v.points) for v in views]).astype(np.int64)
-        self.model = np.ascontiguousarray(prob.model.points)
-        self.use_normals = objective.kind == "robust" and prob.model.normals is not None
-        self.normals = np.ascontiguousarray(prob.model.normals) if self.use_normals else np.zeros((1, 3))
-
-
 def refine(objective: PoseObjective, poses: np.ndarray, fitness: np.ndarray | None = None,
            schedule: Schedule | None = None, damping: float = 1e-3) -> tuple[np.ndarray, np.ndarray]:
     """Improve poses by annealed soft then hard matching.
@@ -99,20 +85,46 @@ def refine(objective: PoseObjective, poses: np.ndarray, fitness: np.ndarray | No
     fitness = objective(poses) if fitness is None else np.array(fitness, dtype=float)
     if not schedule or len(poses) == 0:
         return poses, fitness
-    packed = getattr(objective, "_packed", None)
-    if packed is None:
-        packed = objective._packed = _Packed(objective)
+    packed = objective.packed
     kinds = np.array([STEP_KINDS[kind] for kind, _ in schedule], np.int64)
     values = np.array([value for _, value in schedule], float)
     sigmas = np.array([[soft_sigma(sp, tau, t) for sp, tau in zip(objective.spreads, objective.taus)]
                        for t in values])
     refine_population(poses, fitness, bounds.lo, bounds.hi, bounds.periodic, bounds.free, packed.model,
                       packed.normals, packed.use_normals, packed.intr, packed.cfw,
-                      np.ascontiguousarray(objective.weights, dtype=float), np.ascontiguousarray(objective.taus),
+                      np.array(objective.weights, dtype=float), np.array(objective.taus, dtype=float),
                       sigmas, packed.pts, packed.offsets, objective.kind == "robust", kinds, values,
                       SOFT_OUTLIER, damping)
     # count every projection of the model as an evaluation: 7 per step (pose + 6 Jacobian columns),
     # one fitness per hard step, and the fitness before the first hard step and at the end
     n_hard = int(np.count_nonzero(kinds == STEP_KINDS["hard"]))
-    objective.evaluations += len(poses) * (7 * len(kinds) + n_hard + 2)
+    objective.counter.add(len(poses) * (7 * len(kinds) + n_hard + 2))
     return poses, fitness
+
+
+def match_residuals(objective: PoseObjective, pose: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
+    """The residuals the hard steps pull on, per view, at one pose (6,), as the refinement sees them.
+
+    Uses the refinement's own packed views and compiled projection. For view ``k``: ``image`` (P_k,)
+    the distance from each image point to its nearest usable projected model point (inf if none), and
+    ``model`` (n_usable,) from each usable model point to its nearest image point. Truncated at tau
+    and summed as in eq. (1) (robust: both sides over ``P_k + n_usable``; paper: the image side),
+    they give the fitness of the pose.
+    """
+    packed = objective.packed
+    M = len(packed.model)
+    u, v, usable = np.empty(M), np.empty(M), np.empty(M, bool)
+    s = np.ascontiguousarray(np.asarray(pose, float).reshape(6))
+    out = []
+    for k in range(objective.n_views):
+        project_pose(s, packed.model, packed.normals, packed.use_normals, packed.intr[k], packed.cfw[k], u, v,
+                     usable, np.empty((3, 3)), np.empty((3, 3)))
+        pts = packed.pts[packed.offsets[k]:packed.offsets[k + 1]]
+        P = len(pts)
+        img_nn, img_d2 = np.empty(P, np.int64), np.empty(P)
+        mod_nn, mod_d2 = np.empty(M, np.int64), np.empty(M)
+        nearest_row(u, v, usable, np.ascontiguousarray(pts[:, 0]), np.ascontiguousarray(pts[:, 1]), img_nn, img_d2,
+                    mod_nn, mod_d2)
+        image = np.where(img_nn >= 0, np.sqrt(img_d2), np.inf)
+        out.append((image, np.sqrt(mod_d2[usable])))
+    return out

@@ -4,8 +4,8 @@ Per individual and step: project the model into every weighted view (pinhole +
 plumb_bob, finite-difference Jacobian), accumulate Gauss–Newton normal equations from
 soft (EM-ICP) or hard (nearest-neighbour) matches, take a damped step, hold fixed
 parameters, and bring the pose back into the search box. Hard steps are accepted only
-when the fitness drops. Definitions match :mod:`evopose.fitness` and
-:mod:`evopose.camera` exactly (tests compare them).
+when the fitness drops. The projection (:mod:`evopose.projection`), the view terms and the
+nearest-neighbour matching (:mod:`evopose.kernels`) are the very functions the fitness uses.
 
 Array conventions (V views, M model points, P_total image points):
 ``intr`` (V, 9) = fx, fy, cx, cy, k1, k2, p1, p2, k3; ``cam_from_world`` (V, 4, 4);
@@ -17,111 +17,18 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
-from .kernels import NO_MATCH_D2, _FASTMATH
+from .kernels import nearest_row, view_term_row
+from .projection import FASTMATH as _FASTMATH
+from .projection import project_pose
 
-_MIN_DEPTH = 1e-3
-_FAR_AWAY = 1e6
 _TWO_PI = 2.0 * np.pi
 _FD = np.array([1e-5, 1e-5, 1e-5, 1e-6, 1e-6, 1e-6])
 
 
 @nb.njit(cache=True, fastmath=_FASTMATH, nogil=True)
-def _rotation(roll, pitch, yaw, R):  # pragma: no cover - compiled
-    cr, sr = np.cos(roll), np.sin(roll)
-    cp, sp = np.cos(pitch), np.sin(pitch)
-    cy, sy = np.cos(yaw), np.sin(yaw)
-    R[0, 0] = cy * cp
-    R[0, 1] = cy * sp * sr - sy * cr
-    R[0, 2] = cy * sp * cr + sy * sr
-    R[1, 0] = sy * cp
-    R[1, 1] = sy * sp * sr + cy * cr
-    R[1, 2] = sy * sp * cr - cy * sr
-    R[2, 0] = -sp
-    R[2, 1] = cp * sr
-    R[2, 2] = cp * cr
-
-
-@nb.njit(cache=True, fastmath=_FASTMATH, nogil=True)
-def project_pose(s, model, normals, use_normals, intr, cfw, uv, usable, R, Rc):  # pragma: no cover
-    """Project the model under pose ``s`` (6,) into one view; fills uv (M, 2) and usable (M,)."""
-    _rotation(s[3], s[4], s[5], R)
-    # camera_from_target = cam_from_world @ world_from_target
-    for i in range(3):
-        for j in range(3):
-            Rc[i, j] = cfw[i, 0] * R[0, j] + cfw[i, 1] * R[1, j] + cfw[i, 2] * R[2, j]
-    t0 = cfw[0, 0] * s[0] + cfw[0, 1] * s[1] + cfw[0, 2] * s[2] + cfw[0, 3]
-    t1 = cfw[1, 0] * s[0] + cfw[1, 1] * s[1] + cfw[1, 2] * s[2] + cfw[1, 3]
-    t2 = cfw[2, 0] * s[0] + cfw[2, 1] * s[1] + cfw[2, 2] * s[2] + cfw[2, 3]
-    fx, fy, cx, cy = intr[0], intr[1], intr[2], intr[3]
-    k1, k2, p1, p2, k3 = intr[4], intr[5], intr[6], intr[7], intr[8]
-    distorted = k1 != 0.0 or k2 != 0.0 or p1 != 0.0 or p2 != 0.0 or k3 != 0.0
-    for m in range(model.shape[0]):
-        X = Rc[0, 0] * model[m, 0] + Rc[0, 1] * model[m, 1] + Rc[0, 2] * model[m, 2] + t0
-        Y = Rc[1, 0] * model[m, 0] + Rc[1, 1] * model[m, 1] + Rc[1, 2] * model[m, 2] + t1
-        Z = Rc[2, 0] * model[m, 0] + Rc[2, 1] * model[m, 1] + Rc[2, 2] * model[m, 2] + t2
-        if Z <= _MIN_DEPTH:
-            usable[m] = False
-            uv[m, 0] = _FAR_AWAY
-            uv[m, 1] = _FAR_AWAY
-            continue
-        ok = True
-        if use_normals:
-            nx = Rc[0, 0] * normals[m, 0] + Rc[0, 1] * normals[m, 1] + Rc[0, 2] * normals[m, 2]
-            ny = Rc[1, 0] * normals[m, 0] + Rc[1, 1] * normals[m, 1] + Rc[1, 2] * normals[m, 2]
-            nz = Rc[2, 0] * normals[m, 0] + Rc[2, 1] * normals[m, 1] + Rc[2, 2] * normals[m, 2]
-            ok = nx * X + ny * Y + nz * Z < 0.0
-        usable[m] = ok
-        x = X / Z
-        y = Y / Z
-        if distorted:
-            r2 = x * x + y * y
-            radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
-            xy = x * y
-            xd = x * radial + 2.0 * p1 * xy + p2 * (r2 + 2.0 * x * x)
-            yd = y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * xy
-            x = xd
-            y = yd
-        uv[m, 0] = fx * x + cx
-        uv[m, 1] = fy * y + cy
-
-
-@nb.njit(cache=True, fastmath=_FASTMATH, nogil=True)
-def view_term_one(uv, usable, px, py, tau, robust, row):  # pragma: no cover - compiled
-    """One view's distance term for one pose (as :func:`evopose.fitness.view_term`)."""
-    P = px.shape[0]
-    tau2 = tau * tau
-    for p in range(P):
-        row[p] = NO_MATCH_D2
-    s_mod = 0.0
-    cnt = 0
-    for m in range(uv.shape[0]):
-        if not usable[m]:
-            continue
-        um = uv[m, 0]
-        vm = uv[m, 1]
-        best = NO_MATCH_D2
-        for p in range(P):
-            dx = px[p] - um
-            dy = py[p] - vm
-            d2 = dx * dx + dy * dy
-            best = min(best, d2)
-            row[p] = min(row[p], d2)
-        cnt += 1
-        s_mod += np.sqrt(min(best, tau2))
-    s_img = 0.0
-    if robust:
-        for p in range(P):
-            s_img += np.sqrt(min(row[p], tau2))
-        return (s_img + s_mod) / (P + cnt)
-    for p in range(P):
-        s_img += np.sqrt(row[p])
-    return s_img
-
-
-@nb.njit(cache=True, fastmath=_FASTMATH, nogil=True)
-def _soft_accumulate(uv, J, usable, px, py, sigma, outlier, w_img, w_mod, H, g, w_pair, row_sum):  # pragma: no cover
+def _soft_accumulate(u, v, J, usable, px, py, sigma, outlier, w_img, w_mod, H, g, w_pair, row_sum):  # pragma: no cover
     """EM-ICP normal equations of one pose in one view (weights aggregated per model point)."""
-    M = uv.shape[0]
+    M = u.shape[0]
     P = px.shape[0]
     inv2s2 = 0.5 / (sigma * sigma)
     cut2 = 9.0 * sigma * sigma
@@ -132,8 +39,8 @@ def _soft_accumulate(uv, J, usable, px, py, sigma, outlier, w_img, w_mod, H, g, 
         if not usable[m]:
             continue
         n_usable += 1
-        um = uv[m, 0]
-        vm = uv[m, 1]
+        um = u[m]
+        vm = v[m]
         for p in range(P):
             dx = px[p] - um
             dy = py[p] - vm
@@ -163,8 +70,8 @@ def _soft_accumulate(uv, J, usable, px, py, sigma, outlier, w_img, w_mod, H, g, 
             qy += wt * py[p]
         if c == 0.0:
             continue
-        r0 = c * uv[m, 0] - qx
-        r1 = c * uv[m, 1] - qy
+        r0 = c * u[m] - qx
+        r1 = c * v[m] - qy
         for i in range(6):
             j0 = J[m, 0, i]
             j1 = J[m, 1, i]
@@ -174,47 +81,29 @@ def _soft_accumulate(uv, J, usable, px, py, sigma, outlier, w_img, w_mod, H, g, 
 
 
 @nb.njit(cache=True, fastmath=_FASTMATH, nogil=True)
-def _hard_accumulate(uv, J, usable, px, py, gate2, w_img, w_mod, H, g, row_d2, row_m):  # pragma: no cover
+def _hard_accumulate(u, v, J, usable, px, py, gate2, w_img, w_mod, H, g, img_nn, img_d2, mod_nn,
+                     mod_d2):  # pragma: no cover - compiled
     """Nearest-neighbour normal equations of one pose in one view, both directions within a gate."""
-    M = uv.shape[0]
     P = px.shape[0]
-    for p in range(P):
-        row_d2[p] = NO_MATCH_D2
-        row_m[p] = -1
+    nearest_row(u, v, usable, px, py, img_nn, img_d2, mod_nn, mod_d2)
     n_usable = 0
-    for m in range(M):
+    for m in range(u.shape[0]):
         if usable[m]:
             n_usable += 1
     a = w_img / (P + n_usable)
     b = w_mod / (P + n_usable)
-    for m in range(M):
-        if not usable[m]:
-            continue
-        um = uv[m, 0]
-        vm = uv[m, 1]
-        best = NO_MATCH_D2
-        best_p = -1
-        for p in range(P):
-            dx = px[p] - um
-            dy = py[p] - vm
-            d2 = dx * dx + dy * dy
-            if d2 < best:
-                best = d2
-                best_p = p
-            if d2 < row_d2[p]:
-                row_d2[p] = d2
-                row_m[p] = m
-        if best < gate2:
-            _add_pair(uv, J, m, px[best_p], py[best_p], b, H, g)
+    for m in range(u.shape[0]):
+        if usable[m] and mod_d2[m] < gate2:
+            _add_pair(u, v, J, m, px[mod_nn[m]], py[mod_nn[m]], b, H, g)
     for p in range(P):
-        if row_d2[p] < gate2:
-            _add_pair(uv, J, row_m[p], px[p], py[p], a, H, g)
+        if img_d2[p] < gate2:
+            _add_pair(u, v, J, img_nn[p], px[p], py[p], a, H, g)
 
 
 @nb.njit(cache=True, fastmath=_FASTMATH, nogil=True, inline="always")
-def _add_pair(uv, J, m, qx, qy, w, H, g):  # pragma: no cover - compiled
-    r0 = uv[m, 0] - qx
-    r1 = uv[m, 1] - qy
+def _add_pair(u, v, J, m, qx, qy, w, H, g):  # pragma: no cover - compiled
+    r0 = u[m] - qx
+    r1 = v[m] - qy
     for i in range(6):
         j0 = J[m, 0, i] * w
         j1 = J[m, 1, i] * w
@@ -237,15 +126,15 @@ def _to_bounds(s, lo, hi, periodic):  # pragma: no cover - compiled
 
 @nb.njit(cache=True, fastmath=_FASTMATH, nogil=True)
 def fitness_one(s, model, normals, use_normals, intr, cfw, weights, taus, pts, offsets, robust,
-                uv, usable, row, R, Rc):  # pragma: no cover - compiled
-    """Eq. (4) for one pose: ``sum_k W_k d^(k)``."""
+                u, v, usable, row, R, Rc):  # pragma: no cover - compiled
+    """Eq. (4) for one pose: ``sum_k W_k d^(k)``, with the fitness's own view term."""
     total = 0.0
     for k in range(intr.shape[0]):
         if weights[k] == 0.0:
             continue
-        project_pose(s, model, normals, use_normals, intr[k], cfw[k], uv, usable, R, Rc)
+        project_pose(s, model, normals, use_normals, intr[k], cfw[k], u, v, usable, R, Rc)
         a, b = offsets[k], offsets[k + 1]
-        total += weights[k] * view_term_one(uv, usable, pts[a:b, 0], pts[a:b, 1], taus[k], robust, row)
+        total += weights[k] * view_term_row(u, v, usable, pts[a:b, 0], pts[a:b, 1], taus[k], robust, row)
     return total
 
 
@@ -311,14 +200,18 @@ def refine_population(poses, fitness, lo, hi, periodic, free, model, normals, us
     P_max = 1
     for k in range(V):
         P_max = max(P_max, offsets[k + 1] - offsets[k])
-    uv = np.empty((M, 2))
-    uv_d = np.empty((M, 2))
+    u = np.empty(M)
+    v = np.empty(M)
+    u_d = np.empty(M)
+    v_d = np.empty(M)
     usable = np.empty(M, np.bool_)
     usable_d = np.empty(M, np.bool_)
     J = np.empty((M, 2, 6))
     w_pair = np.empty((M, P_max))
     row = np.empty(P_max)
-    row_m = np.empty(P_max, np.int64)
+    img_nn = np.empty(P_max, np.int64)
+    mod_nn = np.empty(M, np.int64)
+    mod_d2 = np.empty(M)
     R = np.empty((3, 3))
     Rc = np.empty((3, 3))
     H = np.empty((6, 6))
@@ -342,7 +235,7 @@ def refine_population(poses, fitness, lo, hi, periodic, free, model, normals, us
             for k in range(V):
                 if weights[k] == 0.0:
                     continue
-                project_pose(s, model, normals, use_normals, intr[k], cfw[k], uv, usable, R, Rc)
+                project_pose(s, model, normals, use_normals, intr[k], cfw[k], u, v, usable, R, Rc)
                 for d in range(6):
                     if not step_free[d]:
                         for m in range(M):
@@ -352,19 +245,21 @@ def refine_population(poses, fitness, lo, hi, periodic, free, model, normals, us
                     for e in range(6):
                         s_try[e] = s[e]
                     s_try[d] += _FD[d]
-                    project_pose(s_try, model, normals, use_normals, intr[k], cfw[k], uv_d, usable_d, R, Rc)
+                    project_pose(s_try, model, normals, use_normals, intr[k], cfw[k], u_d, v_d, usable_d, R, Rc)
                     for m in range(M):
-                        J[m, 0, d] = (uv_d[m, 0] - uv[m, 0]) / _FD[d]
-                        J[m, 1, d] = (uv_d[m, 1] - uv[m, 1]) / _FD[d]
+                        J[m, 0, d] = (u_d[m] - u[m]) / _FD[d]
+                        J[m, 1, d] = (v_d[m] - v[m]) / _FD[d]
                 a, b = offsets[k], offsets[k + 1]
                 px = pts[a:b, 0]
                 py = pts[a:b, 1]
                 w_k = weights[k]
                 if kinds[step] != 1:
-                    _soft_accumulate(uv, J, usable, px, py, sigmas[step, k], outlier, w_k, w_k, H, g, w_pair, row)
+                    _soft_accumulate(u, v, J, usable, px, py, sigmas[step, k], outlier, w_k, w_k, H, g, w_pair,
+                                     row)
                 else:
                     gate = scales[step] * taus[k]
-                    _hard_accumulate(uv, J, usable, px, py, gate * gate, w_k, w_k, H, g, row, row_m)
+                    _hard_accumulate(u, v, J, usable, px, py, gate * gate, w_k, w_k, H, g, img_nn, row, mod_nn,
+                                     mod_d2)
             # damped step (Levenberg–Marquardt), fixed parameters held
             for i in range(6):
                 for j in range(i):
@@ -380,9 +275,9 @@ def refine_population(poses, fitness, lo, hi, periodic, free, model, normals, us
                 continue
             if not np.isfinite(f_cur):
                 f_cur = fitness_one(s, model, normals, use_normals, intr, cfw, weights, taus, pts, offsets,
-                                    robust, uv, usable, row, R, Rc)
+                                    robust, u, v, usable, row, R, Rc)
             f_try = fitness_one(s_try, model, normals, use_normals, intr, cfw, weights, taus, pts, offsets,
-                                robust, uv, usable, row, R, Rc)
+                                robust, u, v, usable, row, R, Rc)
             if f_try <= f_cur:
                 for d in range(6):
                     s[d] = s_try[d]
@@ -392,7 +287,7 @@ def refine_population(poses, fitness, lo, hi, periodic, free, model, normals, us
                 lam = min(lam * 10.0, 1e4)
         if not np.isfinite(f_cur):
             f_cur = fitness_one(s, model, normals, use_normals, intr, cfw, weights, taus, pts, offsets,
-                                robust, uv, usable, row, R, Rc)
+                                robust, u, v, usable, row, R, Rc)
         if f_cur <= f_start:  # never worse than the input
             for d in range(6):
                 poses[n, d] = s[d]

@@ -1,114 +1,89 @@
-"""Driving the search: :func:`solve` a pose problem from scratch, :func:`track` a sequence (eq. 2)."""
+"""Solving a pose problem: :func:`solve` from scratch, :func:`track` a sequence (eq. 2), and the :class:`Solution`.
+
+Both run :func:`evopose.loop.evolve`, the one generation loop: :func:`solve` with the global search
+(:class:`evopose.search.EvoPose`), :func:`track` with one warm-started generation
+(:class:`evopose.local.LocalSearch`) and, when the fit is lost, a new search.
+"""
 
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from .fitness import PoseObjective
+from .fitness import Match, PoseObjective
+from .local import LocalSearch
+from .loop import Evaluator, evolve
+from .options import SearchOptions
 from .problem import PoseProblem, View
 from .refine import TRACK_HARD_SCHEDULE, TRACK_SCHEDULE, annealing, refine
-from .search import GOOD_REASONS, EvoPose, EvoPoseState, SearchOptions, Solution
+from .search import EvoPose
 
-#: Truncation distance of the coarse fitness used to screen random starts, in units of tau.
-SCREEN_TAU_SCALE = 4.0
-#: Annealing time at which the refinement of children and hints starts (they are near good poses).
-LOCAL_ANNEALING_START = 0.5
 #: Final polish of the best pose: hard nearest-neighbour steps (accepted only when the fitness drops).
 POLISH_SCHEDULE = annealing(1, hard=6, start=1.0)
-#: Generation after which the step-function weight rule of eq. (4) is first applied.
-STEP_RULE_FROM_GENERATION = 2
+#: Stop reasons that mean "the pose is good" (as opposed to a budget running out).
+GOOD_REASONS = ("good_fitness", "consensus", "stalled")
 
 
-def screen(coarse: PoseObjective, candidates: np.ndarray, origins: np.ndarray, fresh_from: int,
-           keep: int) -> tuple[np.ndarray, np.ndarray]:
-    """Keep the ``keep`` best fresh starts (origin >= ``fresh_from``) by the coarse fitness; others pass.
+@dataclass
+class Solution:
+    """Result of :func:`solve` or :func:`track`.
 
-    Shapes: candidates (K, 6), origins (K,) -> (K', 6), (K',).
+    Attributes
+    ----------
+    pose : array, shape (6,)
+        ``world_from_target`` as ``(x, y, z, roll, pitch, yaw)``.
+    fitness : float
+        Eq. (4) of the best individual.
+    view_terms : array, shape (V,)
+        Each view's term ``d^(k)`` at the best pose.
+    view_weights : array, shape (V,)
+        Weights in force at the end (the step rule may have set some to 0).
+    generations : int
+    evaluations : int
+        Projections of the model (fitness evaluations, screening, and the 6 Jacobian
+        columns of every refinement step): the budget to compare with other optimisers.
+    seconds : float
+    converged : bool
+        Stopped because the pose is good (consensus or threshold), not because a budget ran out.
+    stop_reason : str
+    history : list of float
+        Best fitness per generation.
+    from_hint : bool
+        A hint (or a descendant of one) reached the best basin.
+    reinitialised : bool
+        (track) the fit was lost and the search started over.
     """
-    fresh = origins >= fresh_from
-    if keep <= 0 or np.count_nonzero(fresh) <= keep:
-        return candidates, origins
-    idx = np.nonzero(fresh)[0]
-    f = coarse(candidates[idx])
-    chosen = idx[np.argsort(f, kind="stable")[:keep]]
-    mask = ~fresh
-    mask[chosen] = True
-    return candidates[mask], origins[mask]
+
+    pose: np.ndarray
+    fitness: float
+    view_terms: np.ndarray
+    view_weights: np.ndarray
+    generations: int
+    evaluations: int
+    seconds: float
+    converged: bool
+    stop_reason: str
+    history: list
+    from_hint: bool = False
+    reinitialised: bool = False
+    problem: PoseProblem | None = field(default=None, repr=False)
+    options: SearchOptions | None = field(default=None, repr=False)
+
+    def with_(self, **changes) -> "Solution":
+        return replace(self, **changes)
 
 
 def _rng(seed: int | np.random.Generator | None) -> np.random.Generator:
     return seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)
 
 
-def run(problem: PoseProblem, options: SearchOptions, rng: np.random.Generator,
-        initial: np.ndarray | None = None, hint_source=None, on_generation=None) -> tuple[Solution, EvoPoseState]:
-    """The generation loop: ask -> refine -> evaluate (eq. 4) -> tell, until a stop reason.
-
-    Parameters
-    ----------
-    hint_source : callable () -> array (H, 6) or None, optional
-        Polled once per generation for hints that arrived meanwhile (agents pass their inbox).
-    on_generation : callable (EvoPoseState) -> None, optional
-        Called after every generation (progress, Fig. 6 curves).
-    """
-    t0 = time.perf_counter()
-    objective = PoseObjective(problem, options.fitness, options.tau)
-    coarse = PoseObjective(problem, options.fitness, options.tau, tau_scale=SCREEN_TAU_SCALE)
-    schedule = annealing(options.refine_steps)
-    local_schedule = annealing(max(options.refine_steps // 2, 1), start=LOCAL_ANNEALING_START)
-    evo = EvoPose(problem, options, rng, objective.fitness_scale())
-    state = evo.start(initial)
-    reason = None
-    while reason is None:
-        if hint_source is not None:
-            new = hint_source()
-            if new is not None and np.size(new):
-                evo.inject(state, new)
-        candidates, origins = evo.ask(state)
-        candidates, origins = screen(coarse, candidates, origins, state.fresh_from, state.fresh_keep)
-        fitness = objective(candidates)
-        if options.refine_steps:
-            # fresh starts explore (the whole annealing); children and hints exploit (its narrow end)
-            fresh = origins >= state.fresh_from if state.fresh_keep else np.zeros(len(origins), bool)
-            for rows, sched in ((fresh, schedule), (~fresh, local_schedule)):
-                if np.any(rows):
-                    candidates[rows], fitness[rows] = refine(objective, candidates[rows], fitness[rows], sched)
-        best_before = state.best_fitness
-        evo.tell(state, candidates, fitness, origins)
-        if state.best_fitness != best_before:
-            state.best_unmatched = objective.unmatched_fraction(state.best_pose)
-        if (options.view_reject is not None and objective.n_views > 1
-                and state.generation >= STEP_RULE_FROM_GENERATION):
-            old = objective.weights.copy()
-            new_w = objective.apply_step_rule(state.best_pose, options.view_reject)
-            if not np.array_equal(old, new_w):  # eq. (4) changed: fitness values must be recomputed
-                state.fitness = objective(state.population)
-                state.best_supporters = set()
-                state.best_unmatched = objective.unmatched_fraction(state.best_pose)
-                evo.fitness_scale = objective.fitness_scale()
-        if on_generation is not None:
-            on_generation(state)
-        reason = evo.stop_reason(state, objective.evaluations + coarse.evaluations, time.perf_counter() - t0)
-    if options.refine_steps:
-        polished, fit = refine(objective, state.best_pose[None], np.array([state.best_fitness]), POLISH_SCHEDULE)
-        i = int(np.argmin(state.fitness))
-        state.population[i], state.fitness[i] = polished[0], fit[0]
-    best = state.best_pose
-    terms = objective.view_terms(best[None])[0]
-    solution = Solution(
-        pose=best, fitness=state.best_fitness, view_terms=terms, view_weights=objective.weights.copy(),
-        generations=state.generation, evaluations=objective.evaluations + coarse.evaluations,
-        seconds=time.perf_counter() - t0,
-        converged=reason in GOOD_REASONS and evo.is_good(state.best_fitness, state.best_unmatched),
-        stop_reason=reason,
-        history=list(state.history), from_hint=state.best_from_hint, problem=problem, options=options)
-    return solution, state
-
-
 def solve(problem: PoseProblem, options: SearchOptions | None = None,
-          seed: int | np.random.Generator | None = None, **kwargs) -> Solution:
+          seed: int | np.random.Generator | None = None, *, initial: np.ndarray | None = None,
+          hint_source: Callable[[], np.ndarray | None] | None = None,
+          on_generation: Callable | None = None) -> Solution:
     """Find the pose of the model in the views (EvoPose, eq. 1-4).
 
     Parameters
@@ -117,29 +92,49 @@ def solve(problem: PoseProblem, options: SearchOptions | None = None,
     options : SearchOptions, optional
     seed : int or numpy Generator, optional
         The same seed reproduces the same result exactly.
-    **kwargs
-        Passed to :func:`run` (``hint_source``, ``on_generation``, ``initial``).
+    initial : array (K, 6), optional
+        Poses for the first generation.
+    hint_source : callable () -> array (H, 6) or None, optional
+        Polled once per generation for hints that arrived meanwhile (agents pass their inbox).
+    on_generation : callable (EvoPoseState) -> None, optional
+        Called after every generation (progress, Fig. 6 curves).
     """
-    return run(problem, options or SearchOptions(), _rng(seed), **kwargs)[0]
+    t0 = time.perf_counter()
+    options = options or SearchOptions()
+    evo = EvoPose(problem, options, _rng(seed))
+    run = evolve(evo, evo.start(initial), Evaluator.for_search(problem, options), hint_source=hint_source,
+                 on_generation=on_generation)
+    state, objective = run.state, run.evaluator.objective
+    pose, fitness = state.best_pose, state.best_fitness
+    if options.refine_steps:
+        polished, fit = refine(objective, pose[None], np.array([fitness]), POLISH_SCHEDULE)
+        pose, fitness = polished[0], float(fit[0])
+    mismatch = objective.mismatch(fitness)
+    match = Match(None if mismatch is None else float(mismatch), state.best_match.unmatched)
+    terms = objective.view_terms(pose[None])[0]
+    return Solution(
+        pose=pose, fitness=fitness, view_terms=terms, view_weights=objective.weights.copy(),
+        generations=state.generation, evaluations=objective.evaluations, seconds=time.perf_counter() - t0,
+        converged=run.told.stop_reason in GOOD_REASONS and options.is_good(match), stop_reason=run.told.stop_reason,
+        history=list(state.history), from_hint=state.best_from_hint, problem=problem, options=options)
 
 
-def match_quality(problem: PoseProblem, pose: np.ndarray, options: SearchOptions | None = None) -> float:
-    """Mean normalised view term at ``pose``: 0 is a perfect match, 1 is no match (robust fitness)."""
+def pose_mismatch(problem: PoseProblem, pose: np.ndarray, options: SearchOptions | None = None) -> float:
+    """:attr:`evopose.fitness.Match.mismatch` of ``pose`` (6,) under the robust fitness: 0 perfect, 1 no match."""
     options = options or SearchOptions()
     objective = PoseObjective(problem, "robust", options.tau)
-    terms = objective.view_terms(np.atleast_2d(pose))[0]
-    w = objective.base_weights
-    return float(np.sum(w * terms / objective.taus) / np.sum(w))
+    return float(objective.mismatch(objective(np.atleast_2d(pose))[0]))
 
 
 def track(previous: Solution, new_views: list[View] | tuple[View, ...], *, problem: PoseProblem | None = None,
           options: SearchOptions | None = None, seed: int | np.random.Generator | None = None,
-          lost_quality: float = 0.5, hints: np.ndarray | None = None) -> Solution:
+          lost_mismatch: float = 0.5, hints: np.ndarray | None = None) -> Solution:
     """Warm-started pose for the next frame (eq. 2): refine the previous pose on the new views.
 
-    The previous pose is refined locally; if the match is then lost (normalised
-    robust term, or the share of visible marks without a one-to-one match, above
-    ``lost_quality``), the search re-initialises from scratch with the previous pose as a hint.
+    The previous pose (and any hints) is refined locally, both by annealed soft matching and by
+    nearest-neighbour steps alone; if the best is then lost (its mismatch, or the share of visible marks
+    without a one-to-one match, above ``lost_mismatch``; always with the paper's unbounded fitness), the
+    search re-initialises from scratch with the previous pose as a hint.
 
     Parameters
     ----------
@@ -150,7 +145,7 @@ def track(previous: Solution, new_views: list[View] | tuple[View, ...], *, probl
     problem : PoseProblem, optional
         Replaces the previous problem (e.g. new bounds); its views are replaced by ``new_views``.
     hints : array (H, 6), optional
-        Team-mates' poses; the better of previous pose and hints seeds the refinement.
+        Team-mates' poses; the better of previous pose and hints wins.
     """
     t0 = time.perf_counter()
     base = problem or previous.problem
@@ -158,25 +153,24 @@ def track(previous: Solution, new_views: list[View] | tuple[View, ...], *, probl
         raise ValueError("track needs the previous solution's problem or an explicit problem")
     options = options or previous.options or SearchOptions()
     prob = base.with_views(new_views)
-    objective = PoseObjective(prob, options.fitness, options.tau)
+    # a soft step pulled off by a false point is rejected as a whole: nearest-neighbour steps alone, too
+    evaluator = Evaluator(PoseObjective(prob, options.fitness, options.tau),
+                          exploit=(TRACK_SCHEDULE, TRACK_HARD_SCHEDULE))
+    local = LocalSearch(prob.bounds, lost_mismatch=lost_mismatch)
+    state = local.start(previous.pose)
+    if hints is not None and np.size(hints):
+        state = local.inject(state, hints)
+    run = evolve(local, state, evaluator)
+    if run.told.stop_reason == "tracked":
+        best, objective = run.state, run.evaluator.objective
+        terms = objective.view_terms(best.best_pose[None])[0]
+        return Solution(pose=np.array(best.best_pose), fitness=best.best_fitness, view_terms=terms,
+                        view_weights=objective.weights.copy(), generations=0, evaluations=objective.evaluations,
+                        seconds=time.perf_counter() - t0, converged=True, stop_reason="tracked",
+                        history=[best.best_fitness], from_hint=best.best_from_hint, problem=prob, options=options)
     starts = np.atleast_2d(previous.pose)
     if hints is not None and np.size(hints):
         starts = np.concatenate([starts, np.atleast_2d(hints)])
-    fit0 = objective(starts)
-    pose, fit = refine(objective, starts, fit0, schedule=TRACK_SCHEDULE)
-    pose_hard, fit_hard = refine(objective, starts, fit0, schedule=TRACK_HARD_SCHEDULE)
-    better = fit_hard < fit
-    pose[better], fit[better] = pose_hard[better], fit_hard[better]
-    i = int(np.argmin(fit))
-    terms = objective.view_terms(pose[i][None])[0]
-    quality = float(np.sum(objective.base_weights * terms / objective.taus) / np.sum(objective.base_weights))
-    if (options.fitness == "robust" and quality <= lost_quality
-            and objective.unmatched_fraction(pose[i]) <= lost_quality):
-        return Solution(pose=pose[i], fitness=float(fit[i]), view_terms=terms,
-                        view_weights=objective.weights.copy(), generations=0,
-                        evaluations=objective.evaluations, seconds=time.perf_counter() - t0, converged=True,
-                        stop_reason="tracked", history=[float(fit[i])], from_hint=i > 0,
-                        problem=prob, options=options)
     lost = prob.with_hints(np.concatenate([prob.hints, starts]))
     sol = solve(lost, options, seed)
     return sol.with_(reinitialised=True, seconds=time.perf_counter() - t0)

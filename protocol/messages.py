@@ -19,7 +19,7 @@ from .keys import Topic, check_name
 from .limits import FEATURE_POINT_SIZE, MAX_FEATURE_POINTS
 
 #: Version of the message schema; a receiver rejects any other (SchemaMismatch).
-SCHEMA_VERSION = 1
+SCHEMA_VERSION = 2
 
 Float = Annotated[float, Field(allow_inf_nan=False)]
 NonNegative = Annotated[float, Field(ge=0, allow_inf_nan=False)]
@@ -59,7 +59,7 @@ class Message(Payload):
         ``max_age`` is ignored.
     """
 
-    version: Literal[1] = SCHEMA_VERSION
+    version: Literal[2] = SCHEMA_VERSION
     sender: str
     seq: Uint64
     stamp_ns: Annotated[int, Field(ge=0, lt=2**63)]
@@ -216,7 +216,8 @@ class PoseEstimate(Message):
     """An estimate of the pose of ``target``, ``world_from_target``, and how it was found.
 
     ``quaternion`` is derived from the Euler angles and sent for convenience; receivers ignore
-    the one on the wire. ``quality`` is in [0, 1] (1 best); ``inputs`` names the team-mates whose
+    the one on the wire. ``mismatch`` is in [0, 1] (0 best: :attr:`evopose.fitness.Match.mismatch`, the
+    fitness over its value when nothing matches); ``inputs`` names the team-mates whose
     data (images, features, hints, attitude) went into the estimate.
     """
 
@@ -225,7 +226,7 @@ class PoseEstimate(Message):
     target: str = "target"
     pose: Pose6
     fitness: NonNegative
-    quality: Annotated[float, Field(ge=0, le=1, allow_inf_nan=False)]
+    mismatch: Annotated[float, Field(ge=0, le=1, allow_inf_nan=False)]
     converged: bool
     generations: Annotated[int, Field(ge=0, lt=2**32)]
     seconds: NonNegative

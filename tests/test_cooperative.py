@@ -8,6 +8,7 @@ import pytest
 
 from agents.vehicle.frames import FrameClock, SimulatedCamera
 from agents.vehicle.team_views import MateView, TeamViews, build_views, camera_from_info, camera_info, own_view
+from evopose import PoseObjective, View
 from evopose.cooperative import CooperativeEstimator, Knowledge
 from evopose.pose import wrap_angle
 from scenarios.world import load_scenario
@@ -43,14 +44,14 @@ def test_two_views_in_either_order_give_one_pose(exp2):
     assert _position_error(a.pose, frames["H1"].truth) < 0.02
 
 
-def test_tracking_follows_and_reports_quality(exp2):
+def test_tracking_follows_and_reports_mismatch(exp2):
     scenario, frames = exp2
     estimator = _estimator(scenario)
     views, _ = _views(frames, ("H1",))
     first = estimator.estimate(views, frame=0)
     second = estimator.estimate(views, frame=1)
     assert first.solved and not second.solved and second.solution.stop_reason == "tracked"
-    assert 0.5 < second.quality <= 1.0
+    assert 0.0 <= second.mismatch < 0.5 and 0.0 <= first.mismatch < 0.5   # 0 best, as on the wire
     assert _position_error(second.pose, frames["H1"].truth) < 0.05
 
 
@@ -121,3 +122,40 @@ def test_a_narrow_attitude_box_still_lets_the_position_converge():
     estimate = _estimator(scenario).estimate(views, knowledge=knowledge)
     assert estimate.good and estimate.good_after_s is not None
     assert _position_error(estimate.pose, frame.truth) < 0.02
+
+
+def _snapshot(objective: PoseObjective) -> dict:
+    """An objective's state: every attribute but its evaluation counter (a meter, mutable by design) and its
+    packed arrays (a cached property the objective computes itself)."""
+    return {k: np.array(v) if isinstance(v, np.ndarray) else v for k, v in vars(objective).items()
+            if k not in ("counter", "packed")}
+
+
+def test_the_estimator_never_mutates_an_objective(exp2, monkeypatch):
+    """Eq. (4)'s step rule drops a view without the target; the estimator solves, tracks and runs generations
+    with hints. Every objective made on the way ends as it was made: new weights make a new objective."""
+    made = []
+    post_init = PoseObjective.__post_init__
+
+    def record(self):
+        post_init(self)
+        made.append((self, _snapshot(self)))
+
+    monkeypatch.setattr(PoseObjective, "__post_init__", record)
+    scenario, frames = exp2
+    views, _ = _views(frames, ("H1", "H2"))
+    junk = np.random.default_rng(3).uniform([50, 50], [590, 430], (len(views[1].points), 2))
+    views = [views[0], View(views[1].camera, junk, views[1].weight)]
+    estimator = _estimator(scenario)
+    first = estimator.estimate(views, frame=0)
+    assert first.good and list(first.solution.view_weights) == [0.5, 0.0]
+    assert estimator.estimate(views[:1], frame=1).solution.stop_reason == "tracked"
+    truth = frames["H1"].truth
+    for _ in range(3):
+        estimator.generation(truth[None])
+    assert len(made) > 4 and any(list(o.weights) == [0.5, 0.0] for o, _ in made)
+    for objective, before in made:
+        after = _snapshot(objective)
+        assert after.keys() == before.keys()
+        for key, value in before.items():
+            np.testing.assert_array_equal(after[key], value, err_msg=key)

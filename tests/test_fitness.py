@@ -183,10 +183,12 @@ def test_two_views_objective_is_weighted_sum(kind):
     np.testing.assert_allclose(terms, np.stack([d1, d2], axis=1), rtol=1e-12)
     # both views carry information here (neither term is trivially zero)
     assert np.all(terms > 0)
-    # a view whose weight was set to 0 (step rule) is skipped
-    objective.weights = np.array([W1, 0.0])
-    np.testing.assert_allclose(objective(poses), W1 * d1, rtol=1e-12)
-    np.testing.assert_array_equal(objective.view_terms(poses, only_weighted=True)[:, 1], 0.0)
+    # a view whose weight was set to 0 (step rule) is skipped, in a new objective: the old one is unchanged
+    reweighted = objective.with_weights([W1, 0.0])
+    np.testing.assert_allclose(reweighted(poses), W1 * d1, rtol=1e-12)
+    np.testing.assert_array_equal(reweighted.view_terms(poses, only_weighted=True)[:, 1], 0.0)
+    np.testing.assert_allclose(objective(poses), W1 * d1 + W2 * d2, rtol=1e-12)
+    np.testing.assert_array_equal(objective.weights, [W1, W2])
 
 
 # --- step-function weights (eq. 4 rule) -------------------------------------------------------------------------
@@ -209,7 +211,7 @@ def test_step_weights_keeps_base_weights_when_all_would_be_dropped():
     np.testing.assert_array_equal(step_weights(np.array([1.0, 5.0, 9.0]), w0, 2.0), w0)
 
 
-def test_apply_step_rule_zeroes_a_bad_view():
+def test_step_rule_weights_zero_a_bad_view():
     sp = make_problem("box", np.random.default_rng(23), noise=0.5, clutter=0.0, missing=0.0, n_views=2)
     v1, v2 = sp.problem.views
     # the second camera sees something else entirely
@@ -217,10 +219,11 @@ def test_apply_step_rule_zeroes_a_bad_view():
     problem = sp.problem.with_views([v1, View(v2.camera, garbage, 1.0)])
     for kind, threshold in (("robust", 0.5), ("paper", 50.0)):
         objective = PoseObjective(problem, kind)
-        weights = objective.apply_step_rule(sp.true_pose, threshold)
+        weights = objective.step_rule_weights(sp.true_pose, threshold)
         np.testing.assert_array_equal(weights, [1.0, 0.0])
-        np.testing.assert_array_equal(objective.weights, [1.0, 0.0])
-        np.testing.assert_allclose(objective(sp.true_pose[None]),
+        np.testing.assert_array_equal(objective.weights, [1.0, 1.0])   # the rule derives, never assigns
+        reweighted = objective.with_weights(weights)
+        np.testing.assert_allclose(reweighted(sp.true_pose[None]),
                                    objective.view_terms(sp.true_pose[None])[:, 0], rtol=1e-12)
 
 

@@ -103,9 +103,9 @@ with FleetBus.open(options, {fleet!r}, "evil") as bus:
         bus.put_raw(topic, b"\\x00" * (p.size_limit(topic) + 1))                             # oversized
         bus.put_raw(topic, b"")                                                              # empty
     bus.put_raw("pose", p.encode(p.PoseEstimate(sender="other", seq=0, stamp_ns=time.time_ns(), pose=(0,) * 6,
-                fitness=0, quality=1, converged=True, generations=1, seconds=0)))            # spoofed sender
+                fitness=0, mismatch=0, converged=True, generations=1, seconds=0)))           # spoofed sender
     bus.put_raw("pose", p.encode(p.PoseEstimate(sender="evil", seq=0, stamp_ns=time.time_ns() - 10**10,
-                pose=(0,) * 6, fitness=0, quality=1, converged=True, generations=1, seconds=0)))  # stale
+                pose=(0,) * 6, fitness=0, mismatch=0, converged=True, generations=1, seconds=0)))  # stale
     t0 = time.monotonic()
     for i in range(300):
         bus.publish_hint(np.array([i, 0, 10, 0, 0, 0.1]))

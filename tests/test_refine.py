@@ -3,6 +3,8 @@ from a nearby start on clean synthetic problems."""
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
@@ -12,7 +14,7 @@ from evopose.camera import Camera
 from evopose.fitness import PoseObjective
 from evopose.pose import euler_from_rotation, rotation_from_euler
 from evopose.problem import Bounds, PoseProblem, View
-from evopose.refine import refine
+from evopose.refine import match_residuals, refine
 
 
 def perturbed(true_pose: np.ndarray, distance: float, rng: np.random.Generator, n: int,
@@ -87,8 +89,7 @@ def test_refine_uses_the_given_fitness_and_leaves_it_alone():
 def test_refine_honours_view_weights():
     """A view switched off by the step rule (weight 0) is ignored: the result equals refining without it."""
     sp, problem = distorted_two_view_problem()
-    objective = PoseObjective(problem, "robust")
-    objective.weights = np.array([1.0, 0.0])
+    objective = PoseObjective(problem, "robust", weights=np.array([1.0, 0.0]))
     alone = PoseObjective(problem.with_views([problem.views[0]]), "robust")
     poses = population(sp, problem, np.random.default_rng(3))[:10]
     out, fit = refine(objective, poses)
@@ -185,3 +186,56 @@ def test_refine_fitness_consistent_with_normals():
     np.testing.assert_allclose(fit, objective(out), rtol=1e-9, atol=1e-12)
     assert np.all(fit <= before * (1 + 1e-12))
     assert np.any(fit < before)
+
+
+# --- one chamfer distance, one objective ---------------------------------------------------------------------------
+
+@pytest.mark.parametrize("case", ["distorted two views", "box with normals", "one view weighted 0", "paper's eq. 1"])
+def test_fitness_equals_the_refinement_s_residual_cost(case):
+    """The refinement's nearest-neighbour residuals (what its hard steps pull on, from its own packed views and
+    projection), truncated at tau and summed as eq. (1) and (4) say, give the fitness of the same pose."""
+    kind, weights = "robust", None
+    if case == "box with normals":
+        sp = make_problem("box", np.random.default_rng(11), noise=0.5, clutter=0.2, missing=0.1, distance=6.0)
+        problem = sp.problem
+    else:
+        sp, problem = distorted_two_view_problem()
+        kind = "paper" if case == "paper's eq. 1" else "robust"
+        weights = [0.7, 0.0] if case == "one view weighted 0" else None
+    objective = PoseObjective(problem, kind, weights=weights)
+    poses = population(sp, problem, np.random.default_rng(13))
+    fitness = objective(poses)
+    for pose, f in zip(poses, fitness):
+        cost = 0.0
+        for (image, model), w, tau in zip(match_residuals(objective, pose), objective.weights, objective.taus):
+            if kind == "robust":  # both directions, truncated, one mean
+                term = (np.minimum(image, tau).sum() + np.minimum(model, tau).sum()) / (len(image) + len(model))
+            else:                 # eq. (1): every image point to its nearest projected model point
+                term = image.sum()
+            cost += w * term
+        assert cost == pytest.approx(f, rel=1e-9, abs=1e-12)
+    # and the cost the refinement reports for its result is the objective's
+    out, fit = refine(objective, poses[:6])
+    np.testing.assert_allclose(fit, objective(out), rtol=1e-9, atol=1e-12)
+
+
+def test_refine_does_not_mutate_the_objective():
+    """Refinement reads the objective's own packed arrays (computed once by the objective); it attaches nothing
+    to it and changes none of its numbers, so a fresh objective refines the same."""
+    sp, problem = distorted_two_view_problem()
+    objective = PoseObjective(problem, "robust", weights=[1.0, 0.6])
+    attributes = set(vars(objective))
+    weights, taus = objective.weights.copy(), objective.taus.copy()
+    poses = population(sp, problem, np.random.default_rng(14))
+    out, fit = refine(objective, poses)
+    assert set(vars(objective)) - attributes <= {"packed"} and not hasattr(objective, "_packed")
+    assert objective.packed is objective.packed
+    np.testing.assert_array_equal(objective.weights, weights)
+    np.testing.assert_array_equal(objective.taus, taus)
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        objective.weights = np.array([1.0, 0.0])
+    with pytest.raises(ValueError, match="read-only"):
+        objective.weights[1] = 0.0
+    out_fresh, fit_fresh = refine(PoseObjective(problem, "robust", weights=[1.0, 0.6]), poses)
+    np.testing.assert_array_equal(out, out_fresh)
+    np.testing.assert_array_equal(fit, fit_fresh)

@@ -2,12 +2,15 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
 from benchmarks.problems import is_success, make_problem, pose_errors
-from evopose import Bounds, EvoPose, PoseObjective, PoseProblem, SearchOptions, View, solve, track
+from evopose import Bounds, Evaluator, EvoPose, PoseObjective, PoseProblem, SearchOptions, View, refine, solve, track
 from evopose.pose import PARAM_NAMES
+from evopose.solver import POLISH_SCHEDULE
 
 
 def _errors(sp, pose):
@@ -38,7 +41,8 @@ def test_robustness_cases_are_solved(kind, seed, difficulty):
 
 
 def test_robust_fitness_prefers_truth_where_plain_eq1_does_not():
-    """With clutter on one side the paper's eq. (1) minimum moves; the robust fitness keeps the truth."""
+    """False points beyond one corner move the minimum of the paper's eq. (1) out of the right basin; the
+    robust fitness keeps the truth there, and the search finds it."""
     sp = make_problem("random", np.random.default_rng(7), noise=0.5, clutter=0.0, missing=0.0)
     view = sp.problem.views[0]
     rng = np.random.default_rng(0)
@@ -46,12 +50,19 @@ def test_robust_fitness_prefers_truth_where_plain_eq1_does_not():
     cluttered = sp.problem.with_views([View(view.camera, np.concatenate([view.points, far_side]))])
     shifted = sp.true_pose.copy()
     shifted[:2] += 0.02 * sp.distance  # a wrong pose leaning towards the false points
-    paper = PoseObjective(cluttered, "paper")
     robust = PoseObjective(cluttered, "robust")
     candidates = np.stack([sp.true_pose, shifted])
-    # whichever wins eq. (1), the robust one must rank the truth first
     assert robust(candidates)[0] < robust(candidates)[1]
-    assert paper(candidates).shape == (2,)
+    # the robust search lands in the right basin, at a fitness no worse than the truth's
+    found = solve(cluttered, seed=0)
+    _assert_solved(sp, found)
+    assert found.fitness <= robust(sp.true_pose[None])[0]
+    # eq. (1) has a far better minimum in a wrong basin, and its search goes there
+    paper = PoseObjective(cluttered, "paper")
+    misled = solve(cluttered, SearchOptions(fitness="paper"), seed=0)
+    assert misled.fitness < 0.5 * paper(sp.true_pose[None])[0]
+    rot, pos = _errors(sp, misled.pose)
+    assert not is_success(np.deg2rad(rot), pos, sp.distance), (rot, pos)
 
 
 def test_same_seed_same_result_and_different_seed_runs_differently():
@@ -88,28 +99,80 @@ def test_fixed_parameter_never_moves():
 
 def test_good_hint_enters_and_wins_bad_hint_dies():
     sp = make_problem("box", np.random.default_rng(31), noise=1.0, clutter=0.2, missing=0.1)
-    options = SearchOptions()
-    rng = np.random.default_rng(0)
-    evo = EvoPose(sp.problem, options, rng, PoseObjective(sp.problem).fitness_scale())
+    evo = EvoPose(sp.problem, SearchOptions(), np.random.default_rng(0))
     objective = PoseObjective(sp.problem)
-    state = evo.start()
-    candidates, origins = evo.ask(state)
-    evo.tell(state, candidates, objective(candidates), origins)
+
+    def generation(state):
+        state, asked = evo.ask(state)
+        return asked, *evo.tell(state, asked, asked.candidates, objective(asked.candidates), judge=objective.match)
+
+    asked, state, told = generation(evo.start())
+    assert told.generation == 1 and told.improved and told.stop_reason is None
     bad = sp.true_pose.copy()
     bad[3:] += np.deg2rad([150.0, -60.0, 90.0])
     bad[:3] *= 1.5
-    evo.inject(state, bad[None])
-    candidates, origins = evo.ask(state)
-    hint_rows = origins < 0
+    asked, state, told = generation(evo.inject(state, bad[None]))
+    hint_rows = asked.origins < 0
     assert hint_rows.sum() == 1
-    np.testing.assert_allclose(candidates[hint_rows][0], sp.problem.bounds.project(bad))
-    evo.tell(state, candidates, objective(candidates), origins)
+    np.testing.assert_allclose(asked.candidates[hint_rows][0], sp.problem.bounds.project(bad))
     assert not np.any(state.origin < 0), "a hint that fits nothing must be discarded by selection"
+    assert not told.improved
     # the true pose as a hint becomes the best individual at once
-    evo.inject(state, sp.true_pose[None])
-    candidates, origins = evo.ask(state)
-    evo.tell(state, candidates, objective(candidates), origins)
-    assert state.best_from_hint
+    asked, state, told = generation(evo.inject(state, sp.true_pose[None]))
+    assert state.best_from_hint and told.improved
+    assert state.best_match.mismatch == pytest.approx(objective.mismatch(state.best_fitness))
+
+
+def test_ask_tell_state_is_immutable():
+    """Only EvoPose makes states, and every call returns a new one: the old state stays as it was."""
+    sp = make_problem("box", np.random.default_rng(12), noise=1.0, clutter=0.1, missing=0.0)
+    evo = EvoPose(sp.problem, SearchOptions(), np.random.default_rng(0))
+    objective = PoseObjective(sp.problem)
+    start = evo.start()
+    state, asked = evo.ask(start)
+    assert start.next_origin == 0 and state.next_origin == len(asked.candidates) and asked.fresh.all()
+    told_state, told = evo.tell(state, asked, asked.candidates, objective(asked.candidates))
+    assert len(state.population) == 0 and state.generation == 0 and state.history == ()
+    assert told_state.generation == 1 and len(told_state.history) == 1
+    with pytest.raises(ValueError, match="read-only"):
+        told_state.population[0, 0] = 0.0
+    with pytest.raises(AttributeError):
+        told_state.generation = 5
+    hinted = evo.inject(told_state, sp.true_pose[None])
+    assert len(told_state.pending_hints) == 0 and len(hinted.pending_hints) == 1
+
+
+@pytest.mark.parametrize("kind, seed, n_views, junk_view", [("box", 11, 1, False), ("random", 13, 2, False),
+                                                           ("box", 41, 2, True)])
+def test_a_user_written_ask_tell_loop_reaches_solve_s_result(kind, seed, n_views, junk_view):
+    """The search is a plain ask / tell: this loop, written from the public pieces (screen, evaluate with
+    refinement, tell, eq. 4's step rule), reproduces :func:`solve` for the same seed exactly."""
+    sp = make_problem(kind, np.random.default_rng(seed), noise=1.0, clutter=0.1, missing=0.1, n_views=n_views)
+    if junk_view:  # a second view without the target: the step rule drops it, and the population is rescored
+        junk = np.random.default_rng(1).uniform([100, 100], [540, 380], (15, 2))
+        sp = replace(sp, problem=sp.problem.with_views([sp.problem.views[0], View(sp.problem.views[1].camera, junk)]))
+    options = SearchOptions()
+    evo = EvoPose(sp.problem, options, np.random.default_rng(5))
+    evaluator = Evaluator.for_search(sp.problem, options)
+    state, told = evo.start(), None
+    while told is None or told.stop_reason is None:
+        state, asked = evo.ask(state)
+        asked = evaluator.screen(asked)
+        poses, fitness = evaluator(asked)
+        state, told = evo.tell(state, asked, poses, fitness, judge=evaluator.objective.match,
+                               evaluations=evaluator.evaluations)
+        if told.generation >= 2 and (reweighted := evaluator.reweighted(state.best_pose)) is not None:
+            evaluator = reweighted
+            state, told = evo.rescore(state, evaluator.objective(state.population), judge=evaluator.objective.match,
+                                      evaluations=evaluator.evaluations)
+    pose, fit = refine(evaluator.objective, state.best_pose[None], [state.best_fitness], POLISH_SCHEDULE)
+    reference = solve(sp.problem, options, seed=5)
+    assert told.stop_reason == reference.stop_reason and state.generation == reference.generations
+    assert list(state.history) == reference.history
+    np.testing.assert_array_equal(pose[0], reference.pose)
+    np.testing.assert_array_equal(evaluator.objective.weights, reference.view_weights)
+    assert np.count_nonzero(reference.view_weights == 0) == junk_view
+    _assert_solved(sp, reference)
 
 
 def test_solve_with_hint_uses_it():

@@ -106,7 +106,7 @@ def sample_message(spec: PublishSpec, header: dict, rng: np.random.Generator) ->
         return Attitude(**header, body=header["sender"], roll=pose[3], pitch=pose[4], yaw=pose[5],
                         sigma=(0.002, 0.002, 0.01))
     if spec.topic is Topic.POSE:
-        return PoseEstimate(**header, pose=pose, fitness=0.5, quality=0.9, converged=True, generations=10,
+        return PoseEstimate(**header, pose=pose, fitness=0.5, mismatch=0.1, converged=True, generations=10,
                             seconds=0.1)
     raise ValueError(f"publish cannot make {spec.topic.value!r} messages; Stats are sent by agents themselves")
 

@@ -390,7 +390,7 @@ class VehicleAgent:
         target = self.scenario.spec.target.name
         self.bus.publish(PoseEstimate(**self.bus.header(Topic.POSE, stamp), target=target,
                                       pose=tuple(float(v) for v in sol.pose), fitness=float(sol.fitness),
-                                      quality=estimate.quality, converged=estimate.good,
+                                      mismatch=estimate.mismatch, converged=estimate.good,
                                       generations=int(sol.generations), seconds=seconds,
                                       from_hint=bool(sol.from_hint),
                                       inputs=tuple(v for v in inputs if v != self.config.vehicle)))
@@ -398,7 +398,7 @@ class VehicleAgent:
             self._publish_hint(sol.pose)
         self.emit({"event": "frame", "vehicle": self.config.vehicle, "frame": n, "stamp_ns": stamp,
                    "points": points, "views": inputs, "knowledge": [k.name for k in knowledge],
-                   "pose": pose_dict(sol.pose), "fitness": float(sol.fitness), "quality": estimate.quality,
+                   "pose": pose_dict(sol.pose), "fitness": float(sol.fitness), "mismatch": estimate.mismatch,
                    "good": estimate.good, "solved": estimate.solved, "from_hint": bool(sol.from_hint),
                    "seconds": seconds, "error": error})
 
@@ -442,7 +442,7 @@ class VehicleAgent:
         truth = self.scenario.target_pose(n % self.scenario.frames)
         self.bus.publish(PoseEstimate(**self.bus.header(Topic.POSE, self.clock.stamp_ns(n)),
                                       target=self.config.vehicle, pose=tuple(float(v) for v in truth), fitness=0.0,
-                                      quality=1.0, converged=True, generations=0, seconds=0.0))
+                                      mismatch=0.0, converged=True, generations=0, seconds=0.0))
 
 
 def run_agent(options: SessionOptions, config: AgentConfig, stop: threading.Event, emit: Emit) -> dict:

@@ -36,7 +36,7 @@ def golden_messages() -> dict[str, Payload]:
         "attitude": Attitude(sender="airship", seq=42, stamp_ns=STAMP_NS, body="airship", roll=0.1, pitch=-0.05,
                              yaw=1.0, sigma=(0.002, 0.002, 0.01)),
         "pose": PoseEstimate(sender="ugv2", seq=3, stamp_ns=STAMP_NS, target="airship",
-                             pose=(1.0, 2.0, 15.0, 0.1, -0.05, 1.0), fitness=0.75, quality=0.9, converged=True,
+                             pose=(1.0, 2.0, 15.0, 0.1, -0.05, 1.0), fitness=0.75, mismatch=0.1, converged=True,
                              generations=17, seconds=0.42, from_hint=True, inputs=("uav1",)),
         "stats": Stats(sender="ugv2", seq=0, stamp_ns=STAMP_NS, sent={"pose": 10, "hint": 10},
                        received={"features": 9}, bytes_sent={"pose": 2670, "hint": 240},

@@ -1,0 +1,185 @@
+"""The generation loop, the only one: ask -> screen -> evaluate (refine, eq. 4) -> tell, until tell says stop.
+
+:func:`evolve` drives any optimiser with the ask / tell of :class:`evopose.search.EvoPose` (the global
+search of :func:`evopose.solve`) or :class:`evopose.local.LocalSearch` (the warm starts of
+:func:`evopose.track` and :meth:`evopose.cooperative.CooperativeEstimator.generation`). How candidates
+are evaluated is an :class:`Evaluator`: the coarse screening of fresh starts, the Lamarckian
+refinement (:func:`evopose.refine.refine`) and the fitness, eq. (4), with the paper's step rule for
+its weights. The optimiser never sees the objective, only fitness values and a match judgement.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, replace
+from typing import Any, Protocol
+
+import numpy as np
+
+from .fitness import PoseObjective
+from .options import SearchOptions
+from .problem import PoseProblem
+from .refine import Schedule, annealing, refine
+from .search import Ask, Judge, Told
+
+#: Truncation distance of the coarse fitness used to screen random starts, in units of tau.
+SCREEN_TAU_SCALE = 4.0
+#: Annealing time at which the refinement of children and hints starts (they are near good poses).
+LOCAL_ANNEALING_START = 0.5
+#: Generation after which the step-function weight rule of eq. (4) is first applied.
+STEP_RULE_FROM_GENERATION = 2
+
+
+class AskTell(Protocol):
+    """What :func:`evolve` needs of an optimiser; every method returns a new state."""
+
+    def inject(self, state: Any, hints: np.ndarray) -> Any: ...
+
+    def ask(self, state: Any) -> tuple[Any, Ask]: ...
+
+    def tell(self, state: Any, asked: Ask, poses: np.ndarray, fitness: np.ndarray, *, judge: Judge | None = None,
+             evaluations: int = 0, elapsed: float = 0.0) -> tuple[Any, Told]: ...
+
+    def rescore(self, state: Any, fitness: np.ndarray, *, judge: Judge | None = None, evaluations: int = 0,
+                elapsed: float = 0.0) -> tuple[Any, Told]: ...
+
+
+def screen(coarse: PoseObjective, asked: Ask) -> Ask:
+    """Keep the ``asked.fresh_keep`` best fresh starts by the coarse fitness; other candidates pass."""
+    fresh = asked.fresh
+    if np.count_nonzero(fresh) <= asked.fresh_keep:
+        return asked
+    idx = np.nonzero(fresh)[0]
+    f = coarse(asked.candidates[idx])
+    chosen = idx[np.argsort(f, kind="stable")[:asked.fresh_keep]]
+    mask = ~fresh
+    mask[chosen] = True
+    return asked.subset(mask)
+
+
+def _best_of(objective: PoseObjective, poses: np.ndarray, fitness: np.ndarray,
+             schedules: tuple[Schedule, ...]) -> tuple[np.ndarray, np.ndarray]:
+    """Refine every pose along each schedule from the same start; keep the best result per pose."""
+    best_p, best_f = refine(objective, poses, fitness, schedules[0])
+    for schedule in schedules[1:]:
+        p, f = refine(objective, poses, fitness, schedule)
+        better = f < best_f
+        best_p[better], best_f[better] = p[better], f[better]
+    return best_p, best_f
+
+
+@dataclass(frozen=True, eq=False)
+class Evaluator:
+    """How candidates are evaluated (immutable; the step rule derives a new one).
+
+    Attributes
+    ----------
+    objective : PoseObjective
+        Eq. (4) with the weights in force.
+    coarse : PoseObjective or None
+        Screening fitness of fresh starts (a wider tau); None: no screening.
+    explore : tuple of schedules
+        Refinement of fresh starts; with several, each runs from the same start and the best result is kept.
+    exploit : tuple of schedules
+        Refinement of the other candidates (children, hints, given poses).
+    view_reject : float or None
+        Threshold of eq. (4)'s step rule (:meth:`PoseObjective.step_rule_weights`); None keeps the weights.
+    """
+
+    objective: PoseObjective
+    coarse: PoseObjective | None = None
+    explore: tuple[Schedule, ...] = ()
+    exploit: tuple[Schedule, ...] = ()
+    view_reject: float | None = None
+
+    @classmethod
+    def for_search(cls, problem: PoseProblem, options: SearchOptions) -> "Evaluator":
+        """The global search's evaluation: screening, annealed refinement (full for fresh starts, its narrow
+        end for the others), eq. (4) of ``options.fitness`` and its step rule."""
+        objective = PoseObjective(problem, options.fitness, options.tau)
+        coarse = PoseObjective(problem, options.fitness, options.tau, tau_scale=SCREEN_TAU_SCALE,
+                               counter=objective.counter)
+        explore = exploit = ()
+        if options.refine_steps:
+            explore = (annealing(options.refine_steps),)
+            exploit = (annealing(max(options.refine_steps // 2, 1), start=LOCAL_ANNEALING_START),)
+        return cls(objective, coarse, explore, exploit, options.view_reject)
+
+    @property
+    def evaluations(self) -> int:
+        """Projections of the model so far, screening included (the objectives share one counter)."""
+        return self.objective.evaluations
+
+    def screen(self, asked: Ask) -> Ask:
+        return asked if self.coarse is None else screen(self.coarse, asked)
+
+    def __call__(self, asked: Ask) -> tuple[np.ndarray, np.ndarray]:
+        """Eq. (4) of the candidates, then their refinement: poses (K, 6) and fitness (K,)."""
+        poses = np.array(asked.candidates, float)
+        fitness = self.objective(poses)
+        fresh = asked.fresh
+        # fresh starts explore (the whole annealing); children and hints exploit (its narrow end)
+        for rows, schedules in ((fresh, self.explore), (~fresh, self.exploit)):
+            if schedules and np.any(rows):
+                poses[rows], fitness[rows] = _best_of(self.objective, poses[rows], fitness[rows], schedules)
+        return poses, fitness
+
+    def reweighted(self, best_pose: np.ndarray) -> "Evaluator | None":
+        """The evaluator with eq. (4)'s step-rule weights at ``best_pose``, or None if they do not change."""
+        if self.view_reject is None or self.objective.n_views < 2:
+            return None
+        weights = self.objective.step_rule_weights(best_pose, self.view_reject)
+        if np.array_equal(weights, self.objective.weights):
+            return None
+        return replace(self, objective=self.objective.with_weights(weights))
+
+
+@dataclass(frozen=True, eq=False)
+class Run:
+    """How :func:`evolve` ended: the optimiser's last state, the last :class:`Told`, the evaluator in force."""
+
+    state: Any
+    told: Told
+    evaluator: Evaluator
+    seconds: float
+
+
+def evolve(optimiser: AskTell, state: Any, evaluator: Evaluator, *,
+           hint_source: Callable[[], np.ndarray | None] | None = None,
+           on_generation: Callable[[Any], None] | None = None) -> Run:
+    """Run generations until the optimiser's ``tell`` gives a stop reason.
+
+    Parameters
+    ----------
+    optimiser : EvoPose or LocalSearch
+    state
+        The optimiser's state to start from (its ``start``).
+    evaluator : Evaluator
+    hint_source : callable () -> array (H, 6) or None, optional
+        Polled once per generation for hints that arrived meanwhile (agents pass their inbox).
+    on_generation : callable (state) -> None, optional
+        Called after every generation (progress, Fig. 6 curves, publishing each new best).
+    """
+    t0 = time.perf_counter()
+    while True:
+        if hint_source is not None:
+            new = hint_source()
+            if new is not None and np.size(new):
+                state = optimiser.inject(state, new)
+        state, asked = optimiser.ask(state)
+        asked = evaluator.screen(asked)
+        poses, fitness = evaluator(asked)
+        state, told = optimiser.tell(state, asked, poses, fitness, judge=evaluator.objective.match,
+                                     evaluations=evaluator.evaluations, elapsed=time.perf_counter() - t0)
+        if told.generation >= STEP_RULE_FROM_GENERATION:
+            reweighted = evaluator.reweighted(state.best_pose)
+            if reweighted is not None:  # eq. (4) changed: the population's fitness must be recomputed
+                evaluator = reweighted
+                objective = evaluator.objective
+                state, told = optimiser.rescore(state, objective(state.population), judge=objective.match,
+                                                evaluations=evaluator.evaluations, elapsed=time.perf_counter() - t0)
+        if on_generation is not None:
+            on_generation(state)
+        if told.stop_reason is not None:
+            return Run(state, told, evaluator, time.perf_counter() - t0)

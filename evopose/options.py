@@ -1,0 +1,111 @@
+"""Tuning of the search (:class:`SearchOptions`) and what it calls a good or a confident match."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .fitness import FitnessKind, Match
+
+
+@dataclass(frozen=True)
+class SearchOptions:
+    """Tuning of the search; the defaults solve the benchmark problems.
+
+    Match thresholds are on :class:`evopose.fitness.Match`: ``mismatch`` (eq. 4 over its no-match value)
+    and ``unmatched`` (share of visible marks without a one-to-one match), both 0 when perfect.
+
+    Attributes
+    ----------
+    fitness : "robust" | "paper"
+        Robust two-sided bounded distance, or the paper's plain eq. (1).
+    tau : float or None
+        Truncation distance in pixels (robust fitness); automatic per view when None.
+    population : int
+        ``mu``, individuals kept between generations.
+    offspring : int
+        ``lambda``, new individuals per generation.
+    immigrants : float
+        Fraction of the offspring that are fresh random starts.
+    screening : int
+        Fresh starts are drawn this many times over and the best by a coarse fitness kept.
+    refine_steps : int
+        Annealed soft-matching steps of the local refinement per new individual
+        (0 gives the paper's plain EA, without refinement).
+    max_generations, max_evaluations : int
+    time_budget : float or None
+        Seconds of wall time.
+    good_fitness : float or None
+        Stop as soon as the best fitness is at or below this value.
+    consensus : int
+        Stop when the best basin was reached from this many independent starts (0: never),
+        at least ``min_starts`` starts were made, and its match is good: mismatch or unmatched
+        share at most ``good_mismatch``.
+    good_mismatch : float
+    min_starts : int
+        Independent (screened, refined) random starts before the consensus or stall rule may stop
+        (times up to 4 when the problem has fewer than ``REFERENCE_PAIRS`` model x image point pairs)...
+    confident_mismatch : float
+        ...when the best match is confident: mismatch at most this, or at most ``confident_unmatched``
+        of the best pose's visible marks lack a one-to-one image match; otherwise
+    confident_unmatched : float
+    min_starts_unsure : int
+        starts are needed (a poor best match may be a wrong basin: search longer).
+    patience : int
+        Stop ("stalled") when the best has not improved for this many generations after ``min_starts``.
+    min_generations : int
+    view_reject : float or None
+        Step-function weight rule of eq. (4): a view whose term exceeds this (fraction of its
+        tau for the robust fitness, pixels for the paper's) gets weight 0. None disables it.
+    same_position : float
+        Two poses are in the same basin when their positions differ by less than this
+        fraction of the target distance...
+    same_rotation : float
+        ...and their rotations by less than this many radians.
+    """
+
+    fitness: FitnessKind = "robust"
+    tau: float | None = None
+    population: int = 32
+    offspring: int = 64
+    immigrants: float = 0.8
+    screening: int = 8
+    refine_steps: int = 10
+    max_generations: int = 150
+    max_evaluations: int = 2_000_000
+    time_budget: float | None = None
+    good_fitness: float | None = None
+    consensus: int = 2
+    good_mismatch: float = 0.5
+    min_starts: int = 256
+    confident_mismatch: float = 0.3
+    confident_unmatched: float = 0.1
+    min_starts_unsure: int = 1024
+    patience: int = 6
+    min_generations: int = 1
+    view_reject: float | None = 0.6
+    same_position: float = 0.02
+    same_rotation: float = np.deg2rad(3.0)
+
+    def __post_init__(self) -> None:
+        if self.screening < 1:
+            raise ValueError(f"screening must be >= 1, got {self.screening}")
+        if self.population < 2 or self.offspring < 1:
+            raise ValueError("population must be >= 2 and offspring >= 1")
+        if not 0.0 <= self.immigrants <= 1.0:
+            raise ValueError(f"immigrants must be a fraction in [0, 1], got {self.immigrants}")
+        if self.refine_steps < 0 or self.max_generations < 1:
+            raise ValueError("refine_steps must be >= 0 and max_generations >= 1")
+
+    def is_good(self, match: Match) -> bool:
+        """Mismatch or unmatched share within ``good_mismatch`` (always True when the mismatch is unknown:
+        the paper's eq. 1 has no no-match value to judge by)."""
+        return (match.mismatch is None or match.mismatch <= self.good_mismatch
+                or match.unmatched <= self.good_mismatch)
+
+    def is_confident(self, match: Match) -> bool:
+        """Mismatch within ``confident_mismatch`` or unmatched share within ``confident_unmatched``
+        (True when the mismatch is unknown)."""
+        return (match.mismatch is None or match.mismatch <= self.confident_mismatch
+                or match.unmatched <= self.confident_unmatched)

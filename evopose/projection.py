@@ -1,0 +1,119 @@
+"""The one projection of EvoPose, compiled: ``m_j(s)`` of eq. (1), model point ``j`` seen under pose ``s``.
+
+Pinhole with OpenCV ``plumb_bob`` distortion (DESIGN.md §2). Every projection in the package goes
+through :func:`pinhole`: :class:`evopose.camera.Camera` (points, populations), the fitness
+(:func:`evopose.fitness.project_into_view`) and the local refinement (:mod:`evopose.refine_kernel`).
+
+Array conventions: ``intr`` (9,) = fx, fy, cx, cy, k1, k2, p1, p2, k3; ``cam_from_world`` (4, 4);
+a pose ``s`` (6,) = (x, y, z, roll, pitch, yaw) is ``world_from_target`` with ``R = Rz(yaw) Ry(pitch) Rx(roll)``.
+"""
+
+from __future__ import annotations
+
+import numba as nb
+import numpy as np
+
+#: Points closer than this to the camera plane (metres, along the optical axis) are not projected.
+MIN_DEPTH = 1e-3
+#: Image coordinate given to points that cannot be projected (behind the camera); far from any pixel.
+FAR_AWAY_PX = 1e6
+#: Relaxed floating point (no NaN/inf assumptions, which the sentinels above would break).
+FASTMATH = {"nsz", "arcp", "contract", "afn", "reassoc"}
+
+
+@nb.njit(cache=True, fastmath=FASTMATH, nogil=True)
+def rotation_into(roll, pitch, yaw, R):  # pragma: no cover - compiled
+    """``R = Rz(yaw) @ Ry(pitch) @ Rx(roll)`` into ``R`` (3, 3), as :func:`evopose.pose.rotation_from_euler`."""
+    cr, sr = np.cos(roll), np.sin(roll)
+    cp, sp = np.cos(pitch), np.sin(pitch)
+    cy, sy = np.cos(yaw), np.sin(yaw)
+    R[0, 0] = cy * cp
+    R[0, 1] = cy * sp * sr - sy * cr
+    R[0, 2] = cy * sp * cr + sy * sr
+    R[1, 0] = sy * cp
+    R[1, 1] = sy * sp * sr + cy * cr
+    R[1, 2] = sy * sp * cr - cy * sr
+    R[2, 0] = -sp
+    R[2, 1] = cp * sr
+    R[2, 2] = cp * cr
+
+
+@nb.njit(cache=True, fastmath=FASTMATH, nogil=True)
+def pinhole(X, Y, Z, intr):  # pragma: no cover - compiled
+    """Pixel ``(u, v)`` of the optical-frame point ``(X, Y, Z)`` and whether it is in front of the camera.
+
+    Points with ``Z <= MIN_DEPTH`` are not projected: they get ``FAR_AWAY_PX`` and False.
+    """
+    if Z <= MIN_DEPTH:
+        return FAR_AWAY_PX, FAR_AWAY_PX, False
+    x = X / Z
+    y = Y / Z
+    k1, k2, p1, p2, k3 = intr[4], intr[5], intr[6], intr[7], intr[8]
+    if k1 != 0.0 or k2 != 0.0 or p1 != 0.0 or p2 != 0.0 or k3 != 0.0:
+        r2 = x * x + y * y
+        radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
+        xy = x * y
+        xd = x * radial + 2.0 * p1 * xy + p2 * (r2 + 2.0 * x * x)
+        yd = y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * xy
+        x = xd
+        y = yd
+    return intr[0] * x + intr[2], intr[1] * y + intr[3], True
+
+
+@nb.njit(cache=True, fastmath=FASTMATH, nogil=True)
+def project_points(p_cam, intr):  # pragma: no cover - compiled
+    """Project optical-frame points (K, 3): pixels (K, 2) and in-front flags (K,)."""
+    K = p_cam.shape[0]
+    uv = np.empty((K, 2))
+    in_front = np.empty(K, np.bool_)
+    for k in range(K):
+        u, v, ok = pinhole(p_cam[k, 0], p_cam[k, 1], p_cam[k, 2], intr)
+        uv[k, 0] = u
+        uv[k, 1] = v
+        in_front[k] = ok
+    return uv, in_front
+
+
+@nb.njit(cache=True, fastmath=FASTMATH, nogil=True)
+def project_pose(s, model, normals, use_normals, intr, cfw, u, v, usable, R, Rc):  # pragma: no cover
+    """Project the model (M, 3) under pose ``s`` (6,) into one view: fills ``u``, ``v``, ``usable`` (M,).
+
+    A point is usable when it is in front of the camera and, with ``use_normals``, its normal faces the
+    camera. ``R`` and ``Rc`` are (3, 3) scratch arrays.
+    """
+    rotation_into(s[3], s[4], s[5], R)
+    # camera_from_target = cam_from_world @ world_from_target
+    for i in range(3):
+        for j in range(3):
+            Rc[i, j] = cfw[i, 0] * R[0, j] + cfw[i, 1] * R[1, j] + cfw[i, 2] * R[2, j]
+    t0 = cfw[0, 0] * s[0] + cfw[0, 1] * s[1] + cfw[0, 2] * s[2] + cfw[0, 3]
+    t1 = cfw[1, 0] * s[0] + cfw[1, 1] * s[1] + cfw[1, 2] * s[2] + cfw[1, 3]
+    t2 = cfw[2, 0] * s[0] + cfw[2, 1] * s[1] + cfw[2, 2] * s[2] + cfw[2, 3]
+    for m in range(model.shape[0]):
+        X = Rc[0, 0] * model[m, 0] + Rc[0, 1] * model[m, 1] + Rc[0, 2] * model[m, 2] + t0
+        Y = Rc[1, 0] * model[m, 0] + Rc[1, 1] * model[m, 1] + Rc[1, 2] * model[m, 2] + t1
+        Z = Rc[2, 0] * model[m, 0] + Rc[2, 1] * model[m, 1] + Rc[2, 2] * model[m, 2] + t2
+        pu, pv, ok = pinhole(X, Y, Z, intr)
+        if ok and use_normals:
+            nx = Rc[0, 0] * normals[m, 0] + Rc[0, 1] * normals[m, 1] + Rc[0, 2] * normals[m, 2]
+            ny = Rc[1, 0] * normals[m, 0] + Rc[1, 1] * normals[m, 1] + Rc[1, 2] * normals[m, 2]
+            nz = Rc[2, 0] * normals[m, 0] + Rc[2, 1] * normals[m, 1] + Rc[2, 2] * normals[m, 2]
+            ok = nx * X + ny * Y + nz * Z < 0.0
+        u[m] = pu
+        v[m] = pv
+        usable[m] = ok
+
+
+@nb.njit(cache=True, fastmath=FASTMATH, nogil=True)
+def project_poses(poses, model, normals, use_normals, intr, cfw):  # pragma: no cover - compiled
+    """Project the model (M, 3) under every pose (N, 6): ``u``, ``v`` (N, M) pixels and ``usable`` (N, M)."""
+    N = poses.shape[0]
+    M = model.shape[0]
+    u = np.empty((N, M))
+    v = np.empty((N, M))
+    usable = np.empty((N, M), np.bool_)
+    R = np.empty((3, 3))
+    Rc = np.empty((3, 3))
+    for n in range(N):
+        project_pose(poses[n], model, normals, use_normals, intr, cfw, u[n], v[n], usable[n], R, Rc)
+    return u, v, usable
