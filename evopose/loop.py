@@ -144,11 +144,17 @@ class Run:
     evaluator: Evaluator
     seconds: float
 
+    @property
+    def finished(self) -> bool:
+        """The optimiser gave a stop reason (False: the run met its deadline and can be resumed)."""
+        return self.told.stop_reason is not None
+
 
 def evolve(optimiser: AskTell, state: Any, evaluator: Evaluator, *,
            hint_source: Callable[[], np.ndarray | None] | None = None,
-           on_generation: Callable[[Any], None] | None = None) -> Run:
-    """Run generations until the optimiser's ``tell`` gives a stop reason.
+           on_generation: Callable[[Any], None] | None = None, deadline: float | None = None,
+           elapsed_before: float = 0.0) -> Run:
+    """Run generations until the optimiser's ``tell`` gives a stop reason, or until ``deadline``.
 
     Parameters
     ----------
@@ -159,9 +165,15 @@ def evolve(optimiser: AskTell, state: Any, evaluator: Evaluator, *,
     hint_source : callable () -> array (H, 6) or None, optional
         Polled once per generation for hints that arrived meanwhile (agents pass their inbox).
     on_generation : callable (state) -> None, optional
-        Called after every generation (progress, Fig. 6 curves, publishing each new best).
+        Called after every generation (progress, Fig. 6 curves).
+    deadline : float, optional
+        A ``time.perf_counter()`` instant: after the generation that passes it, return an unfinished run
+        (``Run.finished`` False) whose state and evaluator resume the search in a later call (real time:
+        a vehicle publishes the best so far at its camera rate while a search goes on).
+    elapsed_before : float
+        Seconds the search already ran in earlier calls (its time budget counts them).
     """
-    t0 = time.perf_counter()
+    t0 = time.perf_counter() - elapsed_before
     while True:
         if hint_source is not None:
             new = hint_source()
@@ -181,5 +193,5 @@ def evolve(optimiser: AskTell, state: Any, evaluator: Evaluator, *,
                                                 evaluations=evaluator.evaluations, elapsed=time.perf_counter() - t0)
         if on_generation is not None:
             on_generation(state)
-        if told.stop_reason is not None:
+        if told.stop_reason is not None or (deadline is not None and time.perf_counter() >= deadline):
             return Run(state, told, evaluator, time.perf_counter() - t0)

@@ -15,7 +15,7 @@ import numpy as np
 
 from .fitness import Match, PoseObjective
 from .local import LocalSearch
-from .loop import Evaluator, evolve
+from .loop import Evaluator, Run, evolve
 from .options import SearchOptions
 from .problem import PoseProblem, View
 from .refine import TRACK_HARD_SCHEDULE, TRACK_SCHEDULE, annealing, refine
@@ -104,6 +104,14 @@ def solve(problem: PoseProblem, options: SearchOptions | None = None,
     evo = EvoPose(problem, options, _rng(seed))
     run = evolve(evo, evo.start(initial), Evaluator.for_search(problem, options), hint_source=hint_source,
                  on_generation=on_generation)
+    return solution_of(problem, options, run, time.perf_counter() - t0)
+
+
+def solution_of(problem: PoseProblem, options: SearchOptions, run: Run, seconds: float) -> Solution:
+    """The :class:`Solution` of a global search's run (:func:`evopose.loop.evolve` of :class:`EvoPose`): its best
+    pose polished; ``converged`` only when the run stopped for a good reason (an unfinished run, stopped at a
+    deadline, is not converged)."""
+    t0 = time.perf_counter()
     state, objective = run.state, run.evaluator.objective
     pose, fitness = state.best_pose, state.best_fitness
     if options.refine_steps:
@@ -114,8 +122,9 @@ def solve(problem: PoseProblem, options: SearchOptions | None = None,
     terms = objective.view_terms(pose[None])[0]
     return Solution(
         pose=pose, fitness=fitness, view_terms=terms, view_weights=objective.weights.copy(),
-        generations=state.generation, evaluations=objective.evaluations, seconds=time.perf_counter() - t0,
-        converged=run.told.stop_reason in GOOD_REASONS and options.is_good(match), stop_reason=run.told.stop_reason,
+        generations=state.generation, evaluations=objective.evaluations, seconds=seconds + time.perf_counter() - t0,
+        converged=run.told.stop_reason in GOOD_REASONS and options.is_good(match),
+        stop_reason=run.told.stop_reason or "unfinished",
         history=list(state.history), from_hint=state.best_from_hint, problem=problem, options=options)
 
 
