@@ -137,7 +137,7 @@ def pose_mismatch(problem: PoseProblem, pose: np.ndarray, options: SearchOptions
 
 def track(previous: Solution, new_views: list[View] | tuple[View, ...], *, problem: PoseProblem | None = None,
           options: SearchOptions | None = None, seed: int | np.random.Generator | None = None,
-          lost_mismatch: float = 0.5, hints: np.ndarray | None = None) -> Solution:
+          lost_mismatch: float = 0.5, hints: np.ndarray | None = None, search_when_lost: bool = True) -> Solution:
     """Warm-started pose for the next frame (eq. 2): refine the previous pose on the new views.
 
     The previous pose (and any hints) is refined locally, both by annealed soft matching and by
@@ -155,6 +155,9 @@ def track(previous: Solution, new_views: list[View] | tuple[View, ...], *, probl
         Replaces the previous problem (e.g. new bounds); its views are replaced by ``new_views``.
     hints : array (H, 6), optional
         Team-mates' poses; the better of previous pose and hints wins.
+    search_when_lost : bool
+        False: a lost fit is returned as it is (``converged`` False, ``stop_reason`` "lost") instead of
+        searched again, for a caller that runs its search in time slices (an agent at its camera rate).
     """
     t0 = time.perf_counter()
     base = problem or previous.problem
@@ -170,12 +173,13 @@ def track(previous: Solution, new_views: list[View] | tuple[View, ...], *, probl
     if hints is not None and np.size(hints):
         state = local.inject(state, hints)
     run = evolve(local, state, evaluator)
-    if run.told.stop_reason == "tracked":
+    tracked = run.told.stop_reason == "tracked"
+    if tracked or not search_when_lost:
         best, objective = run.state, run.evaluator.objective
         terms = objective.view_terms(best.best_pose[None])[0]
         return Solution(pose=np.array(best.best_pose), fitness=best.best_fitness, view_terms=terms,
                         view_weights=objective.weights.copy(), generations=0, evaluations=objective.evaluations,
-                        seconds=time.perf_counter() - t0, converged=True, stop_reason="tracked",
+                        seconds=time.perf_counter() - t0, converged=tracked, stop_reason="tracked" if tracked else "lost",
                         history=[best.best_fitness], from_hint=best.best_from_hint, problem=prob, options=options)
     starts = np.atleast_2d(previous.pose)
     if hints is not None and np.size(hints):
