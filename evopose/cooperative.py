@@ -9,7 +9,8 @@ combines whatever the team provides:
 * team-mates' full poses (hints), which enter the search as individuals; selection on the own
   views discards those that do not fit (§III, last paragraph).
 
-The first pose is found by :func:`evopose.solve`; later frames are tracked (eq. 2) from the last pose.
+The first pose is found by the global search of :func:`evopose.solve` (:class:`evopose.search.EvoPose`), run
+in time slices so that a vehicle keeps its camera rate; later frames are tracked (eq. 2) from the last pose.
 Between frames :meth:`CooperativeEstimator.generation` runs one small generation on the latest views —
 the best so far, its mutated children and any newly arrived hints, refined and selected
 (:class:`evopose.local.LocalSearch` through :func:`evopose.loop.evolve`, the loop :func:`evopose.solve`
@@ -21,19 +22,20 @@ Pure numpy: no I/O, no Zenoh.
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from .fitness import PoseObjective
 from .local import LocalSearch
-from .loop import Evaluator, evolve
+from .loop import Evaluator, Run, evolve
 from .options import SearchOptions
 from .pose import PARAM_NAMES
 from .problem import Bounds, Model, PoseProblem, View
 from .refine import TRACK_SCHEDULE
-from .solver import Solution, solve, track
+from .search import EvoPose, Told
+from .solver import Solution, solution_of, track
 
 #: Fitness values kept in a solution's history by :meth:`CooperativeEstimator.generation` (bounded memory).
 HISTORY_KEPT = 256
@@ -81,16 +83,16 @@ class Estimate:
         force over its value when nothing matches (robust fitness; 1 when it cannot be judged).
     solved : bool
         The pose was searched from scratch (first frame, or tracking was lost).
-    good_after_s : float or None
-        Seconds into this estimate at which the best individual was first *good* — the paper's "time to
-        a good pose": fitness under a threshold (here the search's confident mismatch, or almost
+    good_at : float or None
+        The ``time.perf_counter()`` instant at which the best individual was first *good* — for the paper's
+        "time to a good pose": fitness under a threshold (here the search's confident mismatch, or almost
         every visible mark matched one to one). A search goes on after that to confirm the pose.
     """
 
     solution: Solution
     mismatch: float
     solved: bool
-    good_after_s: float | None = None
+    good_at: float | None = None
 
     @property
     def pose(self) -> np.ndarray:
@@ -101,8 +103,26 @@ class Estimate:
         return bool(self.solution.converged)
 
 
+@dataclass(frozen=True, eq=False)
+class _Search:
+    """A global search in progress (the first pose, or after tracking was lost), resumed slice by slice."""
+
+    optimiser: EvoPose
+    run: Run
+    problem: PoseProblem
+    frame: int
+    #: perf_counter when it started, and when its best was first good (or None)
+    started: float
+    good_at: float | None = None
+
+
 class CooperativeEstimator:
     """Solve, then track, the target's pose from the own and the team's data (eq. 1-4 and hints).
+
+    Real time: :meth:`estimate` and :meth:`generation` take a time budget. A search from scratch that
+    does not finish within it is kept and resumed by the next call (on the views it started with, as the
+    paper's Experiment 1 searches one snapshot); meanwhile each call returns the best so far, not good.
+    Once the search finishes with a good pose, that pose is tracked (eq. 2) onto the newest views.
 
     Parameters
     ----------
@@ -112,8 +132,8 @@ class CooperativeEstimator:
         The operating area (search box), world frame.
     options : SearchOptions, optional
     seed : int
-        Seeds every search; frame ``n`` uses ``(seed, n)``, so two vehicles given the same inputs
-        compute the same pose.
+        Seeds every search; a search started at frame ``n`` uses ``(seed, n)``, so two vehicles given the
+        same inputs compute the same pose.
     lost_mismatch : float
         Tracking is lost (and the pose searched again) when the mismatch exceeds this.
     """
@@ -124,14 +144,20 @@ class CooperativeEstimator:
         self.options = options or SearchOptions()
         self.seed, self.lost_mismatch = seed, lost_mismatch
         self.last: Solution | None = None
+        self._search: _Search | None = None
         #: how the last frame's views evaluate candidates between frames (its objective: the last eq. 4 weights)
         self._evaluator: Evaluator | None = None
         self._best_fitness = np.inf  # of ``last`` under ``_evaluator.objective``
         self._rng = np.random.default_rng([seed, 1])
 
     def reset(self) -> None:
-        """Forget the last pose: the next frame is searched from scratch."""
-        self.last, self._evaluator = None, None
+        """Forget the last pose and any search in progress: the next frame is searched from scratch."""
+        self.last, self._evaluator, self._search = None, None, None
+
+    @property
+    def searching(self) -> bool:
+        """A search from scratch is in progress (the estimates are the best so far, not good)."""
+        return self._search is not None
 
     def problem(self, views: Sequence[View], knowledge: Sequence[Knowledge] = (),
                 hints: np.ndarray | None = None) -> PoseProblem:
@@ -140,9 +166,7 @@ class CooperativeEstimator:
         return PoseProblem(self.model, tuple(views), constrained_bounds(self.bounds, knowledge), hints)
 
     def estimate(self, views: Sequence[View], *, knowledge: Sequence[Knowledge] = (),
-                 hints: np.ndarray | None = None, frame: int = 0,
-                 hint_source: Callable[[], np.ndarray | None] | None = None,
-                 on_generation: Callable | None = None) -> Estimate:
+                 hints: np.ndarray | None = None, frame: int = 0, budget_s: float | None = None) -> Estimate:
         """The pose at one frame from ``views`` (own and team-mates'), ``knowledge`` and ``hints``.
 
         Parameters
@@ -155,41 +179,72 @@ class CooperativeEstimator:
             Team-mates' poses received since the last frame.
         frame : int
             Frame number, for the seed of a search from scratch.
-        hint_source : callable () -> array (H, 6) or None, optional
-            Polled every generation of a search from scratch for hints that arrive meanwhile.
-        on_generation : callable (EvoPoseState) -> None, optional
-            Called after every generation of a search from scratch (to publish each new best).
+        budget_s : float, optional
+            Seconds a search from scratch may run in this call (None: until it stops); tracking is not cut.
         """
         if not views:
             raise ValueError("estimate needs at least one view")
         problem = self.problem(views, knowledge, hints)
-        t0 = time.perf_counter()
-        if self.last is not None:
+        deadline = None if budget_s is None else time.perf_counter() + budget_s
+        if self.last is not None and self._search is None:
             solution = track(self.last, list(views), problem=problem, options=self.options,
                              seed=np.random.default_rng([self.seed, frame]), lost_mismatch=self.lost_mismatch,
-                             hints=problem.hints if len(problem.hints) else None)
-            solved = solution.stop_reason != "tracked"
-            good_after = solution.seconds if solution.converged else None
-        else:
-            good_after = None
+                             hints=problem.hints if len(problem.hints) else None, search_when_lost=False)
+            if solution.converged:
+                return self._keep(solution, problem, False, time.perf_counter())
+            self.last = None  # lost: search again, with the lost pose as a hint
+            problem = problem.with_hints(np.concatenate([problem.hints, solution.pose[None]]))
+        if self._search is None:
+            optimiser = EvoPose(problem, self.options, np.random.default_rng([self.seed, frame]))
+            run = Run(optimiser.start(), Told(0, np.inf, False, None), Evaluator.for_search(problem, self.options),
+                      0.0)
+            self._search = _Search(optimiser, run, problem, frame, time.perf_counter())
+        elif hints is not None and np.size(hints):
+            self._search = replace(self._search, run=replace(
+                self._search.run, state=self._search.optimiser.inject(self._search.run.state, hints)))
+        return self._advance(deadline, problem)
 
-            def watch(state) -> None:
-                nonlocal good_after
-                if good_after is None and self.options.is_confident(state.best_match):
-                    good_after = time.perf_counter() - t0
-                if on_generation is not None:
-                    on_generation(state)
+    def _advance(self, deadline: float | None, current: PoseProblem | None) -> Estimate:
+        """Resume the search in progress until ``deadline``; a finished good search is tracked onto ``current``."""
+        search = self._search
+        good_at = search.good_at
 
-            solution = solve(problem, self.options, seed=np.random.default_rng([self.seed, frame]),
-                             hint_source=hint_source, on_generation=watch)
-            solved = True
-            if not solution.converged:
-                good_after = None
-        return self._keep(solution, problem, solved, good_after)
+        def watch(state) -> None:
+            nonlocal good_at
+            if good_at is None and self.options.is_confident(state.best_match):
+                good_at = time.perf_counter()
 
-    def generation(self, hints: np.ndarray | None = None) -> Estimate | None:
-        """One generation on the last frame's views: the best, mutated children and ``hints`` (H, 6), refined;
-        the fittest becomes the best if it is better. None before the first estimate."""
+        run = evolve(search.optimiser, search.run.state, search.run.evaluator, on_generation=watch,
+                     deadline=deadline, elapsed_before=search.run.seconds)
+        solution = solution_of(search.problem, self.options, run, run.seconds)
+        if not run.finished:
+            self._search = replace(search, run=run, good_at=good_at)
+            return Estimate(solution, self._mismatch_in(solution), False, None)
+        self._search = None
+        if not solution.converged:
+            return self._keep(solution, search.problem, True, None)
+        if current is not None and current is not search.problem:  # a frame later: onto the newest views
+            tracked = track(solution, list(current.views), problem=current, options=self.options,
+                            seed=np.random.default_rng([self.seed, search.frame, 1]),
+                            lost_mismatch=self.lost_mismatch, search_when_lost=False)
+            if tracked.converged:
+                solution = tracked.with_(generations=solution.generations, history=solution.history,
+                                         from_hint=solution.from_hint)
+        return self._keep(solution, current or search.problem, True, good_at)
+
+    def generation(self, hints: np.ndarray | None = None, budget_s: float | None = None) -> Estimate | None:
+        """Improve the estimate between frames; None before the first estimate.
+
+        With a search from scratch in progress: resume it for up to ``budget_s`` (hints join its population).
+        Otherwise one generation on the last frame's views: the best, mutated children and ``hints`` (H, 6),
+        refined; the fittest becomes the best if it is better.
+        """
+        if self._search is not None:
+            if hints is not None and np.size(hints):
+                self._search = replace(self._search, run=replace(
+                    self._search.run, state=self._search.optimiser.inject(self._search.run.state, hints)))
+            deadline = time.perf_counter() + (budget_s if budget_s is not None else 0.0)
+            return self._advance(deadline, None)
         if self.last is None or self._evaluator is None:
             return None
         bounds = self.last.problem.bounds if self.last.problem is not None else self.bounds
@@ -208,7 +263,13 @@ class CooperativeEstimator:
                                         history=[*self.last.history[-HISTORY_KEPT + 1:], best.best_fitness])
         return Estimate(self.last, self._mismatch(self.last.pose), False)
 
-    def _keep(self, solution: Solution, problem: PoseProblem, solved: bool, good_after: float | None) -> Estimate:
+    def _mismatch_in(self, solution: Solution) -> float:
+        """The mismatch of an unfinished search's best under its own problem."""
+        objective = PoseObjective(solution.problem, self.options.fitness, self.options.tau)
+        mismatch = objective.mismatch(objective(np.atleast_2d(solution.pose))[0])
+        return 1.0 if mismatch is None else float(np.clip(mismatch, 0.0, 1.0))
+
+    def _keep(self, solution: Solution, problem: PoseProblem, solved: bool, good_at: float | None) -> Estimate:
         objective = PoseObjective(solution.problem or problem, self.options.fitness, self.options.tau)
         if len(solution.view_weights) == objective.n_views and np.any(solution.view_weights > 0):
             objective = objective.with_weights(solution.view_weights)  # the step rule's (eq. 4)
@@ -218,7 +279,7 @@ class CooperativeEstimator:
         self.last = solution if solution.converged else None
         if self.last is None:
             self._evaluator = None
-        return Estimate(solution, mismatch, solved, good_after)
+        return Estimate(solution, mismatch, solved, good_at)
 
     def _mismatch(self, pose: np.ndarray) -> float:
         """:attr:`Estimate.mismatch` of ``pose`` under the last frame's objective (1 when it cannot be judged)."""

@@ -120,7 +120,7 @@ def test_a_narrow_attitude_box_still_lets_the_position_converge():
     knowledge = [Knowledge(n, float(frame.truth[3 + i]), np.deg2rad(0.2))
                  for i, n in enumerate(("roll", "pitch", "yaw"))]
     estimate = _estimator(scenario).estimate(views, knowledge=knowledge)
-    assert estimate.good and estimate.good_after_s is not None
+    assert estimate.good and estimate.good_at is not None
     assert _position_error(estimate.pose, frame.truth) < 0.02
 
 

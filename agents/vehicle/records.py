@@ -1,0 +1,85 @@
+"""What a vehicle measured over its run, in constant memory: errors against the truth, timings, counts."""
+
+from __future__ import annotations
+
+import statistics
+from collections import deque
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+
+from evopose.pose import PARAM_NAMES, wrap_angle
+
+
+def pose_error(estimate: np.ndarray, truth: np.ndarray) -> dict:
+    """Absolute errors: x, y, z in metres and roll, pitch, yaw in degrees; ``position`` the distance."""
+    d = np.asarray(estimate, float) - np.asarray(truth, float)
+    d[3:] = np.degrees(wrap_angle(d[3:]))
+    out = {n: float(abs(v)) for n, v in zip(PARAM_NAMES, d)}
+    out["position"] = float(np.linalg.norm(d[:3]))
+    return out
+
+
+def pose_dict(pose: np.ndarray) -> dict:
+    """``{"x": .., ..., "yaw": ..}`` of a pose (6,)."""
+    return {n: float(v) for n, v in zip(PARAM_NAMES, pose)}
+
+
+#: Recent values kept for medians and percentiles (bounded: an agent's memory must not grow with its frames).
+RECENT = 4096
+
+
+class ErrorTotals:
+    """Running mean and max of each error component over the good frames (constant memory)."""
+
+    def __init__(self) -> None:
+        self.count = 0
+        self.sums: dict[str, float] = {}
+        self.maxima: dict[str, float] = {}
+
+    def add(self, error: dict) -> None:
+        self.count += 1
+        for name, value in error.items():
+            self.sums[name] = self.sums.get(name, 0.0) + value
+            self.maxima[name] = max(self.maxima.get(name, 0.0), value)
+
+    def summary(self) -> dict:
+        out = {}
+        for name, total in self.sums.items():
+            out[f"error_{name}"] = total / self.count
+            out[f"error_{name}_max"] = self.maxima[name]
+        return out
+
+
+@dataclass
+class RunRecord:
+    """What an agent measured over its run (the summary); constant memory however long it runs."""
+
+    frames: int = 0
+    estimates: int = 0
+    good: int = 0
+    solves: int = 0
+    late_frames: int = 0
+    multi_view_frames: int = 0
+    first_good_s: float | None = None
+    first_confirmed_s: float | None = None
+    first_solve_s: float | None = None
+    first_history: list = field(default_factory=list)
+    hints_published: int = 0
+    hints_used: int = 0
+    last_pose: list | None = None
+    last_error: dict | None = None
+    errors: ErrorTotals = field(default_factory=ErrorTotals)
+    frame_seconds: deque = field(default_factory=lambda: deque(maxlen=RECENT))
+    mate_latency_s: deque = field(default_factory=lambda: deque(maxlen=RECENT))  # team-mates' data: arrival - stamp
+
+    def summary(self) -> dict:
+        out = {k: v for k, v in asdict(self).items() if k not in ("errors", "frame_seconds", "mate_latency_s")}
+        out.update(self.errors.summary())
+        if self.frame_seconds:
+            out["frame_seconds_median"] = statistics.median(self.frame_seconds)
+        if self.mate_latency_s:
+            latency = np.array(self.mate_latency_s)
+            out["mate_latency_median_s"] = float(np.median(latency))
+            out["mate_latency_p95_s"] = float(np.percentile(latency, 95))
+        return out

@@ -1,0 +1,372 @@
+"""The vehicle roles as classes, each running its frame loop on an open :class:`FleetBus` (paper §IV).
+
+- :class:`CameraVehicle` (``uav``): per frame, acquire the image -> extract the marks -> share them ->
+  :func:`agents.vehicle.step.step` -> publish its outbox. With hints (and alone), an improver thread runs
+  generations between frames (the compiled kernels release the GIL) and its bests leave as hints.
+- :class:`GroundStation`: a camera vehicle that also holds the attitude within the airship's IMU reading
+  (eq. 3).
+- :class:`Airship`: publishes its IMU attitude every frame and receives its own pose back.
+- :class:`Target`: the simulated target; publishes its true pose (ground truth for observers).
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+from collections.abc import Callable
+
+import numpy as np
+
+from evopose import SearchOptions
+from evopose.cooperative import CooperativeEstimator, Knowledge
+from protocol import MESSAGE_TYPES, Attitude, PoseEstimate, Topic
+from scenarios.world import Scenario
+
+from agents.transport.bus import FleetBus, Received
+from agents.vehicle.config import IDLE_GENERATIONS, TARGET_IMU_STREAM, AgentConfig
+from agents.vehicle.frames import NS, FrameClock, SimulatedCamera
+from agents.vehicle.memory import release_free_memory
+from agents.vehicle.records import RunRecord, pose_dict, pose_error
+from agents.vehicle.step import FrameInputs, Outgoing, share, step
+from agents.vehicle.team_views import TeamViews, attitude_knowledge, build_views, mate_view, own_view, wait_until
+
+Emit = Callable[[dict], None]
+#: Share of a frame's period a search from scratch may take in the frame loop (the rest: render, extract, share).
+SEARCH_SHARE_OF_FRAME = 0.5
+#: Hints kept while waiting for the next frame or generation (the newest).
+HINTS_KEPT = 64
+
+
+class HintSchedule:
+    """At most ``rate_hz`` hints a second, as a schedule (a late wake-up does not lower the rate)."""
+
+    def __init__(self, rate_hz: float) -> None:
+        self.period, self.next_s = 1.0 / rate_hz, 0.0
+
+    def due(self, now_s: float) -> bool:
+        """True (and the next slot booked) when a hint may go out at ``now_s``."""
+        if now_s < self.next_s:
+            return False
+        self.next_s = max(self.next_s + self.period, now_s - self.period)
+        return True
+
+
+class Vehicle:
+    """The frame loop every role shares: one ``frame(n)`` per tick of the fleet's clock, a summary at the end."""
+
+    role = "vehicle"
+
+    def __init__(self, config: AgentConfig, bus: FleetBus, scenario: Scenario, emit: Emit) -> None:
+        self.config, self.bus, self.scenario, self.emit = config, bus, scenario, emit
+        self.clock = FrameClock(config.fps or scenario.spec.fps, config.epoch_ns)
+        self.period_s = 1.0 / self.clock.fps
+        self.record = RunRecord()
+        self._started_ns = 0
+
+    def subscribe(self) -> None:
+        """Declare the subscriptions of the role (before the first frame)."""
+
+    def prepare(self) -> None:
+        """One-off work before frame 0."""
+
+    def frame(self, n: int) -> None:
+        raise NotImplementedError
+
+    def run(self, stop: threading.Event) -> dict:
+        self.prepare()
+        mates = [v for v in self.config.wait_for if v != self.config.vehicle]
+        if mates:
+            ok = self.bus.wait_for_teammates(mates, self.config.wait_timeout_s)
+            self.emit({"event": "teammates", "vehicle": self.config.vehicle, "ready": ok,
+                       "alive": sorted(self.bus.teammates())})
+        self.emit({"event": "ready", "vehicle": self.config.vehicle, "role": self.role, "share": self.config.share,
+                   "fps": self.clock.fps})
+        n = None
+        while not stop.is_set() and (self.config.frames is None or self.record.frames < self.config.frames):
+            nxt = self.clock.wait_next(n, stop)
+            if nxt is None:
+                break
+            if n is not None and nxt > n + 1:
+                self.record.late_frames += nxt - n - 1
+            n = nxt
+            if not self._started_ns:
+                self._started_ns = self.clock.stamp_ns(n)
+            self.frame(n)
+            self.record.frames += 1
+        return self.summary()
+
+    def publish(self, out: Outgoing) -> None:
+        """Publish one outbox message (the bus adds sender and sequence number)."""
+        if out.topic == Topic.HINT.value:
+            self.bus.publish_hint(out.fields["pose"])
+            return
+        cls = MESSAGE_TYPES[Topic(out.topic)]
+        self.bus.publish(cls(**self.bus.header(out.topic, out.stamp_ns), **out.fields))
+
+    def summary(self) -> dict:
+        return {"event": "summary", "vehicle": self.config.vehicle, "role": self.role, "share": self.config.share,
+                "fleet": self.config.fleet, "scenario": self.scenario.name, "seed": self.config.seed,
+                "world_seed": self.scenario.seed, "fps": self.clock.fps, **self.record.summary(),
+                "teammates": sorted(self.bus.teammates()), "traffic": self.bus.counters.snapshot()}
+
+
+class CameraVehicle(Vehicle):
+    """A UAV with a camera: localizes the target from its own and its team-mates' data."""
+
+    role = "uav"
+
+    def __init__(self, config: AgentConfig, bus: FleetBus, scenario: Scenario, emit: Emit) -> None:
+        super().__init__(config, bus, scenario, emit)
+        self.sync_wait_s = self.period_s / 2 if config.sync_wait_s is None else config.sync_wait_s
+        self.team = TeamViews()
+        self.camera = SimulatedCamera(scenario, config.vehicle)
+        self.estimator = CooperativeEstimator(scenario.model.evopose_model(), scenario.bounds(),
+                                              SearchOptions(time_budget=config.time_budget_s), seed=config.seed)
+        self._hints: list[np.ndarray] = []
+        self._hints_lock = threading.Lock()
+        self._hint_schedule = HintSchedule(config.hint_rate_hz)
+        self._hint_send_lock = threading.Lock()
+        #: held while the estimator is used: by the frame loop and by the improver thread (one writer at a time)
+        self._estimator_lock = threading.Lock()
+        self._image_ready: float | None = None  # perf_counter when the first frame's image existed
+        self._done = threading.Event()
+
+    # -- set-up ---------------------------------------------------------------------------------
+
+    def subscribe(self) -> None:
+        share_mode, bus = self.config.share, self.bus
+        if share_mode == "raw":
+            bus.subscribe(Topic.IMAGE)
+        elif share_mode == "features":
+            bus.subscribe(Topic.FEATURES)
+        elif share_mode == "hint":
+            bus.subscribe(Topic.HINT, self._on_hint)
+
+    def prepare(self) -> None:
+        """Render once and solve once before frame 0, so that frame 0 is not slowed by caches and compilation."""
+        frame = self.camera.acquire(0, self.clock.stamp_ns(0))
+        views, _ = build_views([own_view(self.config.vehicle, 0, frame.camera, frame.points)])
+        if views:
+            CooperativeEstimator(self.estimator.model, self.estimator.bounds,
+                                 SearchOptions(max_generations=1, min_starts=1)).estimate(views)
+        release_free_memory()  # what the one-off work (ground texture, compilation) freed
+
+    def run(self, stop: threading.Event) -> dict:
+        improver = None
+        if self.config.share in IDLE_GENERATIONS:
+            improver = threading.Thread(target=self.improve, args=(stop,), name="improver", daemon=True)
+        try:
+            if improver is not None:
+                improver.start()
+            return super().run(stop)
+        finally:
+            self._done.set()
+            if improver is not None and improver.is_alive():
+                improver.join(2.0)
+
+    # -- inputs ---------------------------------------------------------------------------------
+
+    def _on_hint(self, rx: Received) -> None:  # bus worker thread: append only
+        with self._hints_lock:
+            self._hints.append(np.asarray(rx.message.pose, float))
+            del self._hints[:-HINTS_KEPT]
+
+    def take_hints(self) -> np.ndarray | None:
+        with self._hints_lock:
+            hints, self._hints = self._hints, []
+            self.record.hints_used += len(hints)
+        return np.array(hints) if hints else None
+
+    def knowledge(self) -> list[Knowledge]:
+        """Eq. (3) knowledge of this frame (none for a UAV)."""
+        return []
+
+    def paired_views(self, stamp_ns: int) -> list:
+        """Team-mates' views of this instant: wait up to ``sync_wait_s`` for each live, sharing team-mate."""
+        share_mode = self.config.share
+        if share_mode not in ("raw", "features"):
+            return []
+        topic = Topic.IMAGE if share_mode == "raw" else Topic.FEATURES
+        max_age = self.config.max_age_s
+
+        def poll(timeout: float) -> None:
+            rx = self.bus.recv(topic, timeout=timeout)
+            while rx is not None:
+                self.record.mate_latency_s.append((rx.received_ns - rx.stamp_ns) / NS)
+                try:
+                    self.team.add(mate_view(rx.vehicle, rx.message, self.camera.extract))
+                except ValueError as err:  # a frame that does not decode: count it, carry on
+                    self.bus.counters.count_rejected(topic.value, "undecodable")
+                    self.emit({"event": "rejected", "vehicle": rx.vehicle, "reason": str(err)})
+                rx = self.bus.recv(topic, timeout=0)
+
+        poll(0)
+        alive = self.bus.teammates()
+        self.team.keep_only(alive)
+        expected = self.team.sharing(alive, stamp_ns, max_age + self.period_s)
+        deadline = time.monotonic() + self.sync_wait_s
+        wait_until(lambda: set(self.team.at(stamp_ns, expected)) >= expected, deadline, poll)
+        found = self.team.at(stamp_ns, expected)
+        # a team-mate whose frame of this instant did not come in time: its newest fresh one
+        found.update(self.team.newest(expected - set(found), stamp_ns, max_age))
+        return list(found.values())
+
+    # -- the frame ------------------------------------------------------------------------------
+
+    def frame(self, n: int) -> None:
+        stamp = self.clock.stamp_ns(n)
+        t_acquire = time.perf_counter()
+        frame = self.camera.acquire(n, stamp)
+        if self._image_ready is None:
+            self._image_ready = t_acquire + frame.render_s
+        mine = own_view(self.config.vehicle, stamp, frame.camera, frame.points)
+        shared = share(self.config.share, self.config.image_encoding, frame, mine)
+        if shared is not None:
+            self.publish(shared)
+        inputs = FrameInputs(n, mine, self.paired_views(stamp), self.knowledge(),
+                             self.take_hints() if self.config.share == "hint" else None, frame.truth)
+        budget = SEARCH_SHARE_OF_FRAME * self.period_s
+        with self._estimator_lock:
+            result = step(self.estimator, inputs, vehicle=self.config.vehicle,
+                          target=self.scenario.spec.target.name, share_mode=self.config.share, budget_s=budget)
+        for out in result.outbox:
+            if out.topic == Topic.HINT.value:
+                self.send_hint(out.fields["pose"])
+            else:
+                self.publish(out)
+        self.account(result)
+        self.emit(result.event)
+
+    def account(self, result) -> None:
+        """The run record of one frame's result."""
+        estimate, rec = result.estimate, self.record
+        if estimate is None:
+            return
+        rec.frame_seconds.append(result.seconds)
+        rec.multi_view_frames += len(result.inputs) > 1
+        rec.estimates += 1
+        rec.solves += int(estimate.solved)
+        sol = estimate.solution
+        if estimate.solved and rec.first_solve_s is None:
+            rec.first_history = [float(f) for f in sol.history]
+            rec.first_solve_s = result.seconds
+        if estimate.good_at is not None and rec.first_good_s is None:
+            rec.first_good_s = estimate.good_at - self._image_ready
+        error = result.event.get("error")
+        if estimate.good:
+            rec.good += 1
+            if error is not None:
+                rec.errors.add(error)
+            if rec.first_confirmed_s is None:
+                rec.first_confirmed_s = time.perf_counter() - self._image_ready
+        rec.last_pose, rec.last_error = [float(v) for v in sol.pose], error
+
+    # -- between frames ---------------------------------------------------------------------------
+
+    def send_hint(self, pose: np.ndarray) -> None:
+        """Send ``pose`` as a hint unless that would exceed ``hint_rate_hz``."""
+        with self._hint_send_lock:
+            if not self._hint_schedule.due(time.monotonic()):
+                return
+            self.bus.publish_hint(pose)
+            self.record.hints_published += 1
+
+    def improve(self, stop: threading.Event) -> None:
+        """The improver thread: generations on the latest views (and the search in progress), with the hints that
+        arrive; in hint mode each best goes out as a hint, at up to ``hint_rate_hz``."""
+        period = 1.0 / self.config.hint_rate_hz
+        hint_mode = self.config.share == "hint"
+        next_s = time.monotonic()
+        while not stop.is_set() and not self._done.is_set():
+            with self._estimator_lock:
+                estimate = self.estimator.generation(self.take_hints() if hint_mode else None, budget_s=period)
+            if estimate is not None and hint_mode:
+                self.send_hint(estimate.pose)
+            now = time.monotonic()
+            next_s = max(next_s + period, now - period)
+            self._done.wait(max(0.0, next_s - now) if estimate is not None else 0.01)
+
+
+class GroundStation(CameraVehicle):
+    """A fixed camera (paper Experiment 1) that holds the attitude within the airship's IMU reading (eq. 3)."""
+
+    role = "ground-station"
+
+    def subscribe(self) -> None:
+        super().subscribe()
+        if self.config.use_attitude:
+            self.bus.subscribe(Topic.ATTITUDE)
+
+    def knowledge(self) -> list[Knowledge]:
+        if not self.config.use_attitude:
+            return []
+        target = self.scenario.spec.target.name
+        for rx in self.bus.latest(Topic.ATTITUDE).values():
+            if isinstance(rx.message, Attitude) and rx.message.body == target:
+                return attitude_knowledge(rx.message, self.config.attitude_sigmas)
+        return []
+
+
+class Airship(Vehicle):
+    """Publishes its IMU attitude every frame; evaluates the poses the ground station sends back."""
+
+    role = "airship"
+
+    def subscribe(self) -> None:
+        self.bus.subscribe(Topic.POSE)
+
+    def frame(self, n: int) -> None:
+        scene = n % self.scenario.frames
+        truth = self.scenario.target_pose(scene)
+        imu = self.scenario.target_imu
+        if imu is not None:
+            rpy = imu.read(truth[3:], self.scenario.seed, TARGET_IMU_STREAM, scene)
+            sigma = float(math.hypot(imu.bias_sigma, imu.noise_sigma))
+            self.bus.publish(Attitude(**self.bus.header(Topic.ATTITUDE, self.clock.stamp_ns(n)),
+                                      body=self.config.vehicle, roll=float(rpy[0]), pitch=float(rpy[1]),
+                                      yaw=float(rpy[2]), sigma=(sigma, sigma, sigma)))
+        self._receive_own_pose()
+
+    def _receive_own_pose(self) -> None:
+        rx = self.bus.recv(Topic.POSE, timeout=0)
+        while rx is not None:
+            message = rx.message
+            if isinstance(message, PoseEstimate) and message.target == self.config.vehicle:
+                self._own_pose(rx, message)
+            rx = self.bus.recv(Topic.POSE, timeout=0)
+
+    def _own_pose(self, rx: Received, message: PoseEstimate) -> None:
+        k = self.clock.index_of(message.stamp_ns)
+        if k is None:
+            return
+        error = pose_error(np.array(message.pose), self.scenario.target_pose(k % self.scenario.frames))
+        self.record.estimates += 1
+        self.record.last_pose, self.record.last_error = list(message.pose), error
+        if message.converged:
+            self.record.good += 1
+            self.record.errors.add(error)
+            if self.record.first_good_s is None:
+                self.record.first_good_s = (rx.received_ns - self._started_ns) / NS
+        self.emit({"event": "own-pose", "vehicle": self.config.vehicle, "from": rx.vehicle, "frame": k,
+                   "pose": pose_dict(np.array(message.pose)), "good": message.converged,
+                   "latency_s": (rx.received_ns - message.stamp_ns) / NS, "error": error})
+
+
+class Target(Vehicle):
+    """The simulated target: publishes its true pose every frame (ground truth for observers)."""
+
+    role = "target"
+
+    def frame(self, n: int) -> None:
+        truth = self.scenario.target_pose(n % self.scenario.frames)
+        self.bus.publish(PoseEstimate(**self.bus.header(Topic.POSE, self.clock.stamp_ns(n)),
+                                      target=self.config.vehicle, pose=tuple(float(v) for v in truth), fitness=0.0,
+                                      mismatch=0.0, converged=True, generations=0, seconds=0.0))
+
+
+#: The class of each role.
+ROLE_CLASSES: dict[str, type[Vehicle]] = {"uav": CameraVehicle, "ground-station": GroundStation,
+                                          "airship": Airship, "target": Target}
+
+__all__ = ["ROLE_CLASSES", "Airship", "CameraVehicle", "GroundStation", "HintSchedule", "Target", "Vehicle"]

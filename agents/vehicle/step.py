@@ -1,0 +1,126 @@
+"""A camera vehicle's per-frame decision, pure: what it shares, what it estimates, what it publishes.
+
+No Zenoh, no clock, no threads: :func:`share` turns the own frame into the message team-mates get, and
+:func:`step` turns one frame's inputs (own view, team-mates' paired views, eq. 3 knowledge, hints) into
+an estimate and an *outbox* of messages to publish. The runtime (:mod:`agents.vehicle.roles`) gathers the
+inputs from the bus and publishes the outbox; tests call :func:`step` directly.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from evopose.cooperative import CooperativeEstimator, Estimate, Knowledge
+
+from agents.vehicle.frames import Frame
+from agents.vehicle.records import pose_dict, pose_error
+from agents.vehicle.team_views import MateView, build_views, encode_image
+
+
+@dataclass(frozen=True)
+class Outgoing:
+    """A message to publish: its topic (a ``protocol.Topic`` value), its acquisition stamp and its fields.
+
+    The transport adds the header (sender, sequence number); a ``hint`` carries ``{"pose": (6,)}``.
+    """
+
+    topic: str
+    stamp_ns: int
+    fields: Mapping = field(default_factory=dict)
+
+
+def share(mode: str, encoding: str, frame: Frame, own: MateView) -> Outgoing | None:
+    """What the own frame gives team-mates: its points with the camera (``features``), the image (``raw``)."""
+    if mode == "features":
+        return Outgoing("features", own.stamp_ns, {"camera": own.camera,
+                                                   "points": own.points.astype("<f4").tobytes()})
+    if mode == "raw":
+        h, w = frame.image.shape[:2]
+        channels = 1 if frame.image.ndim == 2 else 3
+        data = (np.ascontiguousarray(frame.image).tobytes() if encoding == "raw"
+                else encode_image(frame.image, encoding))
+        return Outgoing("image", own.stamp_ns, {"camera": own.camera, "encoding": encoding, "width": w, "height": h,
+                                                "channels": channels, "data": data})
+    return None
+
+
+@dataclass(frozen=True)
+class FrameInputs:
+    """Everything one frame's estimate depends on.
+
+    Attributes
+    ----------
+    index : int
+        Frame number on the fleet's clock.
+    own : MateView
+        The own image points (N, 2) with the own camera.
+    mates : sequence of MateView
+        Team-mates' views paired with this frame (eq. 4).
+    knowledge : sequence of Knowledge
+        Eq. (3) constraints (an IMU attitude).
+    hints : array (H, 6) or None
+        Team-mates' poses received since the last frame.
+    truth : array (6,)
+        The simulator's true target pose: for the frame event's error only, never for the estimate.
+    """
+
+    index: int
+    own: MateView
+    mates: Sequence[MateView] = ()
+    knowledge: Sequence[Knowledge] = ()
+    hints: np.ndarray | None = None
+    truth: np.ndarray | None = None
+
+
+@dataclass(frozen=True)
+class StepResult:
+    """What :func:`step` decided: the estimate (None without enough points), the outbox, the frame event."""
+
+    estimate: Estimate | None
+    inputs: tuple[str, ...]
+    seconds: float
+    outbox: tuple[Outgoing, ...]
+    event: dict
+
+
+def step(estimator: CooperativeEstimator, inputs: FrameInputs, *, vehicle: str, target: str, share_mode: str,
+         budget_s: float | None = None) -> StepResult:
+    """One frame of a camera vehicle: eq. (1)-(4) on the own and team-mates' views, with knowledge and hints.
+
+    The estimate is published as a ``pose`` (``converged`` only when the estimator judges it good); in hint
+    mode a good estimate also goes out as a ``hint``. ``budget_s`` bounds the time a search from scratch may
+    take in this frame: an unfinished search is resumed later and its best so far is published, not good.
+    """
+    own = inputs.own
+    views, used = build_views([own, *inputs.mates])
+    if not views:
+        event = {"event": "no-estimate", "vehicle": vehicle, "frame": inputs.index, "points": len(own.points),
+                 "reason": "too few image points"}
+        return StepResult(None, (), 0.0, (), event)
+    t0 = time.perf_counter()
+    estimate = estimator.estimate(views, knowledge=inputs.knowledge, hints=inputs.hints, frame=inputs.index,
+                                  budget_s=budget_s)
+    seconds = time.perf_counter() - t0
+    sol = estimate.solution
+    mates = tuple(v for v in used if v != vehicle)
+    outbox = [Outgoing("pose", own.stamp_ns, {
+        "target": target, "pose": tuple(float(v) for v in sol.pose), "fitness": float(sol.fitness),
+        "mismatch": estimate.mismatch, "converged": estimate.good, "generations": int(sol.generations),
+        "seconds": seconds, "from_hint": bool(sol.from_hint), "inputs": mates})]
+    if share_mode == "hint" and estimate.good:
+        outbox.append(Outgoing("hint", own.stamp_ns, {"pose": np.array(sol.pose, float)}))
+    event = {"event": "frame", "vehicle": vehicle, "frame": inputs.index, "stamp_ns": own.stamp_ns,
+             "points": len(own.points), "views": list(used), "knowledge": [k.name for k in inputs.knowledge],
+             "pose": pose_dict(sol.pose), "fitness": float(sol.fitness), "mismatch": estimate.mismatch,
+             "good": estimate.good, "solved": estimate.solved, "searching": estimator.searching,
+             "from_hint": bool(sol.from_hint), "seconds": seconds}
+    if inputs.truth is not None:
+        event["error"] = pose_error(sol.pose, inputs.truth)
+    return StepResult(estimate, tuple(used), seconds, tuple(outbox), event)
+
+
+__all__ = ["FrameInputs", "Outgoing", "StepResult", "share", "step"]
