@@ -165,8 +165,17 @@ class CooperativeEstimator:
         hints = np.zeros((0, 6)) if hints is None else np.atleast_2d(np.asarray(hints, float)).reshape(-1, 6)
         return PoseProblem(self.model, tuple(views), constrained_bounds(self.bounds, knowledge), hints)
 
+    @property
+    def current_best(self) -> np.ndarray | None:
+        """The own best pose now (6,): the tracked pose, the best so far of a search in progress, or None."""
+        if self._search is not None:
+            state = self._search.run.state
+            return np.array(state.best_pose) if len(state.population) else None
+        return None if self.last is None else np.array(self.last.pose)
+
     def estimate(self, views: Sequence[View], *, knowledge: Sequence[Knowledge] = (),
-                 hints: np.ndarray | None = None, frame: int = 0, budget_s: float | None = None) -> Estimate:
+                 hints: np.ndarray | None = None, frame: int = 0, budget_s: float | None = None,
+                 candidates: np.ndarray | None = None) -> Estimate:
         """The pose at one frame from ``views`` (own and team-mates'), ``knowledge`` and ``hints``.
 
         Parameters
@@ -181,19 +190,28 @@ class CooperativeEstimator:
             Frame number, for the seed of a search from scratch.
         budget_s : float, optional
             Seconds a search from scratch may run in this call (None: until it stops); tracking is not cut.
+        candidates : array (K, 6), optional
+            Team-mates' best poses sent with the views (our extension of Experiment 2(a)). The own best and
+            these are weighed on this frame's eq. (4) and the fittest is tracked (eq. 2); when that holds, it
+            is the estimate, and a search in progress ends. Team-mates given the same views and candidates
+            therefore publish the same pose.
         """
         if not views:
             raise ValueError("estimate needs at least one view")
         problem = self.problem(views, knowledge, hints)
         deadline = None if budget_s is None else time.perf_counter() + budget_s
-        if self.last is not None and self._search is None:
-            solution = track(self.last, list(views), problem=problem, options=self.options,
+        start = self._start(problem, candidates)
+        if start is not None:
+            previous = self.last if self.last is not None else self._solution_at(start, problem)
+            solution = track(previous.with_(pose=start), list(views), problem=problem, options=self.options,
                              seed=np.random.default_rng([self.seed, frame]), lost_mismatch=self.lost_mismatch,
                              hints=problem.hints if len(problem.hints) else None, search_when_lost=False)
             if solution.converged:
+                self._search = None
                 return self._keep(solution, problem, False, time.perf_counter())
-            self.last = None  # lost: search again, with the lost pose as a hint
-            problem = problem.with_hints(np.concatenate([problem.hints, solution.pose[None]]))
+            if self._search is None:  # lost: search again, with the lost pose as a hint
+                self.last = None
+                problem = problem.with_hints(np.concatenate([problem.hints, solution.pose[None]]))
         if self._search is None:
             optimiser = EvoPose(problem, self.options, np.random.default_rng([self.seed, frame]))
             run = Run(optimiser.start(), Told(0, np.inf, False, None), Evaluator.for_search(problem, self.options),
@@ -203,6 +221,32 @@ class CooperativeEstimator:
             self._search = replace(self._search, run=replace(
                 self._search.run, state=self._search.optimiser.inject(self._search.run.state, hints)))
         return self._advance(deadline, problem)
+
+    def _start(self, problem: PoseProblem, candidates: np.ndarray | None) -> np.ndarray | None:
+        """The pose to track from: the fittest (eq. 4 of ``problem``) of the own best and ``candidates``; without
+        candidates, the last pose while tracking, else None. Ties go to the lexicographically smallest pose,
+        so every vehicle with the same inputs chooses the same."""
+        if candidates is None or not np.size(candidates):
+            return None if self.last is None or self._search is not None else np.array(self.last.pose)
+        pool = np.atleast_2d(np.asarray(candidates, float)).reshape(-1, 6)
+        own = self.current_best
+        if own is not None:
+            pool = np.concatenate([own[None], pool])
+        pool = problem.bounds.project(pool[np.all(np.isfinite(pool), axis=1)])
+        if not len(pool):
+            return None
+        fitness = PoseObjective(problem, self.options.fitness, self.options.tau)(pool)
+        order = np.lexsort((*pool.T[::-1], fitness))
+        return pool[order[0]]
+
+    def _solution_at(self, pose: np.ndarray, problem: PoseProblem) -> Solution:
+        """A stand-in previous solution at ``pose`` for :func:`track`."""
+        objective = PoseObjective(problem, self.options.fitness, self.options.tau)
+        fitness = float(objective(pose[None])[0])
+        return Solution(pose=np.array(pose), fitness=fitness, view_terms=objective.view_terms(pose[None])[0],
+                        view_weights=objective.weights.copy(), generations=0, evaluations=0, seconds=0.0,
+                        converged=False, stop_reason="candidate", history=[fitness], problem=problem,
+                        options=self.options)
 
     def _advance(self, deadline: float | None, current: PoseProblem | None) -> Estimate:
         """Resume the search in progress until ``deadline``; a finished good search is tracked onto ``current``."""

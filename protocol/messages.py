@@ -159,12 +159,18 @@ def unpack_points(data: bytes) -> np.ndarray:
 
 
 class FeatureSet(Message):
-    """Image feature points seen by ``camera``: ``points`` is :func:`pack_points` of an ``(N, 2)`` array, pixels."""
+    """Image feature points seen by ``camera``: ``points`` is :func:`pack_points` of an ``(N, 2)`` array, pixels.
+
+    ``best`` (optional, our extension of the paper's Experiment 2(a)) is the sender's best pose of the target
+    when it took the frame; receivers weigh it against their own on the shared eq. (4), so that team-mates
+    with the same views agree on one pose even when their stochastic searches did not.
+    """
 
     TOPIC: ClassVar[Topic] = Topic.FEATURES
 
     camera: CameraInfo
     points: bytes
+    best: Pose6 | None = None
 
     @field_validator("points")
     @classmethod

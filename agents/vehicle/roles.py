@@ -221,7 +221,9 @@ class CameraVehicle(Vehicle):
         if self._image_ready is None:
             self._image_ready = t_acquire + frame.render_s
         mine = own_view(self.config.vehicle, stamp, frame.camera, frame.points)
-        shared = share(self.config.share, self.config.image_encoding, frame, mine)
+        with self._estimator_lock:
+            best = self.estimator.current_best
+        shared = share(self.config.share, self.config.image_encoding, frame, mine, best)
         if shared is not None:
             self.publish(shared)
         inputs = FrameInputs(n, mine, self.paired_views(stamp), self.knowledge(),

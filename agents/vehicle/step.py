@@ -33,11 +33,14 @@ class Outgoing:
     fields: Mapping = field(default_factory=dict)
 
 
-def share(mode: str, encoding: str, frame: Frame, own: MateView) -> Outgoing | None:
-    """What the own frame gives team-mates: its points with the camera (``features``), the image (``raw``)."""
+def share(mode: str, encoding: str, frame: Frame, own: MateView, best: np.ndarray | None = None) -> Outgoing | None:
+    """What the own frame gives team-mates: its points with the camera and the own ``best`` pose so far
+    (``features``), or the image (``raw``)."""
     if mode == "features":
-        return Outgoing("features", own.stamp_ns, {"camera": own.camera,
-                                                   "points": own.points.astype("<f4").tobytes()})
+        fields = {"camera": own.camera, "points": own.points.astype("<f4").tobytes()}
+        if best is not None:
+            fields["best"] = tuple(float(v) for v in best)
+        return Outgoing("features", own.stamp_ns, fields)
     if mode == "raw":
         h, w = frame.image.shape[:2]
         channels = 1 if frame.image.ndim == 2 else 3
@@ -92,7 +95,9 @@ def step(estimator: CooperativeEstimator, inputs: FrameInputs, *, vehicle: str, 
     """One frame of a camera vehicle: eq. (1)-(4) on the own and team-mates' views, with knowledge and hints.
 
     The estimate is published as a ``pose`` (``converged`` only when the estimator judges it good); in hint
-    mode a good estimate also goes out as a ``hint``. ``budget_s`` bounds the time a search from scratch may
+    mode a good estimate also goes out as a ``hint``. Team-mates' ``best`` poses (sent with their feature sets)
+    are weighed against the own best on this frame's eq. (4): the fitter one is tracked, so that vehicles with
+    the same views publish the same pose. ``budget_s`` bounds the time a search from scratch may
     take in this frame: an unfinished search is resumed later and its best so far is published, not good.
     """
     own = inputs.own
@@ -102,8 +107,9 @@ def step(estimator: CooperativeEstimator, inputs: FrameInputs, *, vehicle: str, 
                  "reason": "too few image points"}
         return StepResult(None, (), 0.0, (), event)
     t0 = time.perf_counter()
+    candidates = [m.best for m in inputs.mates if m.best is not None]
     estimate = estimator.estimate(views, knowledge=inputs.knowledge, hints=inputs.hints, frame=inputs.index,
-                                  budget_s=budget_s)
+                                  budget_s=budget_s, candidates=np.array(candidates) if candidates else None)
     seconds = time.perf_counter() - t0
     sol = estimate.solution
     mates = tuple(v for v in used if v != vehicle)

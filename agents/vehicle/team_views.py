@@ -68,14 +68,15 @@ class MateView:
     stamp_ns: int
     camera: CameraInfo
     points: np.ndarray  #: (N, 2) float32 pixels
+    best: np.ndarray | None = None  #: (6,) the sender's best pose when it took the frame (feature sets)
 
 
 def mate_view(vehicle: str, message: FeatureSet | ImageFrame, extract: Callable[[np.ndarray], np.ndarray]) -> MateView:
     """A team-mate's view from its feature set, or from its raw frame (marks extracted with ``extract``)."""
     if isinstance(message, FeatureSet):
-        points = message.points_uv
-    else:
-        points = np.asarray(extract(image_of(message)), np.float32).reshape(-1, 2)
+        best = None if message.best is None else np.array(message.best, float)
+        return MateView(vehicle, message.stamp_ns, message.camera, message.points_uv, best)
+    points = np.asarray(extract(image_of(message)), np.float32).reshape(-1, 2)
     return MateView(vehicle, message.stamp_ns, message.camera, points)
 
 
