@@ -1,8 +1,11 @@
 """``evopose report``: run the paper's experiments with the fleet and write ``report.md`` and its figures.
 
+Experiment 2 runs on two worlds: ``exp2-paper-scale`` (the paper's image scale: the Pioneer ~25 px wide; the
+headline) and ``exp2`` (telephoto lenses, ~180 px), each also with the Pioneer driving (tracking, eq. 2).
 Tables I and II in the paper's layout with the paper's numbers beside ours, the bandwidth of each share
 mode, Fig. 6 (fitness of the best individual over generations) and the pose agreement of the two
-helicopters; then each of the paper's qualitative findings, checked against our numbers.
+helicopters, frame by frame; then each of the paper's qualitative findings, checked against our numbers
+at each scale.
 """
 
 from __future__ import annotations
@@ -17,11 +20,16 @@ from pathlib import Path
 
 from scenarios.fleet import load_fleet_scenario
 
-from agents.experiments.results import agreement, rows
 from agents.experiments import DEFAULT_ENDPOINT
+from agents.experiments.results import agreement, frame_agreement, rows
 from agents.experiments.runner import run_scenario
 
 SCENARIOS = ("exp1-airship", "exp2-solo", "exp2a-features", "exp2b-hints", "exp2-raw")
+#: Experiment 2's worlds, headline first: (world, its driving variant, what to call it).
+WORLDS = (("exp2-paper-scale", "exp2-paper-scale-driving", "paper scale (Pioneer ~25 px)"),
+          ("exp2", "exp2-driving", "telephoto (Pioneer ~180 px)"))
+#: The scenarios run with the Pioneer driving (tracking, eq. 2).
+DRIVING = ("exp2a-features", "exp2b-hints")
 
 #: Paper, Table I: roll, pitch, yaw error (deg), X, Y, Z error (cm), each (mean, σ); time (s).
 PAPER_TABLE_I = {
@@ -62,15 +70,16 @@ HEADER = ("| {what} | source | roll ° (σ) | pitch ° (σ) | yaw ° (σ) | X {u
           "time to good pose, s |\n|---|---|---|---|---|---|---|---|---|")
 
 
-def _find(result_rows: list[dict], scenario: str, vehicle: str) -> dict | None:
-    return next((r for r in result_rows if r["scenario"] == scenario and r["vehicle"] == vehicle), None)
+def _find(result_rows: list[dict], scenario: str, vehicle: str, world: str | None = None) -> dict | None:
+    return next((r for r in result_rows if r["scenario"] == scenario and r["vehicle"] == vehicle
+                 and (world is None or r["world"] == world)), None)
 
 
 def _find_variant(result_rows: list[dict], variant: str, vehicle: str) -> dict | None:
     return next((r for r in result_rows if r["variant"] == variant and r["vehicle"] == vehicle), None)
 
 
-def figure_6(result_rows: list[dict], path: Path) -> Path:
+def figure_6(result_rows: list[dict], path: Path, world: str) -> Path:
     """Fitness of the best individual over generations of the first search: H1, H2 and H1 + H2 (paper Fig. 6)."""
     import matplotlib
 
@@ -78,14 +87,14 @@ def figure_6(result_rows: list[dict], path: Path) -> Path:
     import matplotlib.pyplot as plt
 
     fig, ax = plt.subplots(figsize=(6, 3.6), dpi=120)
-    for label, row in (("H1 alone", _find(result_rows, "exp2-solo", "H1")),
-                       ("H2 alone", _find(result_rows, "exp2-solo", "H2")),
-                       ("H1 + H2 (eq. 4, W = 0.5)", _find(result_rows, "exp2a-features", "H1"))):
+    for label, row in (("H1 alone", _find(result_rows, "exp2-solo", "H1", world)),
+                       ("H2 alone", _find(result_rows, "exp2-solo", "H2", world)),
+                       ("H1 + H2 (eq. 4, W = 0.5)", _find(result_rows, "exp2a-features", "H1", world))):
         if row and row["history"]:
             ax.plot(range(1, len(row["history"]) + 1), row["history"], marker="o", ms=3, label=label)
     ax.set_xlabel("generation")
     ax.set_ylabel("fitness of the best (px)")
-    ax.set_title("Fitness of the best individual, strategy (a)")
+    ax.set_title(f"Fitness of the best individual, strategy (a), {world}")
     ax.grid(alpha=0.3)
     ax.legend()
     fig.tight_layout()
@@ -94,19 +103,20 @@ def figure_6(result_rows: list[dict], path: Path) -> Path:
     return path
 
 
-def findings(result_rows: list[dict], agree_a: dict, agree_b: dict) -> list[tuple[str, bool, str]]:
-    """The paper's qualitative findings, each with whether our numbers show it and the numbers."""
+def findings(result_rows: list[dict], agree_a: dict, agree_b: dict, world: str,
+             with_exp1: bool = True) -> list[tuple[str, bool, str]]:
+    """The paper's qualitative findings on ``world``, each with whether our numbers show it and the numbers."""
     out = []
     plain, imu = _find_variant(result_rows, "EvoPose", "ground-station"), _find_variant(result_rows, "EvoPose+IMU",
                                                                                         "ground-station")
-    if plain and imu:
+    if plain and imu and with_exp1:
         out.append(("The IMU cuts the time to a good pose (Table I)", imu["first_good_s"] < plain["first_good_s"],
                     f"{plain['first_good_s']:.3f} s -> {imu['first_good_s']:.3f} s"))
         out.append(("The IMU cuts the roll error (Table I)", imu["roll"] < plain["roll"],
                     f"{plain['roll']:.2f}° -> {imu['roll']:.2f}°"))
-    h1, h2 = _find(result_rows, "exp2-solo", "H1"), _find(result_rows, "exp2-solo", "H2")
-    both = _find(result_rows, "exp2a-features", "H1")
-    h1h, h2h = _find(result_rows, "exp2b-hints", "H1"), _find(result_rows, "exp2b-hints", "H2")
+    h1, h2 = _find(result_rows, "exp2-solo", "H1", world), _find(result_rows, "exp2-solo", "H2", world)
+    both = _find(result_rows, "exp2a-features", "H1", world)
+    h1h, h2h = _find(result_rows, "exp2b-hints", "H1", world), _find(result_rows, "exp2b-hints", "H2", world)
     if h1 and h2 and both:
         out.append(("Both cameras beat either alone (position error)", both["position"] < min(h1["position"],
                                                                                                h2["position"]),
@@ -123,16 +133,18 @@ def findings(result_rows: list[dict], agree_a: dict, agree_b: dict) -> list[tupl
                     f"H1 {h1['position'] * 100:.2f} -> {h1h['position'] * 100:.2f} cm, "
                     f"H2 {h2['position'] * 100:.2f} -> {h2h['position'] * 100:.2f} cm"))
         out.append(("...and H2 most", gain2 > gain1, f"gain H1 {gain1 * 100:.2f} cm, H2 {gain2 * 100:.2f} cm"))
-    if agree_a["runs"]:
-        out.append(("In (a) the two helicopters agree (final poses within 1 cm, 0.1°)",
-                    agree_a["position_max"] <= 0.01 and agree_a["angle_max"] <= 0.1,
-                    f"max {agree_a['position_max'] * 100:.3f} cm, {agree_a['angle_max']:.3f}°"))
-    if agree_b["runs"] and agree_a["runs"]:
-        out.append(("In (b) they can differ (more than in (a))", agree_b["position_mean"] > agree_a["position_mean"],
-                    f"mean {agree_b['position_mean'] * 100:.4f} cm in (b) vs {agree_a['position_mean'] * 100:.4f} cm "
-                    "in (a)"))
+    if agree_a["frames"]:
+        out.append(("In (a) the two helicopters publish the same pose (within 1 cm, 0.1°) on >= 95 % of frames",
+                    agree_a["fraction"] >= 0.95,
+                    f"{agree_a['agreed']} of {agree_a['frames']} frames ({agree_a['fraction']:.1%})"))
+    if agree_b["frames"] and agree_a["frames"]:
+        out.append(("In (b) they can differ (agree on fewer frames than in (a))",
+                    agree_b["fraction"] < agree_a["fraction"],
+                    f"same pose on {agree_b['fraction']:.1%} of frames in (b), {agree_a['fraction']:.1%} in (a)"))
     paper_times = {"H1": (h1, 2.3), "H2": (h2, 5.0), "H1 + H2": (both, 1.6), "H1 + hint": (h1h, 0.6),
-                   "H2 + hint": (h2h, 1.3), "EvoPose": (plain, 3.2), "EvoPose+IMU": (imu, 2.3)}
+                   "H2 + hint": (h2h, 1.3)}
+    if with_exp1:
+        paper_times.update({"EvoPose": (plain, 3.2), "EvoPose+IMU": (imu, 2.3)})
     ratios = {k: t / r["first_good_s"] for k, (r, t) in paper_times.items() if r and r["first_good_s"] > 0}
     if ratios:
         slowest = min(ratios, key=ratios.get)
@@ -145,15 +157,18 @@ def findings(result_rows: list[dict], agree_a: dict, agree_b: dict) -> list[tupl
                     for k, r in ours.items())
         out.append(("Position errors below the paper's Table II at the same geometry", below,
                     "every X, Y, Z mean of every row"))
+        worst = max((max(r[a] for a in ANGLES), k) for k, r in ours.items() if r is not None)
+        out.append(("No row's mean angle error over 2° (no wrong basins)", worst[0] <= 2.0,
+                    f"largest: {worst[1]} {worst[0]:.2f}°"))
     return out
 
 
-def bandwidth_rows(result_rows: list[dict]) -> list[str]:
+def bandwidth_rows(result_rows: list[dict], world: str) -> list[str]:
     lines = []
     for scenario, label, topic in (("exp2-raw", "raw images", "image"), ("exp2a-features", "feature sets (a)",
                                                                           "features"),
                                    ("exp2b-hints", "hints (b)", "hint")):
-        r = _find(result_rows, scenario, "H1")
+        r = _find(result_rows, scenario, "H1", world)
         if r and topic in r["traffic"]:
             t = r["traffic"][topic]
             lines.append(f"| {label} | {topic} | {t['rate_hz']:.1f} | {t['bytes_per_message']:,.0f} | "
@@ -161,23 +176,65 @@ def bandwidth_rows(result_rows: list[dict]) -> list[str]:
     return lines
 
 
-def write_report(out: Path, *, runs: int, frames: int | None, seed: int, endpoint: str,
-                 stop: threading.Event, on_run=None) -> Path:
-    """Run every experiment, write ``out/report.md`` and ``out/fig6_fitness.png``; returns the report path."""
-    out.mkdir(parents=True, exist_ok=True)
+def run_all(*, runs: int, frames: int | None, seed: int, endpoint: str, stop: threading.Event,
+            on_run=None) -> list[dict]:
+    """Every experiment: Experiment 1 on its world; Experiment 2 on each of :data:`WORLDS`, also driving."""
     records: list[dict] = []
-    started = time.time()
-    for name in SCENARIOS:
-        scenario = load_fleet_scenario(name)
-        records += run_scenario(scenario, runs=runs, frames=frames, seed=seed, endpoint=endpoint, stop=stop,
-                                on_run=on_run, keep_going=True)
+    plan = [("exp1-airship", None)]
+    for world, driving, _ in WORLDS:
+        plan += [(name, world) for name in SCENARIOS if name != "exp1-airship"]
+        plan += [(name, driving) for name in DRIVING]
+    for name, world in plan:
         if stop.is_set():
             break
+        scenario = load_fleet_scenario(name, world)
+        records += run_scenario(scenario, runs=runs, frames=frames, seed=seed, endpoint=endpoint, stop=stop,
+                                on_run=on_run, keep_going=True)
+    return records
+
+
+def _table_ii(result_rows: list[dict], world: str) -> list[str]:
+    lines = [HEADER.format(what="cameras", u="m")]
+    for label, scenario, vehicle in (("H1", "exp2-solo", "H1"), ("H2", "exp2-solo", "H2"),
+                                     ("H1 + H2", "exp2a-features", "H1"), ("H1 + hint", "exp2b-hints", "H1"),
+                                     ("H2 + hint", "exp2b-hints", "H2")):
+        r = _find(result_rows, scenario, vehicle, world)
+        if r:
+            lines.append(_row(label, r, 1, (2, 4), PAPER_TABLE_II[label][6]))
+        lines.append(_paper_row(label, PAPER_TABLE_II[label]))
+    return lines
+
+
+def _agreement_lines(records: list[dict], worlds: list[str]) -> list[str]:
+    lines = ["| world | strategy | frames both published | same pose (1 cm, 0.1°) | both good | "
+             "final poses: mean / max distance, cm |", "|---|---|---|---|---|---|"]
+    for world in worlds:
+        for label, scenario in (("(a) feature sets", "exp2a-features"), ("(b) hints", "exp2b-hints")):
+            chosen = [r for r in records if r["scenario"] == scenario and r.get("world") == world]
+            fa, ag = frame_agreement(chosen, "H1", "H2"), agreement(chosen, "H1", "H2")
+            if fa["frames"]:
+                lines.append(f"| {world} | {label} | {fa['frames']} | {fa['agreed']} ({fa['fraction']:.1%}) | "
+                             f"{fa['both_good']} | {ag['position_mean'] * 100:.3f} / {ag['position_max'] * 100:.3f} |")
+    return lines
+
+
+def _tracking_lines(result_rows: list[dict]) -> list[str]:
+    lines = ["| world | scenario | vehicle | good frames | position error, cm (σ) | yaw error, ° (σ) |",
+             "|---|---|---|---|---|---|"]
+    for _, driving, _ in WORLDS:
+        for r in (r for r in result_rows if r["world"] == driving):
+            lines.append(f"| {driving} | {r['scenario']} | {r['vehicle']} | {r['good_fraction']:.0%} | "
+                         f"{_cell(r['position'] * 100, r['position_sd'] * 100, 1)} | {_cell(r['yaw'], r['yaw_sd'], 2)} |")
+    return lines
+
+
+def write_report(out: Path, *, runs: int, frames: int | None, seed: int, endpoint: str,
+                 stop: threading.Event, on_run=None) -> Path:
+    """Run every experiment, write ``out/report.md`` and one Fig. 6 per world; returns the report path."""
+    out.mkdir(parents=True, exist_ok=True)
+    started = time.time()
+    records = run_all(runs=runs, frames=frames, seed=seed, endpoint=endpoint, stop=stop, on_run=on_run)
     result_rows = rows(records)
-    a_records = [r for r in records if r["scenario"] == "exp2a-features"]
-    b_records = [r for r in records if r["scenario"] == "exp2b-hints"]
-    agree_a, agree_b = agreement(a_records, "H1", "H2"), agreement(b_records, "H1", "H2")
-    fig = figure_6(result_rows, out / "fig6_fitness.png")
     lines = [f"# EvoPose Fleet: the paper's experiments, reproduced",
              "",
              f"Produced by `evopose report --runs {runs}{'' if frames is None else f' --frames {frames}'}"
@@ -186,9 +243,14 @@ def write_report(out: Path, *, runs: int, frames: int | None, seed: int, endpoin
              f"{(time.time() - started) / 60:.1f} min. Every vehicle ran as its own process over Zenoh on loopback; "
              "each run used other search seeds and another world seed (image noise, IMU bias). Errors are per run the "
              "mean absolute error over the frames with a good (converged) estimate, then mean and σ over the runs. "
-             "Time to a good pose: from the acquisition of the first frame to the first good estimate.",
-             "", "## Table I: the airship localized by the ground station (Experiment 1)", "",
-             HEADER.format(what="algorithm", u="cm")]
+             "Time to a good pose: from the acquisition of the first frame to the first good estimate. Experiment 2 "
+             "runs on two worlds of the same geometry: at the paper's image scale (the headline) and with telephoto "
+             "lenses.",
+             ""]
+    for world, _, title in WORLDS:
+        lines += [f"## Table II at {title}: `{world}`", "", *_table_ii(result_rows, world), ""]
+    lines += ["## Table I: the airship localized by the ground station (Experiment 1, `exp1-airship`)", "",
+              HEADER.format(what="algorithm", u="cm")]
     for variant in ("EvoPose", "EvoPose+IMU"):
         r = _find_variant(result_rows, variant, "ground-station")
         if r:
@@ -199,35 +261,37 @@ def write_report(out: Path, *, runs: int, frames: int | None, seed: int, endpoin
         lines += ["", "The airship received its pose back from the station: "
                   + "; ".join(f"{r['variant']}: {r['good_fraction']:.0%} of its frames, position error "
                               f"{r['position'] * 100:.1f} cm" for r in airship) + "."]
-    lines += ["", "## Table II: the Pioneer localized by two helicopters (Experiment 2)", "",
-              HEADER.format(what="cameras", u="m")]
-    for label, scenario, vehicle in (("H1", "exp2-solo", "H1"), ("H2", "exp2-solo", "H2"),
-                                     ("H1 + H2", "exp2a-features", "H1"), ("H1 + hint", "exp2b-hints", "H1"),
-                                     ("H2 + hint", "exp2b-hints", "H2")):
-        r = _find(result_rows, scenario, vehicle)
-        if r:
-            lines.append(_row(label, r, 1, (2, 4), PAPER_TABLE_II[label][6]))
-        lines.append(_paper_row(label, PAPER_TABLE_II[label]))
     lines += ["", "## Bandwidth per share mode (H1's sending side)", "",
-              "| share | topic | messages/s | bytes/message | bytes/s |", "|---|---|---|---|---|",
-              *bandwidth_rows(result_rows),
-              "", "The paper: about 10 frames/s of features (tens of points, hundreds of bytes) in (a), over 100 Hz of "
+              "| world | share | topic | messages/s | bytes/message | bytes/s |", "|---|---|---|---|---|---|"]
+    for world, _, _ in WORLDS:
+        lines += [f"| {world} " + line for line in bandwidth_rows(result_rows, world)]
+    lines += ["", "The paper: about 10 frames/s of features (tens of points, hundreds of bytes) in (a), over 100 Hz of "
               "24-byte hints in (b); raw images are the alternative it rejects for their bandwidth.",
-              "", "## Pose agreement between H1 and H2 (final poses of each run)", "",
-              "| strategy | runs | mean distance, cm | max distance, cm | max angle, ° |", "|---|---|---|---|---|"]
-    for label, ag in (("(a) feature sets", agree_a), ("(b) hints", agree_b)):
-        if ag["runs"]:
-            lines.append(f"| {label} | {ag['runs']} | {ag['position_mean'] * 100:.4f} | {ag['position_max'] * 100:.4f}"
-                         f" | {ag['angle_max']:.3f} |")
-    lines += ["", "## Fig. 6: fitness of the best individual", "", f"![Fig. 6]({fig.name})", "",
-              "First search of run 0: fitness (eq. 4, robust, pixels) of the best individual per generation.", "",
-              "## The paper's findings in our numbers", "", "| finding | holds | numbers |", "|---|---|---|"]
-    for text, holds, numbers in findings(result_rows, agree_a, agree_b):
-        lines.append(f"| {text} | {'yes' if holds else '**no**'} | {numbers} |")
+              "", "## Pose agreement between H1 and H2, frame by frame", "",
+              *_agreement_lines(records, [w for w, _, _ in WORLDS] + [d for _, d, _ in WORLDS]),
+              "", "## Tracking a driving Pioneer (eq. 2): 0.5 m/s, turning at 0.2 rad/s", "",
+              *_tracking_lines(result_rows), "", "## Fig. 6: fitness of the best individual", ""]
+    for world, _, title in WORLDS:
+        fig = figure_6(result_rows, out / f"fig6_{world}.png", world)
+        lines += [f"![Fig. 6, {title}]({fig.name})", ""]
+    lines += ["First search of run 0: fitness (eq. 4, robust, pixels) of the best individual per generation.", ""]
+    for world, _, title in WORLDS:
+        a = [r for r in records if r["scenario"] == "exp2a-features" and r.get("world") == world]
+        b = [r for r in records if r["scenario"] == "exp2b-hints" and r.get("world") == world]
+        lines += [f"## The paper's findings at {title}", "", "| finding | holds | numbers |", "|---|---|---|"]
+        for text, holds, numbers in findings(result_rows, frame_agreement(a, "H1", "H2"),
+                                             frame_agreement(b, "H1", "H2"), world, world == WORLDS[0][0]):
+            lines.append(f"| {text} | {'yes' if holds else '**no**'} | {numbers} |")
+        lines.append("")
     failed = [r for r in records if r.get("error")]
     if failed:
-        lines += ["", f"**{len(failed)} of {len(records)} runs failed** and are left out of the tables:"]
-        lines += [f"- {r['scenario']} / {r['variant']} run {r['run']}: {r['error']}" for r in failed]
+        lines += [f"**{len(failed)} of {len(records)} runs failed** and are left out of the tables:"]
+        lines += [f"- {r['scenario']} on {r.get('world')} / {r['variant']} run {r['run']}: {r['error']}"
+                  for r in failed]
+    slow = [r for r in records if r.get("slow")]
+    if slow:
+        lines += ["", f"{len(slow)} runs were slow (stopped at their deadline; their frames so far are counted): "
+                  + ", ".join(f"{r['scenario']} on {r.get('world')} run {r['run']}" for r in slow)]
     seconds = [r["seconds"] for r in records if r.get("seconds")]
     if seconds:
         lines += ["", f"Wall time per run (start-up margin included): median {statistics.median(seconds):.1f} s, "
@@ -239,4 +303,4 @@ def write_report(out: Path, *, runs: int, frames: int | None, seed: int, endpoin
     return path
 
 
-__all__ = ["DEFAULT_ENDPOINT", "SCENARIOS", "write_report"]
+__all__ = ["DEFAULT_ENDPOINT", "SCENARIOS", "WORLDS", "run_all", "write_report"]

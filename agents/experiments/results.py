@@ -28,16 +28,17 @@ def estimating(summary: dict | None) -> bool:
 
 
 def rows(records: list[dict]) -> list[dict]:
-    """One row per (variant, estimating vehicle): mean and σ over runs of each error, times, rates."""
-    grouped: dict[tuple[str, str, str], list[dict]] = {}
+    """One row per (world, scenario, variant, estimating vehicle): mean and σ over runs of each error, times, rates."""
+    grouped: dict[tuple[str, str, str, str], list[dict]] = {}
     for record in records:
         for vehicle, summary in record["agents"].items():
             if estimating(summary):
-                grouped.setdefault((record["scenario"], record["variant"], vehicle), []).append(summary)
+                key = (record.get("world", ""), record["scenario"], record["variant"], vehicle)
+                grouped.setdefault(key, []).append(summary)
     out = []
-    for (scenario, variant, vehicle), summaries in grouped.items():
-        row = {"scenario": scenario, "variant": variant, "vehicle": vehicle, "role": summaries[0]["role"],
-               "share": summaries[0]["share"], "runs": len(summaries)}
+    for (world, scenario, variant, vehicle), summaries in grouped.items():
+        row = {"world": world, "scenario": scenario, "variant": variant, "vehicle": vehicle,
+               "role": summaries[0]["role"], "share": summaries[0]["share"], "runs": len(summaries)}
         for name in PARAMS:
             row[name], row[f"{name}_sd"] = _mean_sd([s.get(f"error_{name}") for s in summaries])
         row["position"], row["position_sd"] = _mean_sd([s.get("error_position") for s in summaries])
@@ -65,6 +66,32 @@ def traffic_rates(summaries: list[dict]) -> dict[str, dict]:
     return {topic: {"rate_hz": statistics.fmean(r for r, _ in v),
                     "bytes_per_message": statistics.fmean(b for _, b in v),
                     "bytes_per_s": statistics.fmean(r * b for r, b in v)} for topic, v in per_topic.items()}
+
+
+#: Two published poses agree when their positions are within this (m) and each angle within this (deg).
+AGREE_POSITION_M, AGREE_ANGLE_DEG = 0.01, 0.1
+
+
+def frame_agreement(records: list[dict], a: str, b: str) -> dict:
+    """Frame by frame, whether ``a`` and ``b`` published the same pose (within 1 cm and 0.1°): over the frames
+    both published a pose for, ``frames``, ``agreed`` and their ratio ``fraction``; and how often both were good."""
+    frames = agreed = both_good = 0
+    for record in records:
+        sa, sb = record["agents"].get(a), record["agents"].get(b)
+        if not (sa and sb):
+            continue
+        pb = {int(p[0]): p for p in sb.get("poses", [])}
+        for p in sa.get("poses", []):
+            q = pb.get(int(p[0]))
+            if q is None:
+                continue
+            frames += 1
+            both_good += bool(p[7] and q[7])
+            d = np.array(p[1:7], float) - np.array(q[1:7], float)
+            d[3:] = np.degrees((d[3:] + np.pi) % (2 * np.pi) - np.pi)
+            agreed += bool(np.linalg.norm(d[:3]) <= AGREE_POSITION_M and np.all(np.abs(d[3:]) <= AGREE_ANGLE_DEG))
+    return {"frames": frames, "agreed": agreed, "both_good": both_good,
+            "fraction": agreed / frames if frames else float("nan")}
 
 
 def agreement(records: list[dict], a: str, b: str) -> dict:

@@ -115,7 +115,7 @@ def run_variant(scenario: FleetScenario, variant: VariantSpec, run: int, *, fram
     epoch_ns = time.time_ns() + int(START_MARGIN_S * 1e9)
     vehicles = [a.vehicle for a in variant.agents]
     base = ["--no-multicast"]
-    router = None
+    router, slow = None, False
     children: list[subprocess.Popen] = []
     procs: list[AgentProcess] = []
     env = {**os.environ, "PYTHONUNBUFFERED": "1"}
@@ -147,8 +147,9 @@ def run_variant(scenario: FleetScenario, variant: VariantSpec, run: int, *, fram
             crashed = [p for p in procs if p.popen.poll() not in (None, 0)]
             if crashed:
                 break
-            if time.monotonic() > deadline:
-                raise ScenarioRunError(f"run {run} of {scenario.name}/{variant.name} did not finish in time")
+            if time.monotonic() > deadline:  # slow: stop the agents, keep what they measured (their summaries)
+                slow = True
+                break
             if on_progress is not None:
                 on_progress({"run": run, "variant": variant.name,
                              "frames": min(p.frames_done for p in procs)})
@@ -163,7 +164,7 @@ def run_variant(scenario: FleetScenario, variant: VariantSpec, run: int, *, fram
                             + (f" ({p.stderr.strip().splitlines()[-1]})" if p.stderr.strip() else "") for p in crashed)
         raise ScenarioRunError(f"run {run} of {scenario.name}/{variant.name}: {details}")
     return {"scenario": scenario.name, "world": scenario.world.name, "variant": variant.name, "run": run,
-            "fleet": fleet,
+            "fleet": fleet, "slow": slow,
             "interrupted": stop.is_set(), "seconds": time.monotonic() - started,
             "agents": {p.vehicle: p.summary for p in procs}}
 

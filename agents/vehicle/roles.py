@@ -263,6 +263,7 @@ class CameraVehicle(Vehicle):
             if rec.first_confirmed_s is None:
                 rec.first_confirmed_s = time.perf_counter() - self._image_ready
         rec.last_pose, rec.last_error = [float(v) for v in sol.pose], error
+        rec.poses.append([result.event["frame"], *rec.last_pose, bool(estimate.good)])
 
     # -- between frames ---------------------------------------------------------------------------
 
