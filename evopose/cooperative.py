@@ -149,6 +149,9 @@ class CooperativeEstimator:
         self._evaluator: Evaluator | None = None
         self._best_fitness = np.inf  # of ``last`` under ``_evaluator.objective``
         self._rng = np.random.default_rng([seed, 1])
+        self._frame = 0  # the frame being estimated
+        self._good: tuple[int, np.ndarray] | None = None  # (frame, pose) of the last good estimate
+        self._motion: tuple[int, np.ndarray] | None = None  # (frame, pose change per frame) at the last good one
 
     def reset(self) -> None:
         """Forget the last pose and any search in progress: the next frame is searched from scratch."""
@@ -175,7 +178,8 @@ class CooperativeEstimator:
 
     def estimate(self, views: Sequence[View], *, knowledge: Sequence[Knowledge] = (),
                  hints: np.ndarray | None = None, frame: int = 0, budget_s: float | None = None,
-                 candidates: np.ndarray | None = None) -> Estimate:
+                 candidates: np.ndarray | None = None, candidate_margin: float = 0.0,
+                 generations: int | None = None) -> Estimate:
         """The pose at one frame from ``views`` (own and team-mates'), ``knowledge`` and ``hints``.
 
         Parameters
@@ -195,17 +199,28 @@ class CooperativeEstimator:
             these are weighed on this frame's eq. (4) and the fittest is tracked (eq. 2); when that holds, it
             is the estimate, and a search in progress ends. Team-mates given the same views and candidates
             therefore publish the same pose.
+        candidate_margin : float
+            0: the fittest wins (feature sets: every vehicle must choose the same). > 0 (hints): a candidate
+            whose mismatch on the own views is within this of the own best's is preferred, because the own
+            views cannot tell them apart and the team-mate, seeing from elsewhere, can — so no vehicle stays in
+            a wrong basin that its team-mate's pose would fix.
+        generations : int, optional
+            A search from scratch runs this many generations in this call (``budget_s`` still caps it): slices
+            that team-mates with the same views run alike, so their best so far agree too.
         """
         if not views:
             raise ValueError("estimate needs at least one view")
         problem = self.problem(views, knowledge, hints)
         deadline = None if budget_s is None else time.perf_counter() + budget_s
-        start = self._start(problem, candidates)
+        self._frame = frame
+        start = self._start(problem, candidates, candidate_margin)
         if start is not None:
             previous = self.last if self.last is not None else self._solution_at(start, problem)
+            predicted = self._predicted(frame, start)
+            extra = problem.hints if predicted is None else np.concatenate([problem.hints, predicted[None]])
             solution = track(previous.with_(pose=start), list(views), problem=problem, options=self.options,
                              seed=np.random.default_rng([self.seed, frame]), lost_mismatch=self.lost_mismatch,
-                             hints=problem.hints if len(problem.hints) else None, search_when_lost=False)
+                             hints=extra if len(extra) else None, search_when_lost=False)
             if solution.converged:
                 self._search = None
                 return self._keep(solution, problem, False, time.perf_counter())
@@ -220,24 +235,42 @@ class CooperativeEstimator:
         elif hints is not None and np.size(hints):
             self._search = replace(self._search, run=replace(
                 self._search.run, state=self._search.optimiser.inject(self._search.run.state, hints)))
-        return self._advance(deadline, problem)
+        return self._advance(deadline, problem, generations)
 
-    def _start(self, problem: PoseProblem, candidates: np.ndarray | None) -> np.ndarray | None:
+    def _predicted(self, frame: int, start: np.ndarray) -> np.ndarray | None:
+        """Eq. (2) with a constant-velocity guess: ``start`` moved on by the motion between the last two good
+        estimates, for a target that moves between frames (None without two of them)."""
+        if self._motion is None or frame <= self._motion[0]:
+            return None
+        velocity = self._motion[1]
+        return start + velocity * (frame - self._motion[0])
+
+    def _start(self, problem: PoseProblem, candidates: np.ndarray | None, margin: float = 0.0) -> np.ndarray | None:
         """The pose to track from: the fittest (eq. 4 of ``problem``) of the own best and ``candidates``; without
         candidates, the last pose while tracking, else None. Ties go to the lexicographically smallest pose,
-        so every vehicle with the same inputs chooses the same."""
+        so every vehicle with the same inputs chooses the same. With ``margin`` > 0 the fittest candidate wins
+        over the own best when its mismatch is at most ``margin`` higher."""
+        tracking = None if self.last is None or self._search is not None else np.array(self.last.pose)
         if candidates is None or not np.size(candidates):
-            return None if self.last is None or self._search is not None else np.array(self.last.pose)
+            return tracking
         pool = np.atleast_2d(np.asarray(candidates, float)).reshape(-1, 6)
-        own = self.current_best
-        if own is not None:
-            pool = np.concatenate([own[None], pool])
         pool = problem.bounds.project(pool[np.all(np.isfinite(pool), axis=1)])
+        own = self.current_best
         if not len(pool):
-            return None
-        fitness = PoseObjective(problem, self.options.fitness, self.options.tau)(pool)
-        order = np.lexsort((*pool.T[::-1], fitness))
-        return pool[order[0]]
+            return tracking
+        objective = PoseObjective(problem, self.options.fitness, self.options.tau)
+        fitness = objective(pool)
+        best = pool[np.lexsort((*pool.T[::-1], fitness))[0]]
+        if own is None:
+            return best
+        own_fitness, best_fitness = float(objective(own[None])[0]), float(np.min(fitness))
+        if margin > 0:
+            own_mismatch, best_mismatch = objective.mismatch(own_fitness), objective.mismatch(best_fitness)
+            if own_mismatch is not None and best_mismatch <= own_mismatch + margin:
+                return best
+            return best if best_fitness < own_fitness else own
+        both = np.concatenate([own[None], pool])
+        return both[np.lexsort((*both.T[::-1], np.concatenate([[own_fitness], fitness])))[0]]
 
     def _solution_at(self, pose: np.ndarray, problem: PoseProblem) -> Solution:
         """A stand-in previous solution at ``pose`` for :func:`track`."""
@@ -248,8 +281,9 @@ class CooperativeEstimator:
                         converged=False, stop_reason="candidate", history=[fitness], problem=problem,
                         options=self.options)
 
-    def _advance(self, deadline: float | None, current: PoseProblem | None) -> Estimate:
-        """Resume the search in progress until ``deadline``; a finished good search is tracked onto ``current``."""
+    def _advance(self, deadline: float | None, current: PoseProblem | None, generations: int | None = None) -> Estimate:
+        """Resume the search in progress until ``deadline`` (or for ``generations``); a finished good search is
+        tracked onto ``current``."""
         search = self._search
         good_at = search.good_at
 
@@ -258,8 +292,9 @@ class CooperativeEstimator:
             if good_at is None and self.options.is_confident(state.best_match):
                 good_at = time.perf_counter()
 
+        until = None if generations is None else search.run.told.generation + generations
         run = evolve(search.optimiser, search.run.state, search.run.evaluator, on_generation=watch,
-                     deadline=deadline, elapsed_before=search.run.seconds)
+                     deadline=deadline, elapsed_before=search.run.seconds, until_generation=until)
         solution = solution_of(search.problem, self.options, run, run.seconds)
         if not run.finished:
             self._search = replace(search, run=run, good_at=good_at)
@@ -320,10 +355,22 @@ class CooperativeEstimator:
         self._evaluator = Evaluator(objective, exploit=(TRACK_SCHEDULE,))
         self._best_fitness = float(objective(np.atleast_2d(solution.pose))[0])
         mismatch = self._mismatch(solution.pose)
+        self._remember_motion(solution if solution.converged else None)
         self.last = solution if solution.converged else None
         if self.last is None:
             self._evaluator = None
         return Estimate(solution, mismatch, solved, good_at)
+
+    def _remember_motion(self, solution: Solution | None) -> None:
+        """The velocity per frame between the last two good estimates (for :meth:`_predicted`)."""
+        frame, previous = self._frame, self._good
+        self._good = None if solution is None else (frame, np.array(solution.pose))
+        if solution is None or previous is None or frame <= previous[0]:
+            self._motion = None
+            return
+        delta = np.array(solution.pose) - previous[1]
+        delta[3:] = (delta[3:] + np.pi) % (2 * np.pi) - np.pi
+        self._motion = (frame, delta / (frame - previous[0]))
 
     def _mismatch(self, pose: np.ndarray) -> float:
         """:attr:`Estimate.mismatch` of ``pose`` under the last frame's objective (1 when it cannot be judged)."""

@@ -153,7 +153,7 @@ class Run:
 def evolve(optimiser: AskTell, state: Any, evaluator: Evaluator, *,
            hint_source: Callable[[], np.ndarray | None] | None = None,
            on_generation: Callable[[Any], None] | None = None, deadline: float | None = None,
-           elapsed_before: float = 0.0) -> Run:
+           elapsed_before: float = 0.0, until_generation: int | None = None) -> Run:
     """Run generations until the optimiser's ``tell`` gives a stop reason, or until ``deadline``.
 
     Parameters
@@ -172,6 +172,9 @@ def evolve(optimiser: AskTell, state: Any, evaluator: Evaluator, *,
         a vehicle publishes the best so far at its camera rate while a search goes on).
     elapsed_before : float
         Seconds the search already ran in earlier calls (its time budget counts them).
+    until_generation : int, optional
+        Also return (unfinished) once this many generations are told: slices of a fixed number of
+        generations, which two vehicles with the same inputs run alike whatever their clocks.
     """
     t0 = time.perf_counter() - elapsed_before
     while True:
@@ -193,5 +196,6 @@ def evolve(optimiser: AskTell, state: Any, evaluator: Evaluator, *,
                                                 evaluations=evaluator.evaluations, elapsed=time.perf_counter() - t0)
         if on_generation is not None:
             on_generation(state)
-        if told.stop_reason is not None or (deadline is not None and time.perf_counter() >= deadline):
+        if (told.stop_reason is not None or (deadline is not None and time.perf_counter() >= deadline)
+                or (until_generation is not None and told.generation >= until_generation)):
             return Run(state, told, evaluator, time.perf_counter() - t0)

@@ -23,6 +23,7 @@ from evopose.cooperative import CooperativeEstimator, Knowledge
 from protocol import MESSAGE_TYPES, Attitude, PoseEstimate, Topic
 from scenarios.world import Scenario
 
+from agents.errors import TeamNotMetError
 from agents.transport.bus import FleetBus, Received
 from agents.vehicle.config import IDLE_GENERATIONS, TARGET_IMU_STREAM, AgentConfig
 from agents.vehicle.frames import NS, FrameClock, SimulatedCamera
@@ -78,8 +79,14 @@ class Vehicle:
         mates = [v for v in self.config.wait_for if v != self.config.vehicle]
         if mates:
             ok = self.bus.wait_for_teammates(mates, self.config.wait_timeout_s)
-            self.emit({"event": "teammates", "vehicle": self.config.vehicle, "ready": ok,
-                       "alive": sorted(self.bus.teammates())})
+            alive = sorted(self.bus.teammates())
+            self.emit({"event": "teammates", "vehicle": self.config.vehicle, "ready": ok, "alive": alive})
+            if not ok:  # a team that never met is an error, not a run alone (docs/security.md)
+                missing = sorted(set(mates) - set(alive))
+                raise TeamNotMetError(f"team-mates {', '.join(missing)} of {self.config.vehicle} did not appear in "
+                                      f"fleet {self.config.fleet!r} within {self.config.wait_timeout_s:g} s "
+                                      "(--wait-timeout); check --connect/--listen (multicast scouting is off "
+                                      "unless --multicast)")
         self.emit({"event": "ready", "vehicle": self.config.vehicle, "role": self.role, "share": self.config.share,
                    "fps": self.clock.fps})
         n = None
@@ -124,6 +131,7 @@ class CameraVehicle(Vehicle):
         self.estimator = CooperativeEstimator(scenario.model.evopose_model(), scenario.bounds(),
                                               SearchOptions(time_budget=config.time_budget_s), seed=config.seed)
         self._hints: list[np.ndarray] = []
+        self._latest_hint: np.ndarray | None = None
         self._hints_lock = threading.Lock()
         self._hint_schedule = HintSchedule(config.hint_rate_hz)
         self._hint_send_lock = threading.Lock()
@@ -169,8 +177,15 @@ class CameraVehicle(Vehicle):
 
     def _on_hint(self, rx: Received) -> None:  # bus worker thread: append only
         with self._hints_lock:
-            self._hints.append(np.asarray(rx.message.pose, float))
+            self._latest_hint = np.asarray(rx.message.pose, float)
+            self._hints.append(self._latest_hint)
             del self._hints[:-HINTS_KEPT]
+
+    def latest_hint(self) -> np.ndarray | None:
+        """The newest team-mate's hint (kept after the improver took it), then forgotten."""
+        with self._hints_lock:
+            hint, self._latest_hint = self._latest_hint, None
+        return hint
 
     def take_hints(self) -> np.ndarray | None:
         with self._hints_lock:
@@ -226,9 +241,13 @@ class CameraVehicle(Vehicle):
         shared = share(self.config.share, self.config.image_encoding, frame, mine, best)
         if shared is not None:
             self.publish(shared)
+        hint_mode = self.config.share == "hint"
         inputs = FrameInputs(n, mine, self.paired_views(stamp), self.knowledge(),
-                             self.take_hints() if self.config.share == "hint" else None, frame.truth)
-        budget = SEARCH_SHARE_OF_FRAME * self.period_s
+                             self.take_hints() if hint_mode else None, frame.truth,
+                             self.latest_hint() if hint_mode else None)
+        # slices of a fixed number of generations (same views on every vehicle) are capped at a whole frame
+        same_views = self.config.share in ("features", "raw")
+        budget = (1.0 if same_views else SEARCH_SHARE_OF_FRAME) * self.period_s
         with self._estimator_lock:
             result = step(self.estimator, inputs, vehicle=self.config.vehicle,
                           target=self.scenario.spec.target.name, share_mode=self.config.share, budget_s=budget)
@@ -262,7 +281,7 @@ class CameraVehicle(Vehicle):
                 rec.errors.add(error)
             if rec.first_confirmed_s is None:
                 rec.first_confirmed_s = time.perf_counter() - self._image_ready
-        rec.last_pose, rec.last_error = [float(v) for v in sol.pose], error
+        rec.last_pose, rec.last_error = list(result.outbox[0].fields["pose"]), error
         rec.poses.append([result.event["frame"], *rec.last_pose, bool(estimate.good)])
 
     # -- between frames ---------------------------------------------------------------------------
@@ -284,7 +303,7 @@ class CameraVehicle(Vehicle):
         while not stop.is_set() and not self._done.is_set():
             with self._estimator_lock:
                 estimate = self.estimator.generation(self.take_hints() if hint_mode else None, budget_s=period)
-            if estimate is not None and hint_mode:
+            if estimate is not None and estimate.good and hint_mode:  # a search's best so far is no hint
                 self.send_hint(estimate.pose)
             now = time.monotonic()
             next_s = max(next_s + period, now - period)

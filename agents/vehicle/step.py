@@ -15,10 +15,18 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from evopose.cooperative import CooperativeEstimator, Estimate, Knowledge
+from evopose.pose import matrix_from_pose, pose_from_matrix
 
 from agents.vehicle.frames import Frame
 from agents.vehicle.records import pose_dict, pose_error
 from agents.vehicle.team_views import MateView, build_views, encode_image
+
+
+#: Generations a search from scratch runs per frame when team-mates share the same views (~25 ms each).
+GENERATIONS_PER_FRAME = 2
+#: Hint mode: a team-mate's pose whose mismatch on the own views is at most this much higher than the own
+#: best's is taken (the own views cannot tell the two apart; the team-mate sees from elsewhere).
+HINT_MARGIN = 0.1
 
 
 @dataclass(frozen=True)
@@ -69,6 +77,8 @@ class FrameInputs:
         Team-mates' poses received since the last frame.
     truth : array (6,)
         The simulator's true target pose: for the frame event's error only, never for the estimate.
+    latest_hint : array (6,) or None
+        The newest hint of a team-mate (hint mode), weighed against the own best with :data:`HINT_MARGIN`.
     """
 
     index: int
@@ -77,6 +87,7 @@ class FrameInputs:
     knowledge: Sequence[Knowledge] = ()
     hints: np.ndarray | None = None
     truth: np.ndarray | None = None
+    latest_hint: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -108,24 +119,32 @@ def step(estimator: CooperativeEstimator, inputs: FrameInputs, *, vehicle: str, 
         return StepResult(None, (), 0.0, (), event)
     t0 = time.perf_counter()
     candidates = [m.best for m in inputs.mates if m.best is not None]
+    margin = 0.0
+    if inputs.latest_hint is not None:  # hints: a team-mate's pose that fits the own views about as well wins
+        candidates, margin = [*candidates, inputs.latest_hint], HINT_MARGIN
+    # the same views on every vehicle (raw images, feature sets): slices of a fixed number of generations, so that
+    # team-mates' searches advance alike and their best so far agree; otherwise slices of time
+    generations = GENERATIONS_PER_FRAME if share_mode in ("features", "raw") else None
     estimate = estimator.estimate(views, knowledge=inputs.knowledge, hints=inputs.hints, frame=inputs.index,
-                                  budget_s=budget_s, candidates=np.array(candidates) if candidates else None)
+                                  budget_s=budget_s, candidates=np.array(candidates) if candidates else None,
+                                  candidate_margin=margin, generations=generations)
     seconds = time.perf_counter() - t0
     sol = estimate.solution
+    pose = pose_from_matrix(matrix_from_pose(np.asarray(sol.pose, float)))  # canonical: pitch within +-90 deg
     mates = tuple(v for v in used if v != vehicle)
     outbox = [Outgoing("pose", own.stamp_ns, {
-        "target": target, "pose": tuple(float(v) for v in sol.pose), "fitness": float(sol.fitness),
+        "target": target, "pose": tuple(float(v) for v in pose), "fitness": float(sol.fitness),
         "mismatch": estimate.mismatch, "converged": estimate.good, "generations": int(sol.generations),
         "seconds": seconds, "from_hint": bool(sol.from_hint), "inputs": mates})]
     if share_mode == "hint" and estimate.good:
-        outbox.append(Outgoing("hint", own.stamp_ns, {"pose": np.array(sol.pose, float)}))
+        outbox.append(Outgoing("hint", own.stamp_ns, {"pose": pose}))
     event = {"event": "frame", "vehicle": vehicle, "frame": inputs.index, "stamp_ns": own.stamp_ns,
              "points": len(own.points), "views": list(used), "knowledge": [k.name for k in inputs.knowledge],
-             "pose": pose_dict(sol.pose), "fitness": float(sol.fitness), "mismatch": estimate.mismatch,
+             "pose": pose_dict(pose), "fitness": float(sol.fitness), "mismatch": estimate.mismatch,
              "good": estimate.good, "solved": estimate.solved, "searching": estimator.searching,
              "from_hint": bool(sol.from_hint), "seconds": seconds}
     if inputs.truth is not None:
-        event["error"] = pose_error(sol.pose, inputs.truth)
+        event["error"] = pose_error(pose, inputs.truth)
     return StepResult(estimate, tuple(used), seconds, tuple(outbox), event)
 
 
