@@ -93,8 +93,7 @@ def any_hue_ranges(image_bgr: np.ndarray, *, tol: int = ANY_HUE_TOLERANCE, separ
                 and all(min((p - q) % 180, (q - p) % 180) > separation for q in peaks)):
             peaks.append(p)
     peaks.sort()
-    names = [HUE_NAMES[round(p / 15) % 12] for p in peaks]
-    out = []
+    out, names = [], [HUE_NAMES[round(p / 15) % 12] for p in peaks]
     for i, p in enumerate(peaks):   # stop at the valleys towards the next and the previous mode
         up, down = (peaks[(i + 1) % len(peaks)] - p) % 180 or 180, (p - peaks[i - 1]) % 180 or 180
         hi = min(tol, int(np.argmin(smooth[(p + np.arange(up)) % 180]))) if len(peaks) > 1 else tol
@@ -227,10 +226,14 @@ def _candidates(cidx: np.ndarray, n_colours: int, passes, min_area: int) -> tupl
     for j in np.nonzero(stats[1:, 4] >= min_area)[0] + 1:   # a part is no bigger than its component
         x, y, bw, bh, _ = stats[j].tolist()
         sl = (slice(y, y + bh), slice(x, x + bw))
-        for k in np.nonzero(votes[j])[0]:
-            m, sub_lab, sub_stats, _ = cv2.connectedComponentsWithStats(
-                ((lab[sl] == j) & (roi[sl] == k + 1)).view(np.uint8), connectivity=8)
-            for q, (sx, sy, sw, sh, sa) in enumerate(sub_stats[1:].tolist(), 1):
+        for k in (colours := np.nonzero(votes[j])[0]):
+            if len(colours) == 1:   # the usual case: the component is of one colour
+                sub_lab, sub_stats = (lab[sl] == j).view(np.uint8), [[0, 0, bw, bh, int(stats[j, 4])]]
+            else:
+                _, sub_lab, sub_stats, _ = cv2.connectedComponentsWithStats(
+                    ((lab[sl] == j) & (roi[sl] == k + 1)).view(np.uint8), connectivity=8)
+                sub_stats = sub_stats[1:].tolist()
+            for q, (sx, sy, sw, sh, sa) in enumerate(sub_stats, 1):
                 if passes(x0 + x + sx, y0 + y + sy, sw, sh, sa):
                     ids[y0 + y:y0 + y + bh, x0 + x:x0 + x + bw][sub_lab == q] = len(cands) + 1
                     cands.append((int(k), x0 + x + sx, y0 + y + sy, sw, sh, sa))
@@ -264,10 +267,8 @@ def _pack(bgr: np.ndarray, ids: np.ndarray, cands: list[tuple[int, ...]],
 
 
 def _encloses(ids: np.ndarray, i: int, nbrs: set[int], sizes: np.ndarray) -> bool:
-    """Whether candidate ``i`` (ids (h, w)) encloses 3+ neighbours a third its size or less: marks on a body (a
-    mark's fringe specks lie outside it)."""
-    small = [j for j in nbrs if 3 * sizes[j] <= sizes[i]]
-    if len(small) < 3:
+    """Whether candidate ``i`` (ids (h, w)) encloses 3+ neighbours a third its size or less (marks on a body)."""
+    if len(small := [j for j in nbrs if 3 * sizes[j] <= sizes[i]]) < 3:
         return False
     contours, _ = cv2.findContours((ids == i).view(np.uint8), cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
     inside = cv2.drawContours(np.zeros(ids.shape, np.uint8), contours, -1, 1, -1).view(bool)
@@ -294,18 +295,17 @@ def _region_stats(img: np.ndarray, ids: np.ndarray, n: int) -> dict:
     c, b = np.bincount(r_id, minlength=n + 1), np.zeros((n + 1, 3), np.float32)
     keys = np.sort(r_id[:, None] * 256 + flat[r_pix].astype(np.int64), axis=0)
     b[c > 0] = keys[np.minimum(np.cumsum(c) - c + c // 2, len(r_id) - 1)][c > 0] % 256 if len(r_id) else 0
-    o_pix = np.flatnonzero(ids > 0)
-    o_id = ids.ravel()[o_pix].astype(np.int64)
+    o_id = ids.ravel()[(o_pix := np.flatnonzero(ids > 0))].astype(np.int64)
     d = flat[o_pix] - b[o_id]
     far = (d * d).sum(axis=1)
-    per = np.bincount(o_id, minlength=n + 1)   # the farthest pixel per candidate: the last of its sorted run
-    top = np.where(per > 0, far[np.lexsort((far, o_id))][np.maximum(np.cumsum(per) - 1, 0)], 0.0)
+    top = np.zeros(n + 1, np.float32)   # the farthest pixel per candidate
+    np.maximum.at(top, o_id, far)
     sel = far >= 0.64 * top[o_id]
-    cb = np.stack([np.bincount(o_id[sel], d[sel, ch], n + 1) for ch in range(3)], axis=1)
-    cb = (cb / np.maximum(np.bincount(o_id[sel], minlength=n + 1), 1)[:, None]).astype(np.float32)
-    nb = np.concatenate([near_hi.ravel()[o_pix], near_lo.ravel()[o_pix]]).astype(np.int64)
-    mine = np.concatenate([o_id, o_id])
-    pairs: list[set[int]] = [set() for _ in range(n + 1)]
+    o_sel, d_sel = o_id[sel], d[sel]
+    cb = np.stack([np.bincount(o_sel, d_sel[:, ch], n + 1) for ch in range(3)], axis=1)
+    cb = (cb / np.maximum(np.bincount(o_sel, minlength=n + 1), 1)[:, None]).astype(np.float32)
+    nb, mine = np.concatenate([near_hi.ravel()[o_pix], near_lo.ravel()[o_pix]]).astype(np.int64), np.tile(o_id, 2)
+    pairs: list[set[int]] = [set() for _ in range(n + 1)]   # the ids 8-adjacent to each
     for code in np.unique((mine * (n + 2) + nb)[(nb != mine) & (nb <= n)]).tolist():
         pairs[code // (n + 2)].add(code % (n + 2))
     f_pix, f_id = owners((ids == 0) & (near_hi > 0), near_hi, near_lo)
