@@ -41,9 +41,11 @@ bench-footprint: $(STAMP)
 lock: $(STAMP)
 	$(PY) -m pip freeze --exclude-editable | grep -v '^evopose' > constraints.txt
 
-# Regenerate docker-compose.yml (exp2a-features) and compose/<scenario>.yml for every shipped fleet scenario.
+# Regenerate docker-compose.yml (exp2a-features), docker-compose.secure.yml (the same with TLS, mTLS and the ACL)
+# and compose/<scenario>.yml for every shipped fleet scenario.
 compose: $(STAMP)
 	$(VENV)/bin/evopose scenario compose exp2a-features --out docker-compose.yml
+	$(VENV)/bin/evopose scenario compose exp2a-features --secure --out docker-compose.secure.yml
 	mkdir -p compose
 	rm -f compose/*.yml
 	for f in scenarios/fleet/*.yaml; do \

@@ -9,3 +9,7 @@ class FleetError(Exception):
 
 class BusConfigError(FleetError):
     """A bad Zenoh mode, endpoint or configuration file, or a session that cannot be opened."""
+
+
+class TeamNotMetError(FleetError):
+    """The team-mates a vehicle was told to wait for (``--wait-for``) never appeared."""

@@ -25,6 +25,8 @@ REGENERATE = "out of date: run `make compose` to regenerate the compose files"
 #: (committed file, scenario, build context relative to the file)
 COMMITTED = [(ROOT / "docker-compose.yml", MAIN_SCENARIO, ".")] + [
     (ROOT / "compose" / f"{name}.yml", name, "..") for name in fleet_scenario_names()]
+#: the secure compose file of the main scenario (TLS, mTLS, the router's ACL; docs/security.md)
+SECURE = ROOT / "docker-compose.secure.yml"
 
 
 def _id(case: tuple) -> str:
@@ -103,7 +105,7 @@ def test_agent_commands_are_accepted(cli, case: tuple) -> None:
         p = ctx.params
         assert p["vehicle"] == vehicles[service_name] and p["fleet"] == scenario.name
         assert p["share"] in SHARES and p["image_encoding"] in ENCODINGS and p["role"] in (None, *ROLES)
-        assert p["frames"] is None and p["as_json"] and p["no_multicast"] and p["mode"] == "client"
+        assert p["frames"] is None and p["as_json"] and not p["multicast"] and p["mode"] == "client"
         assert p["connect"] == ["tcp/router:7447"]
         make_config(SessionOptions(mode=p["mode"], connect=tuple(p["connect"]), multicast=False))
         world_file = ROOT / p["scenario"]  # relative to the repository root (the image's working directory)
@@ -121,7 +123,7 @@ def test_router_command_is_accepted(cli, case: tuple) -> None:
     router = services_of(case[0])["router"]
     ctx = parse(cli, router["command"])
     assert ctx.command.name == "router"
-    assert ctx.params["listen"] == ["tcp/0.0.0.0:7447"] and ctx.params["no_multicast"]
+    assert ctx.params["listen"] == ["tcp/0.0.0.0:7447"] and not ctx.params["multicast"]
     make_config(SessionOptions(mode="router", listen=tuple(ctx.params["listen"]), multicast=False))
 
 
@@ -157,3 +159,49 @@ def test_cli_errors(argv: list[str], capsys: pytest.CaptureFixture[str]) -> None
     assert captured.out == ""
     lines = captured.err.splitlines()
     assert len(lines) == 1 and lines[0].startswith("error: ") and "nope" in lines[0], captured.err
+
+
+# -- the secure compose file -----------------------------------------------------------------------
+
+def test_committed_secure_file_is_generated() -> None:
+    assert SECURE.is_file(), f"{SECURE.name} is missing: {REGENERATE}"
+    scenario = load_fleet_scenario(MAIN_SCENARIO)
+    assert SECURE.read_text(encoding="utf-8") == compose_yaml(scenario, secure=True), f"{SECURE.name} is {REGENERATE}"
+    assert yaml.safe_load(SECURE.read_text(encoding="utf-8")) == compose_document(scenario, secure=True)
+
+
+def test_secure_services_get_only_their_own_credentials_and_their_configs_work(cli, tmp_path: Path) -> None:
+    """Each service mounts the CA certificate and its own certificate, key and config (never ca.key nor another
+    member's key); the commands parse; the configs that `evopose fleet credentials` writes for this file open
+    as Zenoh configurations with the commands' options on top (the router's name is in its certificate)."""
+    scenario = load_fleet_scenario(MAIN_SCENARIO)
+    services = services_of(SECURE)
+    header = SECURE.read_text(encoding="utf-8").splitlines()
+    make = next(line for line in header if "evopose fleet credentials" in line).split(": ", 1)[1].split()
+    directory = tmp_path / "credentials"
+    assert main([*make[1:3], str(directory), *make[4:]]) == 0  # the command the header gives, into tmp_path
+    for name, service in services.items():
+        member = "router" if name == "router" else next(a.vehicle for a in scenario.spec.variants[0].agents
+                                                        if a.vehicle.lower() == name)
+        mounts = sorted(v.split(":")[0] for v in service["volumes"])
+        assert mounts == sorted(f"./credentials/{f}" for f in ("ca.pem", f"{member}.pem", f"{member}.key",
+                                                               f"{member}.json5"))
+        assert all(v.endswith(":ro") and v.split(":")[1].startswith("/credentials/") for v in service["volumes"])
+        ctx = parse(cli, service["command"])
+        p = ctx.params
+        assert str(p["config"]) == f"/credentials/{member}.json5"
+        host_config = directory / f"{member}.json5"
+        if name == "router":
+            assert p["listen"] == ["tls/0.0.0.0:7447"]
+            config = make_config(SessionOptions(mode="router", listen=tuple(p["listen"]), config_file=host_config))
+            assert '"enable_mtls":true' in config.get_json("transport/link/tls").replace(" ", "")
+            assert "true" in config.get_json("access_control/enabled")
+        else:
+            assert p["connect"] == ["tls/router:7447"] and p["mode"] is None  # client mode: from the file
+            config = make_config(SessionOptions(connect=tuple(p["connect"]), config_file=host_config))
+            assert config.get_json("mode") == '"client"'
+    from cryptography import x509
+
+    router_cert = x509.load_pem_x509_certificate((directory / "router.pem").read_bytes())
+    names = router_cert.extensions.get_extension_for_class(x509.SubjectAlternativeName).value
+    assert "router" in names.get_values_for_type(x509.DNSName)

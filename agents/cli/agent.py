@@ -9,7 +9,7 @@ import typer
 from rich.console import Console
 from rich.table import Table
 
-from agents.cli.options import ConfigFile, Connect, Listen, Mode, NoMulticast, emit_json, session_options
+from agents.cli.options import ConfigFile, Connect, Listen, Mode, Multicast, emit_json, session_options
 from agents.cli.signals import stop_on_signals
 from agents.vehicle.config import ENCODINGS, ROLES, SHARES, AgentConfig
 
@@ -74,7 +74,7 @@ def register(app: typer.Typer) -> None:
         time_budget: Annotated[float | None, typer.Option(min=0, help="Seconds per search from scratch.")] = None,
         as_json: Annotated[bool, typer.Option("--json", help="One JSON object per event on stdout.")] = False,
         connect: Connect = None, listen: Listen = None, mode: Mode = None, config: ConfigFile = None,
-        no_multicast: NoMulticast = False,
+        multicast: Multicast = False,
     ) -> None:
         """Run one vehicle: acquire, extract, share, estimate (eq. 1-4 and hints), publish; until stopped."""
         from agents.vehicle.agent import run_agent
@@ -101,7 +101,7 @@ def register(app: typer.Typer) -> None:
                               f"{'good' if record['good'] else 'not converged'} {record['seconds'] * 1e3:.0f} ms")
 
         with stop_on_signals() as stop:
-            summary = run_agent(session_options(mode, connect, listen, config, no_multicast), agent_config, stop, emit)
+            summary = run_agent(session_options(mode, connect, listen, config, multicast), agent_config, stop, emit)
         if as_json:
             emit_json(summary)
         else:

@@ -1,4 +1,5 @@
-"""The fleet commands: ``evopose router``, ``meter``, ``publish`` and ``listen``; thin wrappers over fleet_services.
+"""The fleet commands: ``evopose router``, ``meter``, ``publish``, ``listen`` and ``fleet credentials``; thin wrappers
+over the services in agents/tools/runners.py and agents/transport/credentials.py.
 
 Registered on the main typer app by :func:`register` (called from agents/cli/main.py).
 """
@@ -8,6 +9,7 @@ from __future__ import annotations
 import json
 import math
 import sys
+from dataclasses import replace
 from pathlib import Path
 from typing import Annotated
 
@@ -15,7 +17,7 @@ import typer
 from rich.console import Console
 from rich.table import Table
 
-from agents.cli.options import (ConfigFile, Connect, Fleet, Listen, Mode, NoMulticast, Vehicle, emit_json,
+from agents.cli.options import (ConfigFile, Connect, Fleet, Listen, Mode, Multicast, Vehicle, emit_json,
                                 session_options)
 from agents.cli.signals import stop_on_signals
 from agents.errors import FleetError
@@ -82,16 +84,65 @@ def agents_table(agents: dict[str, dict]) -> Table:
     return table
 
 
+fleet_app = typer.Typer(name="fleet", help="A fleet's set-up: credentials.", no_args_is_help=True)
+
+
+def _names(text: str) -> list[str]:
+    return [name.strip() for name in text.split(",") if name.strip()]
+
+
+@fleet_app.command("credentials")
+def credentials_command(
+    directory: Annotated[Path, typer.Argument(metavar="DIR", help="Where to write them (created, mode 0700).")],
+    fleet: Fleet,
+    vehicles: Annotated[str, typer.Option(help="Comma-separated vehicles, e.g. H1,H2,pioneer.")],
+    observers: Annotated[str, typer.Option(help="Comma-separated members that only receive (e.g. meter).")] = "",
+    router_host: Annotated[list[str] | None, typer.Option(
+        "--router-host", metavar="HOST", help="Another name or address of the router (repeatable); 127.0.0.1 "
+                                              "and localhost are always in its certificate.")] = None,
+    listen: Annotated[str, typer.Option("--listen", metavar="ENDPOINT", help="The router's TLS endpoint.")]
+    = "tls/127.0.0.1:7447",
+    connect: Annotated[str | None, typer.Option("--connect", metavar="ENDPOINT",
+                                                help="Where vehicles connect (default: the router's endpoint).")]
+    = None,
+    days: Annotated[int, typer.Option(min=1, help="Validity of the certificates, days.")] = 365,
+    force: Annotated[bool, typer.Option("--force", help="Replace credentials already in DIR.")] = False,
+    as_json: Annotated[bool, typer.Option("--json", help="Print what was written as one JSON object.")] = False,
+) -> None:
+    """A fleet CA, a certificate and key per vehicle (common name = vehicle) and for the router, and ready Zenoh
+    configs: DIR/router.json5 (TLS, mTLS, deny-by-default ACL) and DIR/<vehicle>.json5 (TLS clients)."""
+    from agents.transport.credentials import create_credentials
+
+    made = create_credentials(directory, fleet, _names(vehicles), observers=_names(observers),
+                              router_hosts=router_host or (), listen=listen, connect=connect, days=days,
+                              overwrite=force)
+    if as_json:
+        emit_json(made.as_dict())
+        return
+    console = Console(stderr=True)
+    console.print(f"fleet {fleet}: credentials for {', '.join((*made.vehicles, *made.observers))} in {directory}")
+    console.print(f"  evopose router --config {made.router_config}")
+    first = made.vehicles[0]
+    console.print(f"  evopose agent --fleet {fleet} --vehicle {first} ... --config {made.config(first)}")
+    console.print(f"  keep {directory / 'ca.key'} offline: only new certificates need it")
+
+
 def register(app: typer.Typer) -> None:
     """Add the fleet commands to ``app``."""
+    app.add_typer(fleet_app, name="fleet")
 
     @app.command("router")
     def router_command(listen: Listen = None, connect: Connect = None, config: ConfigFile = None,
-                       no_multicast: NoMulticast = False,
+                       multicast: Multicast = False,
                        as_json: Annotated[bool, typer.Option("--json", help="Print JSON lines.")] = False) -> None:
-        """Run a Zenoh router (a Python session in router mode) until SIGINT/SIGTERM."""
-        options = session_options("router", connect, listen or ["tcp/0.0.0.0:7447"], config, no_multicast)
+        """Run a Zenoh router (a Python session in router mode) until SIGINT/SIGTERM.
+
+        Listens on tcp/127.0.0.1:7447 unless --listen or the --config file says otherwise."""
         from agents.tools.runners import run_router
+        from agents.transport.session import listen_endpoints
+
+        options = session_options("router", connect, listen, config, multicast)
+        options = replace(options, listen=listen_endpoints(options))
 
         console = Console(stderr=True)
 
@@ -109,7 +160,7 @@ def register(app: typer.Typer) -> None:
     @app.command("meter")
     def meter_command(fleet: Annotated[str | None, typer.Option(help="Fleet to meter (default: every fleet).")] = None,
                       connect: Connect = None, listen: Listen = None, mode: Mode = None, config: ConfigFile = None,
-                      no_multicast: NoMulticast = False,
+                      multicast: Multicast = False,
                       window: Annotated[int, typer.Option(min=2, help="Messages per key in the window.")] = 100,
                       duration: Annotated[float | None, typer.Option(min=0, help="Stop after S seconds.")] = None,
                       as_json: Annotated[bool, typer.Option("--json", help="One JSON object per key per second.")]
@@ -127,7 +178,7 @@ def register(app: typer.Typer) -> None:
                 console.print(meter_table(records))
 
         with stop_on_signals() as stop:
-            summary = run_meter(session_options(mode, connect, listen, config, no_multicast), stop, emit, fleet=fleet,
+            summary = run_meter(session_options(mode, connect, listen, config, multicast), stop, emit, fleet=fleet,
                                 window=window, duration=duration)
         if as_json:
             emit_json({"type": "summary", **summary})
@@ -151,7 +202,7 @@ def register(app: typer.Typer) -> None:
                         = 3.0,
                         stay: Annotated[bool, typer.Option(help="Stay alive after sending until SIGINT.")] = False,
                         connect: Connect = None, listen: Listen = None, mode: Mode = None, config: ConfigFile = None,
-                        no_multicast: NoMulticast = False) -> None:
+                        multicast: Multicast = False) -> None:
         """Send well-formed (or deliberately bad) messages of one topic at a rate: a test and demo tool."""
         if payload not in PAYLOADS:
             raise FleetError(f"--payload must be one of {', '.join(PAYLOADS)}, got {payload!r}")
@@ -163,7 +214,7 @@ def register(app: typer.Typer) -> None:
             raise FleetError(f"--topic must be one of {', '.join(TOPICS)}, got {topic!r}")
         spec = PublishSpec(Topic(topic), rate, count, duration, payload, points, width, height, seed)
         with stop_on_signals() as stop:
-            emit_json(run_publisher(session_options(mode, connect, listen, config, no_multicast), stop, fleet, vehicle,
+            emit_json(run_publisher(session_options(mode, connect, listen, config, multicast), stop, fleet, vehicle,
                                     spec, wait_s=wait, stay=stay))
 
     @app.command("listen")
@@ -173,10 +224,10 @@ def register(app: typer.Typer) -> None:
                        duration: Annotated[float | None, typer.Option(min=0, help="Stop after S seconds.")] = None,
                        max_age: Annotated[float, typer.Option(min=0, help="Ignore data older than S seconds.")] = 1.0,
                        connect: Connect = None, listen: Listen = None, mode: Mode = None, config: ConfigFile = None,
-                       no_multicast: NoMulticast = False) -> None:
+                       multicast: Multicast = False) -> None:
         """Join the fleet as a receiving vehicle; print join/leave events and, at the end, the counters (JSON)."""
         from agents.tools.runners import run_listener
 
         with stop_on_signals() as stop:
-            emit_json(run_listener(session_options(mode, connect, listen, config, no_multicast), stop, fleet, vehicle,
+            emit_json(run_listener(session_options(mode, connect, listen, config, multicast), stop, fleet, vehicle,
                                    _topics(topics), duration=duration, max_age_s=max_age, emit=emit_json))

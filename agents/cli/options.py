@@ -18,22 +18,25 @@ if TYPE_CHECKING:
 Connect = Annotated[list[str] | None, typer.Option("--connect", "-e", metavar="ENDPOINT",
                                                    help="Endpoint to connect to, e.g. tcp/10.0.0.1:7447 (repeatable).")]
 Listen = Annotated[list[str] | None, typer.Option("--listen", "-l", metavar="ENDPOINT",
-                                                  help="Endpoint to listen on, e.g. tcp/127.0.0.1:7447 (repeatable).")]
+                                                  help="Endpoint to listen on, e.g. tcp/127.0.0.1:7447 (repeatable; "
+                                                       "default: loopback only).")]
 Mode = Annotated[str | None, typer.Option(help="Zenoh mode: peer, client or router.")]
 ConfigFile = Annotated[Path | None, typer.Option("--config", metavar="FILE",
                                                  help="Zenoh JSON5 config file (default: $ZENOH_CONFIG).")]
-NoMulticast = Annotated[bool, typer.Option("--no-multicast", help="Turn multicast scouting off.")]
+Multicast = Annotated[bool, typer.Option("--multicast/--no-multicast",
+                                         help="Multicast scouting: find peers on the LAN (off by default; "
+                                              "--no-multicast is accepted and changes nothing).")]
 Fleet = Annotated[str, typer.Option(help="Fleet name.")]
 Vehicle = Annotated[str, typer.Option(help="This vehicle's name.")]
 
 
 def session_options(mode: str | None, connect: list[str] | None, listen: list[str] | None, config: Path | None,
-                    no_multicast: bool) -> SessionOptions:
+                    multicast: bool) -> SessionOptions:
     """The :class:`~agents.transport.session.SessionOptions` of a command's network options."""
     from agents.transport.session import SessionOptions
 
     return SessionOptions(mode=mode, connect=tuple(connect or ()), listen=tuple(listen or ()), config_file=config,
-                          multicast=not no_multicast)
+                          multicast=multicast)
 
 
 def emit_json(record: dict) -> None:

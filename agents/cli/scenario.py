@@ -14,7 +14,7 @@ from rich.table import Table
 
 from agents.cli.options import emit_json
 from agents.cli.signals import stop_on_signals
-from agents.experiments import DEFAULT_ENDPOINT, DEFAULT_IMAGE
+from agents.experiments import DEFAULT_CREDENTIALS, DEFAULT_ENDPOINT, DEFAULT_IMAGE
 
 scenario_app = typer.Typer(name="scenario", help="Fleet scenarios: list, show, run, compose.", no_args_is_help=True)
 
@@ -98,9 +98,16 @@ def run_command(
     = None,
     listen: Annotated[str, typer.Option("--listen", help="Where the fleet can be reached from outside.")]
     = DEFAULT_ENDPOINT,
+    secure: Annotated[bool, typer.Option("--secure", help="TLS with a certificate per vehicle and a router with a "
+                                                          "deny-by-default ACL (docs/security.md).")] = False,
+    credentials: Annotated[Path | None, typer.Option(
+        "--credentials", metavar="DIR", help="With --secure: keep each run's credentials in DIR/<fleet> "
+                                             "(default: a temporary directory, removed).")] = None,
     as_json: Annotated[bool, typer.Option("--json", help="One JSON object with every run's summaries.")] = False,
 ) -> None:
     """Start every agent of the scenario as its own process, run, stop them all, print the results."""
+    if credentials is not None and not secure:
+        raise typer.BadParameter("needs --secure", param_hint="--credentials")
     from scenarios.fleet import load_fleet_scenario
 
     from agents.experiments.results import rows
@@ -111,7 +118,7 @@ def run_command(
     with stop_on_signals() as stop:
         if as_json:
             records = run_scenario(scenario, runs=runs, frames=frames, seed=seed, endpoint=listen,
-                                   variants=variant, stop=stop, fps=fps)
+                                   variants=variant, stop=stop, fps=fps, secure=secure, credentials=credentials)
         else:
             with console.status(f"{scenario.name}: starting") as status:
                 def progress(p: dict) -> None:
@@ -124,7 +131,7 @@ def run_command(
 
                 records = run_scenario(scenario, runs=runs, frames=frames, seed=seed, endpoint=listen,
                                        variants=variant, stop=stop, on_run=finished, on_progress=progress,
-                                       fps=fps)
+                                       fps=fps, secure=secure, credentials=credentials)
     result_rows = rows(records)
     if as_json:
         emit_json({"scenario": scenario.name, "interrupted": stop.is_set(), "rows": result_rows, "runs": records})
@@ -142,13 +149,22 @@ def compose_command(
     out: Annotated[Path | None, typer.Option("--out", metavar="FILE", help="Write here, not to stdout.")] = None,
     image: Annotated[str, typer.Option(help="Image of every service.")] = DEFAULT_IMAGE,
     context: Annotated[str, typer.Option(help="Build context relative to the file (.. for compose/).")] = ".",
+    secure: Annotated[bool, typer.Option("--secure", help="TLS, a certificate per service and the router's ACL, "
+                                                          "from a credentials directory (evopose fleet "
+                                                          "credentials ... --router-host router).")] = False,
+    credentials: Annotated[str, typer.Option("--credentials", metavar="DIR",
+                                             help="With --secure: the credentials directory, relative to the "
+                                                  "file.")] = DEFAULT_CREDENTIALS,
 ) -> None:
     """A docker-compose file of the scenario: a Zenoh router, and one service per agent joining it."""
     from scenarios.fleet import load_fleet_scenario
 
     from agents.experiments.compose import compose_yaml
 
-    text = compose_yaml(load_fleet_scenario(name), variant, image=image, context=context)
+    if credentials != DEFAULT_CREDENTIALS and not secure:
+        raise typer.BadParameter("needs --secure", param_hint="--credentials")
+    text = compose_yaml(load_fleet_scenario(name), variant, image=image, context=context, secure=secure,
+                        credentials=credentials)
     if out is None:
         sys.stdout.write(text)
     else:

@@ -7,3 +7,5 @@ The package's face holds only the defaults the CLI shows in its help (so ``--hel
 DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"
 #: Image of every docker-compose service.
 DEFAULT_IMAGE = "evopose-fleet"
+#: The credentials directory of a secure compose file, relative to the file.
+DEFAULT_CREDENTIALS = "credentials"

@@ -8,6 +8,13 @@ Zenoh client. Agents run until stopped (no ``--frames``): ``docker compose stop`
 
 The document is a pure function of the scenario: no timestamps and no absolute paths, so the committed
 files can be compared with what the generator produces (``make compose`` rewrites them).
+
+``secure``: the router listens with TLS only (``tls/0.0.0.0:7447`` inside its container), requires a client
+certificate and enforces the fleet's ACL; each agent is a TLS client with its own certificate. The files
+come from a credentials directory made beforehand (``evopose fleet credentials DIR --fleet <scenario>
+--vehicles ... --observers meter --router-host router``: the router's certificate must name the service
+``router``), and each service gets only its own files (read-only): the CA certificate, its certificate,
+key and Zenoh configuration, mounted under ``/credentials``. The CA's key is never mounted.
 """
 
 from __future__ import annotations
@@ -21,15 +28,21 @@ from scenarios.errors import ScenarioError
 from scenarios.fleet import FleetScenario
 from scenarios.world import SCENARIOS_DIR
 
-from agents.experiments import DEFAULT_IMAGE
+from agents.experiments import DEFAULT_CREDENTIALS, DEFAULT_IMAGE
 
 #: The directory holding the ``scenarios`` package: the repository root in a checkout (the build context).
 REPO_ROOT = SCENARIOS_DIR.parent
 #: The router's port, inside the compose network and on the host's loopback.
 ROUTER_PORT = 7447
 ROUTER_SERVICE = "router"
+#: Where a secure service finds its credentials inside its container.
+CREDENTIALS_MOUNT = "/credentials"
+#: The observer a secure fleet's credentials name, for a meter on the host.
+OBSERVER = "meter"
 
 _SERVICE_NAME = re.compile(r"^[a-z0-9][a-z0-9_.-]*$")
+#: How long an agent waits for its team-mates before it exits with an error, s.
+WAIT_FOR_TEAM_S = 120
 #: Is the router's port open yet? Zenoh clients fail at once when it is not, so the agents wait for this.
 _ROUTER_HEALTHCHECK = f'import socket; socket.create_connection(("127.0.0.1", {ROUTER_PORT}), timeout=1).close()'
 
@@ -55,8 +68,27 @@ def _image(image: str, context: str) -> dict:
     return {"build": context, "image": image}
 
 
+def _credential_files(member: str) -> list[str]:
+    """What one member needs (the names ``evopose fleet credentials`` writes): the CA certificate, its own
+    certificate, key and Zenoh configuration."""
+    return ["ca.pem", f"{member}.pem", f"{member}.key", f"{member}.json5"]
+
+
+def _volumes(credentials: str, member: str) -> list[str]:
+    # compose reads a source without ./ ../ or / as a named volume, not a file
+    source = credentials if credentials.startswith(("/", "./", "../")) else f"./{credentials}"
+    return [f"{source.rstrip('/')}/{name}:{CREDENTIALS_MOUNT}/{name}:ro" for name in _credential_files(member)]
+
+
+def credentials_command(scenario: FleetScenario, variant: str | None = None) -> str:
+    """The command that makes the credentials a secure compose file of ``scenario`` expects."""
+    chosen = scenario.variant(variant) if variant is not None else scenario.spec.variants[0]
+    return (f"evopose fleet credentials {DEFAULT_CREDENTIALS} --fleet {scenario.name} --vehicles "
+            f"{','.join(a.vehicle for a in chosen.agents)} --observers {OBSERVER} --router-host {ROUTER_SERVICE}")
+
+
 def compose_document(scenario: FleetScenario, variant: str | None = None, *, image: str = DEFAULT_IMAGE,
-                     context: str = ".") -> dict:
+                     context: str = ".", secure: bool = False, credentials: str = DEFAULT_CREDENTIALS) -> dict:
     """The docker-compose document of one variant of ``scenario`` (default: its first).
 
     Parameters
@@ -70,6 +102,8 @@ def compose_document(scenario: FleetScenario, variant: str | None = None, *, ima
     context : str
         The build context relative to the compose file: ``.`` for a file at the repository root, ``..``
         for one in ``compose/``.
+    secure : bool
+        TLS, mutual TLS and the router's ACL, from the ``credentials`` directory (relative to the file).
 
     Raises
     ------
@@ -78,10 +112,15 @@ def compose_document(scenario: FleetScenario, variant: str | None = None, *, ima
     """
     chosen = scenario.variant(variant) if variant is not None else scenario.spec.variants[0]
     world = world_path_in_repo(scenario)
+    protocol = "tls" if secure else "tcp"
+    router_command = ["evopose", "router", "--listen", f"{protocol}/0.0.0.0:{ROUTER_PORT}"]
+    if secure:
+        router_command[2:2] = ["--config", f"{CREDENTIALS_MOUNT}/{ROUTER_SERVICE}.json5"]
     services: dict[str, dict] = {
         ROUTER_SERVICE: {
             **_image(image, context),
-            "command": ["evopose", "router", "--listen", f"tcp/0.0.0.0:{ROUTER_PORT}", "--no-multicast"],
+            "command": router_command,
+            **({"volumes": _volumes(credentials, ROUTER_SERVICE)} if secure else {}),
             "ports": [f"127.0.0.1:{ROUTER_PORT}:{ROUTER_PORT}"],
             "healthcheck": {"test": ["CMD", "python", "-c", _ROUTER_HEALTHCHECK],
                             "interval": "1s", "timeout": "2s", "retries": 60},
@@ -99,14 +138,19 @@ def compose_document(scenario: FleetScenario, variant: str | None = None, *, ima
         command = ["evopose", "agent", "--scenario", world, "--fleet", scenario.name, *agent.cli_args()]
         if scenario.spec.fps is not None:
             command += ["--fps", f"{scenario.spec.fps:g}"]
-        command += ["--mode", "client", "--connect", f"tcp/{ROUTER_SERVICE}:{ROUTER_PORT}", "--no-multicast"]
+        if secure:  # the vehicle's own file: a TLS client with its certificate
+            command += ["--config", f"{CREDENTIALS_MOUNT}/{agent.vehicle}.json5"]
+        else:
+            command += ["--mode", "client"]
+        command += ["--connect", f"{protocol}/{ROUTER_SERVICE}:{ROUTER_PORT}"]
         others = [v for v in vehicles if v != agent.vehicle]
-        if others:
-            command += ["--wait-for", ",".join(others)]
+        if others:  # a team that never meets is an error: give slow starts (first compilation) time
+            command += ["--wait-for", ",".join(others), "--wait-timeout", f"{WAIT_FOR_TEAM_S:g}"]
         command.append("--json")
         services[name] = {
             **_image(image, context),
             "command": command,
+            **({"volumes": _volumes(credentials, agent.vehicle)} if secure else {}),
             "depends_on": {ROUTER_SERVICE: {"condition": "service_healthy"}},
             "stop_signal": "SIGTERM",
             "stop_grace_period": "10s",
@@ -116,7 +160,7 @@ def compose_document(scenario: FleetScenario, variant: str | None = None, *, ima
 
 
 def compose_header(scenario: FleetScenario, variant: str | None = None, *, image: str = DEFAULT_IMAGE,
-                   context: str = ".") -> str:
+                   context: str = ".", secure: bool = False, credentials: str = DEFAULT_CREDENTIALS) -> str:
     """The comment at the top of the file: how it was generated, and that it must not be edited."""
     chosen = scenario.variant(variant) if variant is not None else scenario.spec.variants[0]
     args = [scenario.name]
@@ -126,10 +170,20 @@ def compose_header(scenario: FleetScenario, variant: str | None = None, *, image
         args += ["--image", image]
     if context != ".":
         args += ["--context", context]
+    if secure:
+        args.append("--secure")
+        if credentials != DEFAULT_CREDENTIALS:
+            args += ["--credentials", credentials]
     lines = [f"# Generated by `evopose scenario compose {' '.join(args)}`: do not edit by hand;",
              "# run `make compose` to regenerate.",
              f"# Fleet scenario {scenario.name}, variant {chosen.name}"
              + (f": {scenario.spec.description}" if scenario.spec.description else "")]
+    if secure:
+        make = credentials_command(scenario, variant).replace(f" {DEFAULT_CREDENTIALS} ", f" {credentials} ", 1)
+        lines += ["# Secure (docs/security.md): TLS, a certificate per service, the router's deny-by-default ACL.",
+                  f"# First, beside this file: {make}",
+                  f"# Meter from the host: evopose meter --config {credentials}/{OBSERVER}.json5 --fleet "
+                  f"{scenario.name}"]
     others = [v.name for v in scenario.spec.variants if v.name != chosen.name]
     if others:
         lines.append(f"# Other variants (--variant): {', '.join(others)}")
@@ -157,12 +211,14 @@ def _flow_string_lists(node: object) -> object:
 
 
 def compose_yaml(scenario: FleetScenario, variant: str | None = None, *, image: str = DEFAULT_IMAGE,
-                 context: str = ".") -> str:
+                 context: str = ".", secure: bool = False, credentials: str = DEFAULT_CREDENTIALS) -> str:
     """:func:`compose_document` as YAML text, after the generated-file header."""
-    document = compose_document(scenario, variant, image=image, context=context)
+    document = compose_document(scenario, variant, image=image, context=context, secure=secure,
+                                credentials=credentials)
     body = yaml.dump(_flow_string_lists(document), Dumper=_Dumper, sort_keys=False, default_flow_style=False,
                      width=1000, allow_unicode=True)
-    return compose_header(scenario, variant, image=image, context=context) + body
+    return compose_header(scenario, variant, image=image, context=context, secure=secure,
+                          credentials=credentials) + body
 
 
-__all__ = ["compose_document", "compose_header", "compose_yaml", "world_path_in_repo"]
+__all__ = ["compose_document", "compose_header", "compose_yaml", "credentials_command", "world_path_in_repo"]

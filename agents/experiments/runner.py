@@ -5,7 +5,13 @@ start at the same frame), the run's seeds (search seed ``seed + run``, world see
 run sees other noise and IMU biases) and ``--frames N``; each ends with a JSON summary. Networking: the
 first agent listens on the scenario's endpoint (default ``tcp/127.0.0.1:7447``) and the others connect to
 it, peer to peer; with ``router: true`` a router listens there and every agent joins it as a client. An
-outside program (``evopose meter --connect tcp/127.0.0.1:7447``) can watch the traffic there.
+outside program (``evopose meter --connect tcp/127.0.0.1:7447``) can watch the traffic there. Multicast
+scouting is off (the default): the agents meet through the endpoint only.
+
+``secure``: every run gets its fleet's credentials (``evopose fleet credentials``, in ``credentials/<fleet>``
+or a temporary directory removed after the run), a router listens on the endpoint as ``tls/`` with mutual
+TLS and the deny-by-default ACL, and every agent is a TLS client with its own certificate (docs/security.md).
+An outside meter needs the ``meter`` observer's configuration from that directory.
 
 Every child is stopped, whatever happens: a crashed agent ends the run (the others get SIGTERM), Ctrl-C
 stops them all, and anything still alive after a grace period is killed.
@@ -15,13 +21,16 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import signal
 import subprocess
 import sys
+import tempfile
 import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from pathlib import Path
 
 from scenarios.fleet import FleetScenario, VariantSpec
 
@@ -33,6 +42,10 @@ from agents.experiments import DEFAULT_ENDPOINT
 START_MARGIN_S = 6.0
 #: Seconds an agent gets to stop after SIGTERM before it is killed.
 GRACE_S = 10.0
+#: How long an agent waits for its team-mates before it gives up with an error (``--wait-timeout``).
+WAIT_FOR_TEAM_S = 30.0
+#: The member of a secure fleet that may only watch (``evopose meter --config <credentials>/meter.json5``).
+OBSERVER = "meter"
 
 
 class ScenarioRunError(FleetError):
@@ -85,8 +98,25 @@ def agent_command(scenario: FleetScenario, agent_args: list[str], *, fleet: str,
     """The command line of one agent of a run."""
     return [sys.executable, "-m", "agents.cli", "agent", "--scenario", str(scenario.world_path), "--fleet", fleet,
             *agent_args, "--frames", str(frames), "--fps", f"{fps:g}", "--epoch-ns", str(epoch_ns),
-            "--seed", str(seed), "--world-seed", str(world_seed), "--wait-for", ",".join(wait_for), "--json",
-            *network]
+            "--seed", str(seed), "--world-seed", str(world_seed), "--wait-for", ",".join(wait_for),
+            "--wait-timeout", f"{WAIT_FOR_TEAM_S:g}", "--json", *network]
+
+
+def tls_endpoint(endpoint: str) -> str:
+    """``tcp/host:port`` as ``tls/host:port`` (a secure fleet listens with TLS only)."""
+    protocol, _, address = endpoint.partition("/")
+    if protocol not in ("tcp", "tls") or not address:
+        raise ScenarioRunError(f"--secure needs a tcp/ or tls/ endpoint, got {endpoint!r}")
+    return f"tls/{address}"
+
+
+def make_credentials(directory: Path, fleet: str, vehicles: list[str], endpoint: str, env: dict) -> None:
+    """``evopose fleet credentials`` for one run's fleet (a subprocess: this room never imports the agents)."""
+    cmd = [sys.executable, "-m", "agents.cli", "fleet", "credentials", str(directory), "--fleet", fleet,
+           "--vehicles", ",".join(vehicles), "--observers", OBSERVER, "--listen", endpoint, "--force", "--json"]
+    done = subprocess.run(cmd, capture_output=True, text=True, env=env, timeout=120)
+    if done.returncode != 0:
+        raise ScenarioRunError(f"credentials for fleet {fleet!r}: {done.stderr.strip()[-300:]}")
 
 
 def _stop_all(procs: list, sig: int = signal.SIGTERM) -> None:
@@ -107,33 +137,45 @@ def _stop_all(procs: list, sig: int = signal.SIGTERM) -> None:
 
 def run_variant(scenario: FleetScenario, variant: VariantSpec, run: int, *, frames: int, seed: int,
                 endpoint: str, stop: threading.Event, on_progress: Callable[[dict], None] | None = None,
-                fps: float | None = None) -> dict:
-    """One run of one variant: start its agents (and router), wait for their summaries, stop everything."""
+                fps: float | None = None, secure: bool = False, credentials: Path | None = None) -> dict:
+    """One run of one variant: start its agents (and router), wait for their summaries, stop everything.
+
+    ``secure``: TLS, mTLS and the router's ACL, with this run's credentials in ``credentials/<fleet>`` (kept)
+    or in a temporary directory (removed).
+    """
     fps = fps or scenario.fps
     started = time.monotonic()
     fleet = f"{scenario.name}-{variant.name}-{run}".replace("+", "-")[:64]
-    epoch_ns = time.time_ns() + int(START_MARGIN_S * 1e9)
     vehicles = [a.vehicle for a in variant.agents]
-    base = ["--no-multicast"]
     router, slow = None, False
     children: list[subprocess.Popen] = []
     procs: list[AgentProcess] = []
     env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+    use_router = scenario.spec.router or secure
+    keys_dir, temporary = None, None
     try:
-        if scenario.spec.router:
-            router = subprocess.Popen([sys.executable, "-m", "agents.cli", "router", "--listen", endpoint,
-                                       "--no-multicast", "--json"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                                      text=True, env=env)
+        if secure:
+            endpoint = tls_endpoint(endpoint)
+            temporary = None if credentials is not None else tempfile.mkdtemp(prefix="evopose-credentials-")
+            keys_dir = Path(credentials) / fleet if credentials is not None else Path(temporary)
+            make_credentials(keys_dir, fleet, vehicles, endpoint, env)
+        if use_router:
+            config = ["--config", str(keys_dir / "router.json5")] if secure else []
+            router = subprocess.Popen([sys.executable, "-m", "agents.cli", "router", *config, "--listen", endpoint,
+                                       "--json"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
             children.append(router)
             if not router.stdout.readline():
                 raise ScenarioRunError(f"the router did not start: {router.stderr.read().strip()[-300:]}")
+        epoch_ns = time.time_ns() + int(START_MARGIN_S * 1e9)
         for i, agent in enumerate(variant.agents):
-            if scenario.spec.router:
-                network = [*base, "--mode", "client", "--connect", endpoint]
+            if secure:  # the vehicle's file: a TLS client with its certificate
+                network = ["--config", str(keys_dir / f"{agent.vehicle}.json5"), "--connect", endpoint]
+            elif use_router:
+                network = ["--mode", "client", "--connect", endpoint]
             elif i == 0:
-                network = [*base, "--listen", endpoint]
+                network = ["--listen", endpoint]
             else:
-                network = [*base, "--connect", endpoint]
+                network = ["--connect", endpoint]
             cmd = agent_command(scenario, agent.cli_args(), fleet=fleet, frames=frames, fps=fps, epoch_ns=epoch_ns,
                                 seed=seed + run, world_seed=scenario.world.seed + run, network=network,
                                 wait_for=[v for v in vehicles if v != agent.vehicle])
@@ -158,21 +200,23 @@ def run_variant(scenario: FleetScenario, variant: VariantSpec, run: int, *, fram
         _stop_all(children)
         for proc in procs:
             proc.finish(GRACE_S)
+        if temporary is not None:
+            shutil.rmtree(temporary, ignore_errors=True)
     crashed = [p for p in procs if p.popen.returncode not in (0, None) and p.summary is None]
     if crashed and not stop.is_set():
         details = "; ".join(f"{p.vehicle} exited {p.popen.returncode}"
                             + (f" ({p.stderr.strip().splitlines()[-1]})" if p.stderr.strip() else "") for p in crashed)
         raise ScenarioRunError(f"run {run} of {scenario.name}/{variant.name}: {details}")
     return {"scenario": scenario.name, "world": scenario.world.name, "variant": variant.name, "run": run,
-            "fleet": fleet, "slow": slow,
+            "fleet": fleet, "slow": slow, "secure": secure,
             "interrupted": stop.is_set(), "seconds": time.monotonic() - started,
             "agents": {p.vehicle: p.summary for p in procs}}
 
 
 def run_scenario(scenario: FleetScenario, *, runs: int = 1, frames: int | None = None, seed: int = 0,
                  endpoint: str = DEFAULT_ENDPOINT, variants: list[str] | None = None, stop: threading.Event,
-                 fps: float | None = None, keep_going: bool = False,
-                 on_run: Callable[[dict], None] | None = None,
+                 fps: float | None = None, keep_going: bool = False, secure: bool = False,
+                 credentials: Path | None = None, on_run: Callable[[dict], None] | None = None,
                  on_progress: Callable[[dict], None] | None = None) -> list[dict]:
     """Every run of every (chosen) variant; returns one record per run (see :func:`run_variant`).
 
@@ -187,7 +231,8 @@ def run_scenario(scenario: FleetScenario, *, runs: int = 1, frames: int | None =
                 return results
             try:
                 record = run_variant(scenario, variant, run, frames=frames or scenario.frames, seed=seed,
-                                     endpoint=endpoint, stop=stop, on_progress=on_progress, fps=fps)
+                                     endpoint=endpoint, stop=stop, on_progress=on_progress, fps=fps,
+                                     secure=secure, credentials=credentials)
             except ScenarioRunError as err:
                 if not keep_going:
                     raise

@@ -1,9 +1,19 @@
 """One Zenoh session per process, configured from ``--mode``, ``--connect``, ``--listen`` and ``ZENOH_CONFIG``.
 
 Precedence: the file (``config_file``, else the ``ZENOH_CONFIG`` environment variable), then the
-command-line options on top of it. ``multicast=False`` turns multicast scouting off, as tests do
-on loopback. Open the session in the process that uses it: a Zenoh session does not survive
-``fork`` (DESIGN.md §4).
+command-line options on top of it. Open the session in the process that uses it: a Zenoh session does
+not survive ``fork`` (DESIGN.md §4).
+
+Safe defaults (docs/security.md), where Zenoh's own are wide open:
+
+- multicast scouting is off unless ``multicast=True`` (``--multicast``), whatever the file says;
+- a router or peer listens on loopback unless endpoints are given (``--listen``, or a file that sets
+  ``listen/endpoints``): a router on :data:`ROUTER_LISTEN` ``tcp/127.0.0.1:7447``, a peer on
+  :data:`PEER_LISTEN` ``tcp/127.0.0.1:0`` (a free port, so that peers on this host that learn of it by
+  gossip can still connect to it). Zenoh's defaults would be ``tcp/[::]:7447`` and ``tcp/[::]:0``:
+  every interface. A peer that must be reachable from other hosts says so: ``--listen tcp/0.0.0.0:0``.
+- TLS file names in a configuration file that are relative (as ``evopose fleet credentials`` writes
+  them) are resolved against the file's directory, not the working directory.
 """
 
 from __future__ import annotations
@@ -19,6 +29,13 @@ import zenoh
 from agents.errors import BusConfigError
 
 MODES = ("peer", "client", "router")
+#: Where a router listens by default (loopback only).
+ROUTER_LISTEN = "tcp/127.0.0.1:7447"
+#: Where a peer listens by default: loopback, a free port.
+PEER_LISTEN = "tcp/127.0.0.1:0"
+#: File-path keys of ``transport/link/tls`` resolved against the configuration file's directory.
+TLS_FILE_KEYS = ("root_ca_certificate", "listen_private_key", "listen_certificate", "connect_private_key",
+                 "connect_certificate")
 _ENDPOINT = re.compile(r"[a-z][a-z0-9\-]*/\S+")
 
 
@@ -35,14 +52,14 @@ class SessionOptions:
     config_file : Path or None
         A Zenoh JSON5 configuration; ``None`` reads ``ZENOH_CONFIG`` when set.
     multicast : bool
-        Multicast scouting (discovery of peers on the LAN); off for tests.
+        Multicast scouting (discovery of peers on the LAN); off by default.
     """
 
     mode: str | None = None
     connect: tuple[str, ...] = ()
     listen: tuple[str, ...] = ()
     config_file: Path | None = None
-    multicast: bool = True
+    multicast: bool = False
     extra: dict[str, object] = field(default_factory=dict)  #: more ``path -> value`` insertions
 
 
@@ -60,11 +77,27 @@ def _insert(config: zenoh.Config, path: str, value: object, what: str) -> None:
         raise BusConfigError(f"{what}: {_zenoh_message(err)}") from None
 
 
+def _get(config: zenoh.Config, path: str) -> object:
+    return json.loads(config.get_json(path))
+
+
+def config_path(options: SessionOptions) -> Path | None:
+    """The configuration file ``options`` read: ``config_file``, else ``$ZENOH_CONFIG``, else None."""
+    if options.config_file is not None:
+        return Path(options.config_file)
+    return Path(os.environ["ZENOH_CONFIG"]) if os.environ.get("ZENOH_CONFIG") else None
+
+
+def _resolve_tls_files(config: zenoh.Config, directory: Path) -> None:
+    for key in TLS_FILE_KEYS:
+        value = _get(config, f"transport/link/tls/{key}")
+        if isinstance(value, str) and value and not Path(value).is_absolute():
+            _insert(config, f"transport/link/tls/{key}", str((directory / value).absolute()), key)
+
+
 def make_config(options: SessionOptions) -> zenoh.Config:
     """The Zenoh configuration of ``options``; raise :class:`BusConfigError` naming the bad option."""
-    path = options.config_file
-    if path is None and os.environ.get("ZENOH_CONFIG"):
-        path = Path(os.environ["ZENOH_CONFIG"])
+    path = config_path(options)
     if path is not None:
         if not Path(path).is_file():
             raise BusConfigError(f"Zenoh config file {str(path)!r} does not exist or is not a file")
@@ -72,6 +105,7 @@ def make_config(options: SessionOptions) -> zenoh.Config:
             config = zenoh.Config.from_file(str(path))
         except zenoh.ZError as err:
             raise BusConfigError(f"Zenoh config file {str(path)!r}: {_zenoh_message(err)}") from None
+        _resolve_tls_files(config, Path(path).parent)
     else:
         config = zenoh.Config()
     if options.mode is not None:
@@ -84,11 +118,32 @@ def make_config(options: SessionOptions) -> zenoh.Config:
                 raise BusConfigError(f"--{option} endpoint {endpoint!r} must look like tcp/127.0.0.1:7447")
         if endpoints:
             _insert(config, f"{option}/endpoints", list(endpoints), f"--{option} {' '.join(endpoints)}")
-    if not options.multicast:
-        _insert(config, "scouting/multicast/enabled", False, "multicast")
+    if not options.listen:
+        _listen_on_loopback_by_default(config)
+    _insert(config, "scouting/multicast/enabled", bool(options.multicast), "multicast")
     for key, value in options.extra.items():
         _insert(config, key, value, key)
     return config
+
+
+def _listen_on_loopback_by_default(config: zenoh.Config) -> None:
+    """Replace Zenoh's default listen endpoints (every interface) by loopback ones; keep endpoints a file set."""
+    if _get(config, "listen/endpoints") != _get(zenoh.Config(), "listen/endpoints"):
+        return  # the file chose
+    mode = _get(config, "mode") or "peer"
+    if mode == "router":
+        _insert(config, "listen/endpoints", [ROUTER_LISTEN], "listen")
+    elif mode == "peer":
+        _insert(config, "listen/endpoints", [PEER_LISTEN], "listen")
+
+
+def listen_endpoints(options: SessionOptions) -> tuple[str, ...]:
+    """Where a session opened with ``options`` will listen (after the file and the loopback defaults)."""
+    config = make_config(options)
+    endpoints = _get(config, "listen/endpoints")
+    if isinstance(endpoints, dict):
+        endpoints = endpoints.get(_get(config, "mode") or "peer") or []
+    return tuple(endpoints)
 
 
 def open_session(options: SessionOptions) -> zenoh.Session:

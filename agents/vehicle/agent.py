@@ -16,7 +16,8 @@ from scenarios.world import Scenario, build_scenario, load_scenario
 
 from agents.errors import FleetError
 from agents.transport.bus import FleetBus
-from agents.transport.session import SessionOptions
+from agents.transport.presence import ensure_name_free
+from agents.transport.session import SessionOptions, open_session
 from agents.vehicle.config import CAMERA_ROLES, AgentConfig
 from agents.vehicle.memory import pin_mmap_threshold
 from agents.vehicle.roles import ROLE_CLASSES
@@ -60,9 +61,16 @@ def run_agent(options: SessionOptions, config: AgentConfig, stop: threading.Even
     role = resolve_role(scenario, config.vehicle, config.role)
     if role in CAMERA_ROLES:
         scenario.bounds()  # a camera vehicle needs the operating area: fail before joining the fleet
-    with FleetBus.open(options, config.fleet, config.vehicle, max_age_s=config.max_age_s, stats_period_s=1.0,
+    session = open_session(options)
+    try:
+        ensure_name_free(session, config.fleet, config.vehicle)  # a second agent of this name refuses to start
+        bus = FleetBus(session, config.fleet, config.vehicle, max_age_s=config.max_age_s, stats_period_s=1.0,
                        on_join=lambda v: emit({"event": "join", "vehicle": v}),
-                       on_leave=lambda v: emit({"event": "leave", "vehicle": v})) as bus:
+                       on_leave=lambda v: emit({"event": "leave", "vehicle": v}), owns_session=True)
+    except BaseException:
+        session.close()
+        raise
+    with bus:
         vehicle = ROLE_CLASSES[role](config, bus, scenario, emit)
         vehicle.subscribe()
         return vehicle.run(stop)

@@ -75,7 +75,8 @@ class Vehicle:
         raise NotImplementedError
 
     def run(self, stop: threading.Event) -> dict:
-        self.prepare()
+        # wait first: team-mates are present from the moment their bus opens, before their own (long) prepare;
+        # waiting after ours could miss a quick one that has already come and gone
         mates = [v for v in self.config.wait_for if v != self.config.vehicle]
         if mates:
             ok = self.bus.wait_for_teammates(mates, self.config.wait_timeout_s)
@@ -87,6 +88,7 @@ class Vehicle:
                                       f"fleet {self.config.fleet!r} within {self.config.wait_timeout_s:g} s "
                                       "(--wait-timeout); check --connect/--listen (multicast scouting is off "
                                       "unless --multicast)")
+        self.prepare()
         self.emit({"event": "ready", "vehicle": self.config.vehicle, "role": self.role, "share": self.config.share,
                    "fps": self.clock.fps})
         n = None
