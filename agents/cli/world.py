@@ -41,14 +41,18 @@ def render_command(
 def features_command(
     image: Annotated[Path, typer.Argument(metavar="IMAGE", show_default=False, help="Image file (PNG, JPEG).")],
     model: Annotated[str | None, typer.Option(help="Model file (or shipped name) whose mark colours to find; "
-                                                   "default: every shipped colour.")] = None,
+                                                   "default: any saturated hue.")] = None,
+    colours: Annotated[str | None, typer.Option(help="Comma-separated hue names to find (red, orange, yellow, "
+                                                     "chartreuse, green, spring, cyan, azure, blue, violet, "
+                                                     "magenta, rose); overrides --model.")] = None,
     corners: Annotated[bool, typer.Option("--corners", help="Shi-Tomasi corners instead of colour marks.")] = False,
     as_json: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
 ) -> None:
     """Extract the feature points of an image (colour marks, or corners)."""
     from agents.tools.world import image_features
 
-    result = image_features(image, model=model, corners=corners)
+    names = [c.strip() for c in colours.split(",") if c.strip()] if colours else None
+    result = image_features(image, model=model, colours=names, corners=corners)
     if as_json:
         print(json.dumps(result))
         return

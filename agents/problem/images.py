@@ -13,21 +13,10 @@ import cv2
 import numpy as np
 
 from evopose import Bounds, Camera, Model
-from evopose.features import MarkDetections, colour_ranges, detect_colour_marks
+from evopose.features import MarkDetections, detect_colour_marks
 from evopose.pose import matrix_from_pose
 from scenarios.errors import ImageError, WorldError
-from scenarios.target import MODELS_DIR, TargetModel, load_model
-
-#: Colours searched when no model is given: the union of the shipped models' palettes.
-SHIPPED_MODELS = ("pioneer", "airship")
-
-
-def default_palette() -> dict[str, tuple[int, int, int]]:
-    palette: dict[str, tuple[int, int, int]] = {}
-    for name in SHIPPED_MODELS:
-        palette.update(load_model(MODELS_DIR / f"{name}.yaml").palette)
-    return palette
-
+from scenarios.target import TargetModel
 
 def read_image(path: str | Path) -> np.ndarray:
     """A BGR uint8 image from a file (PNG, JPEG, ...).
@@ -58,9 +47,13 @@ def write_image(path: str | Path, image: np.ndarray) -> Path:
     return path
 
 
-def detect_marks(image: np.ndarray, palette: dict | None = None) -> MarkDetections:
-    """Colour marks of ``palette`` (default: every shipped model's colours) in a BGR image."""
-    return detect_colour_marks(image, colour_ranges(palette or default_palette()))
+def detect_marks(image: np.ndarray, colours: dict | list[str] | None = None) -> MarkDetections:
+    """Colour marks in a BGR image: of a palette (name -> BGR, a model's), of hue names (``["blue", "yellow"]``),
+    or, by default, of any saturated hue."""
+    try:
+        return detect_colour_marks(image, colours)
+    except (KeyError, ValueError) as err:
+        raise WorldError(f"colours: {' '.join(str(err).split())}") from None
 
 
 def frustum_bounds(camera: Camera, model: Model, points: np.ndarray) -> Bounds:
@@ -114,5 +107,5 @@ def draw_overlay(image: np.ndarray | None, camera: Camera, model: Model, pose: n
     return canvas
 
 
-__all__ = ["WorldError", "default_palette", "detect_marks", "draw_overlay", "frustum_bounds", "read_image",
+__all__ = ["WorldError", "detect_marks", "draw_overlay", "frustum_bounds", "read_image",
            "write_image"]

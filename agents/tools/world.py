@@ -41,18 +41,20 @@ def render_to_files(scenario: str | Path, frame: int, out: str | Path, *, vehicl
     return {**truth, "image": str(image_path), "truth": str(truth_path)}
 
 
-def image_features(image_path: str | Path, *, model: str | Path | None = None, corners: bool = False,
-                   max_corners: int = 200) -> dict:
-    """The feature points of an image file: colour marks (of ``model``'s palette) or corners.
+def image_features(image_path: str | Path, *, model: str | Path | None = None, colours: list[str] | None = None,
+                   corners: bool = False, max_corners: int = 200) -> dict:
+    """The feature points of an image file: colour marks or corners.
 
-    Returns ``{"image", "width", "height", "method", "count", "points": [[u, v], ...], "colours": [...]}``.
+    Marks of ``colours`` (hue names such as ``blue``), else of ``model``'s palette, else of any saturated hue.
+    Returns ``{"image", "width", "height", "method", "count", "points": [[u, v], ...], "colours": [...],
+    "touching": [...]}`` (``touching``: the mark was split from, or merged with, a neighbour).
     """
     image = read_image(image_path)
     out: dict = {"image": str(image_path), "width": int(image.shape[1]), "height": int(image.shape[0])}
     if corners:
         pts = detect_corners(image, max_corners=max_corners)
         return {**out, "method": "corners", "count": len(pts), "points": pts.tolist()}
-    palette = load_model(model).palette if model is not None else None
-    det = detect_marks(image, palette)
+    wanted = colours if colours else (load_model(model).palette if model is not None else None)
+    det = detect_marks(image, wanted)
     return {**out, "method": "colour-marks", "count": len(det), "points": det.points.tolist(),
-            "colours": det.colours()}
+            "colours": det.colours(), "touching": [bool(v) for v in det.touching]}
