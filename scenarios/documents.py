@@ -28,8 +28,8 @@ from pydantic import BaseModel, ConfigDict, ValidationError
 
 T = TypeVar("T", bound=BaseModel)
 
-#: Largest file read, bytes (a problem file of 10^5 points is ~4 MB of YAML).
-MAX_FILE_BYTES = 32 * 1024 * 1024
+#: Largest file read, bytes (a problem file at its limit of 16384 image points is ~0.8 MB of YAML).
+MAX_FILE_BYTES = 8 * 1024 * 1024
 #: Deepest nesting of mappings and lists.
 MAX_DEPTH = 32
 #: Most nodes a YAML document may have once its aliases are expanded.
@@ -263,6 +263,7 @@ _MESSAGES = {
     "model_type": "expected a mapping, got {input}",
     "dict_type": "expected a mapping, got {input}",
     "too_short": "must not be empty",
+    "too_long": "at most {max_length} entries, got {actual_length}",
     "greater_than": "must be > {gt}, got {input}",
     "greater_than_equal": "must be >= {ge}, got {input}",
     "less_than": "must be < {lt}, got {input}",

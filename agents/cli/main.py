@@ -6,7 +6,6 @@ Errors become exit codes only here: a malformed input or a bad argument prints o
 
 from __future__ import annotations
 
-import json
 import math
 import sys
 from pathlib import Path
@@ -20,6 +19,7 @@ from agents.cli import agent as agent_commands
 from agents.cli import fleet as fleet_commands
 from agents.cli import scenario as scenario_commands
 from agents.cli import world as world_commands
+from agents.cli.options import json_line
 
 #: The fitness kinds of evopose.fitness.FitnessKind: robust (truncated, scale-aware) or the paper's eq. (1).
 FITNESS_KINDS = ("robust", "paper")
@@ -74,7 +74,7 @@ def solve_command(
     else:
         result = solve_file(problem, seed=seed, time_budget=time_budget, fitness=fitness, overlay=overlay)
     if as_json:
-        print(json.dumps(result))
+        print(json_line(result))
     else:
         Console().print(solution_table(result))
 

@@ -6,9 +6,10 @@ Light on purpose: the CLI builds its options from here without importing Zenoh.
 from __future__ import annotations
 
 import json
+import math
 import sys
 from pathlib import Path
-from typing import TYPE_CHECKING, Annotated
+from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
 
@@ -39,7 +40,23 @@ def session_options(mode: str | None, connect: list[str] | None, listen: list[st
                           multicast=multicast)
 
 
+def finite(value: Any) -> Any:
+    """``value`` with every non-finite float (NaN, inf) made None, so that it is valid JSON."""
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, dict):
+        return {k: finite(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [finite(v) for v in value]
+    return value
+
+
+def json_line(record: Any) -> str:
+    """One line of valid JSON (RFC 8259: no NaN or Infinity)."""
+    return json.dumps(finite(record), allow_nan=False)
+
+
 def emit_json(record: dict) -> None:
     """Print one JSON object on its own line, flushed (for pipes and tests)."""
-    sys.stdout.write(json.dumps(record) + "\n")
+    sys.stdout.write(json_line(record) + "\n")
     sys.stdout.flush()

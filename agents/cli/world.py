@@ -7,12 +7,13 @@ Registered on :data:`agents.cli.main.app`; thin commands that call one service f
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import Annotated
 
 import typer
 from rich.console import Console
+
+from agents.cli.options import json_line
 
 
 def render_command(
@@ -31,7 +32,7 @@ def render_command(
 
     result = render_to_files(scenario, frame, out, vehicle=vehicle, truth_path=truth, clean=clean)
     if as_json:
-        print(json.dumps(result))
+        print(json_line(result))
     else:
         Console().print(f"{result['image']}: {result['vehicle']} frame {result['frame']} "
                         f"(t = {result['time']:.2f} s), {len(result['marks'])} visible marks; "
@@ -54,7 +55,7 @@ def features_command(
     names = [c.strip() for c in colours.split(",") if c.strip()] if colours else None
     result = image_features(image, model=model, colours=names, corners=corners)
     if as_json:
-        print(json.dumps(result))
+        print(json_line(result))
         return
     console = Console()
     console.print(f"{result['image']}: {result['count']} points ({result['method']})")

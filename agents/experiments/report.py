@@ -235,7 +235,7 @@ def write_report(out: Path, *, runs: int, frames: int | None, seed: int, endpoin
     started = time.time()
     records = run_all(runs=runs, frames=frames, seed=seed, endpoint=endpoint, stop=stop, on_run=on_run)
     result_rows = rows(records)
-    lines = [f"# EvoPose Fleet: the paper's experiments, reproduced",
+    lines = ["# EvoPose Fleet: the paper's experiments, reproduced",
              "",
              f"Produced by `evopose report --runs {runs}{'' if frames is None else f' --frames {frames}'}"
              f" --seed {seed}` on {time.strftime('%Y-%m-%d', time.gmtime(started))}, "

@@ -27,6 +27,15 @@ from scenarios.documents import UnknownKey, describe, read_mapping, validation_m
 
 from agents.problem.images import detect_marks, read_image
 
+#: Problem-size limits (README, "Solving a pose problem"): each breach is one line naming the field.
+MAX_MODEL_POINTS = 4096
+MAX_IMAGE_POINTS = 16384  # as many as a feature set may carry on the wire
+MAX_VIEWS = 32
+MAX_HINTS = 256
+#: Largest coordinate accepted: metres in the model and the search box, pixels in the images.
+MAX_COORDINATE = 1e6
+#: Largest search sizes accepted in ``options``.
+MAX_POPULATION, MAX_OFFSPRING, MAX_SCREENING = 4096, 16384, 64
 #: Range searched for an angle the file does not mention: a full turn.
 FULL_TURN = (-math.pi, math.pi)
 #: Shortest normal evopose.Model accepts.
@@ -62,10 +71,16 @@ def _non_zero(value: list[float]) -> list[float]:
     return value
 
 
-Point2 = Annotated[list[float], _fixed_length(2, "[u, v]")]
-Point3 = Annotated[list[float], _fixed_length(3, "[x, y, z]")]
+def _moderate(value: list[float]) -> list[float]:
+    if any(abs(v) > MAX_COORDINATE for v in value):
+        raise ValueError(f"coordinates must be within +-{MAX_COORDINATE:g}")
+    return value
+
+
+Point2 = Annotated[list[float], _fixed_length(2, "[u, v]"), AfterValidator(_moderate)]
+Point3 = Annotated[list[float], _fixed_length(3, "[x, y, z]"), AfterValidator(_moderate)]
 Normal = Annotated[Point3, AfterValidator(_non_zero)]
-Range = Annotated[list[float], _fixed_length(2, "[lo, hi]"), AfterValidator(_ordered)]
+Range = Annotated[list[float], _fixed_length(2, "[lo, hi]"), AfterValidator(_moderate), AfterValidator(_ordered)]
 Distortion = Annotated[list[float], _fixed_length(5, "[k1, k2, p1, p2, k3]")]
 
 
@@ -103,8 +118,8 @@ class ModelSpec(Spec):
     """The target's feature points in the target frame, optionally with outward normals; or a model ``file``
     (``scenarios/models`` format: marks with colours, relative to the problem file, or a shipped model name)."""
 
-    points: Annotated[list[Point3], Field(min_length=1)] | None = None
-    normals: list[Normal] | None = None
+    points: Annotated[list[Point3], Field(min_length=1, max_length=MAX_MODEL_POINTS)] | None = None
+    normals: Annotated[list[Normal], Field(max_length=MAX_MODEL_POINTS)] | None = None
     file: str | None = None
 
     @field_validator("normals")
@@ -150,7 +165,7 @@ class ViewSpec(Spec):
     """One camera's unordered image points (or an ``image`` file to extract them from) and its weight in eq. (4)."""
 
     camera: CameraSpec
-    points: Annotated[list[Point2], Field(min_length=1)] | None = None
+    points: Annotated[list[Point2], Field(min_length=1, max_length=MAX_IMAGE_POINTS)] | None = None
     image: str | None = None
     weight: Annotated[float, Field(ge=0)] = 1.0
 
@@ -212,10 +227,10 @@ class ProblemSpec(Spec):
     """A whole pose-problem file (DESIGN.md §3)."""
 
     model: ModelSpec
-    views: Annotated[list[ViewSpec], Field(min_length=1)]
+    views: Annotated[list[ViewSpec], Field(min_length=1, max_length=MAX_VIEWS)]
     search: SearchSpec
     constraints: ConstraintsSpec = ConstraintsSpec()
-    hints: list[PoseSpec] = []
+    hints: Annotated[list[PoseSpec], Field(max_length=MAX_HINTS)] = []
     seed: Annotated[int, Field(ge=0)] | None = None
     options: OptionsSpec = OptionsSpec()
 
@@ -239,6 +254,10 @@ def _bounds(spec: ProblemSpec) -> Bounds:
 
 
 def _search_options(spec: ProblemSpec) -> SearchOptions:
+    for name, limit in (("population", MAX_POPULATION), ("offspring", MAX_OFFSPRING), ("screening", MAX_SCREENING)):
+        value = getattr(spec.options, name, None)
+        if value is not None and value > limit:
+            raise ProblemFileError(f"options.{name}: at most {limit}, got {value}")
     try:
         return SearchOptions(**spec.options.model_dump(exclude_unset=True))
     except ValueError as err:
