@@ -309,7 +309,10 @@ def render_frame(scenario: Scenario, frame: int, vehicle: str | None = None, *, 
     # occlusion rays end a little above the surface, so the mark's own face never blocks them
     lift = MARK_LIFT * normals_w[candidates, None, :]
     samples = np.concatenate([centres_w[candidates, None, :], outlines_w[candidates]], axis=1) + lift
-    blocked = first_hits(eye, samples.reshape(-1, 3), faces.triangles).reshape(len(candidates), -1)
+    if len(candidates):
+        blocked = first_hits(eye, samples.reshape(-1, 3), faces.triangles).reshape(len(candidates), -1)
+    else:  # no mark in view (a camera looking away): nothing to test
+        blocked = np.zeros((0, 1 + MARK_OUTLINE), bool)
     shown = candidates[~blocked[:, 0]]
     whole = ~blocked[~blocked[:, 0]].any(axis=1)
     whole &= np.all(camera.in_image(uv_o[shown], margin=-0.5), axis=1) & front_o.reshape(-1, MARK_OUTLINE)[shown].all(1)

@@ -91,3 +91,11 @@ def test_problem_size_limits_are_one_line(tmp_path, change, expected):
 def test_output_json_never_holds_nan():
     assert finite({"a": float("nan"), "b": [1.0, float("inf")], "c": "x"}) == {"a": None, "b": [1.0, None], "c": "x"}
     assert json.loads(json_line({"fitness": float("nan")})) == {"fitness": None}
+
+
+def test_a_camera_looking_away_renders_no_marks_instead_of_failing(tmp_path):
+    world = tmp_path / "away.yaml"
+    world.write_text("extends: exp2\nname: away\nvehicles:\n  - {name: H1, camera: {look_at: [-60.0, 30.0, 12.0]}}\n")
+    result = evopose("render", world, "--vehicle", "H1", "--out", tmp_path / "away.png", "--json")
+    assert result.returncode == 0, result.stderr[-500:]
+    assert json.loads(result.stdout)["marks"] == []
