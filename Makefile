@@ -4,7 +4,7 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test bench bench-footprint examples install clean lock compose
+.PHONY: demo test fuzz bench bench-footprint examples install clean lock compose
 
 $(STAMP): pyproject.toml constraints.txt
 	$(PYTHON) -m venv $(VENV)
@@ -19,6 +19,10 @@ demo: $(STAMP)
 
 test: $(STAMP)
 	$(PY) -m pytest -q
+
+# The fuzz tests with many more (and random) examples than `make test` runs (a few minutes).
+fuzz: $(STAMP)
+	EVOPOSE_FUZZ_EXAMPLES=3000 EVOPOSE_FUZZ_RANDOM=1 $(PY) -m pytest -q tests/test_fuzz.py
 
 # Regenerate the example pose-problem files from seeded synthetic problems.
 examples: $(STAMP)
