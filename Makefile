@@ -34,6 +34,7 @@ bench: $(STAMP)
 	NUMBA_NUM_THREADS=1 $(PY) -m benchmarks.bench_kernels
 	$(PY) -m benchmarks.bench_features
 	$(PY) -m benchmarks.bench_fleet
+	$(PY) -m benchmarks.bench_latency
 	$(PY) -m benchmarks.report
 
 # Three agent pairs for 10 minutes each (30 min): memory and CPU over time.
