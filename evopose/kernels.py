@@ -22,6 +22,8 @@ from .projection import FASTMATH as _FASTMATH
 
 #: Squared distance reported when no candidate exists (no usable model point, or unusable model point).
 NO_MATCH_D2 = 1e30
+#: View-term modes (:func:`view_term_row`): the paper's eq. (1), the robust two-sided mean, the mutual RMS.
+PAPER, ROBUST, MUTUAL = 0, 1, 2
 
 
 @nb.njit(cache=True, fastmath=_FASTMATH, nogil=True)
@@ -78,26 +80,70 @@ def chamfer_row(u, v, usable, px, py, tau, robust, row):  # pragma: no cover - c
 
 
 @nb.njit(cache=True, fastmath=_FASTMATH, nogil=True)
-def view_term_row(u, v, usable, px, py, tau, robust, row):  # pragma: no cover - compiled
-    """The view's term ``d^(k)`` for one pose (pixels).
+def mutual_row(u, v, usable, px, py, tau, img_nn, img_d2, mod_nn, mod_d2):  # pragma: no cover - compiled
+    """One-to-one matching of one pose in one view: mutual nearest neighbours closer than ``tau``.
 
-    ``robust``: ``(sum_i min(d_i, tau) + sum_j min(d_j, tau)) / (P + n_usable)``, one mean over both
-    directions; otherwise the paper's eq. (1) ``sum_i min_j |p_i - m_j(s)|``.
+    Fills the scratch arrays as :func:`nearest_row` does (``img_nn``, ``img_d2`` (>= P,), ``mod_nn``,
+    ``mod_d2`` (M,)).
+
+    Returns
+    -------
+    sq_sum : float
+        ``sum_i e_i^2 + sum_j e_j^2`` over the image points and the usable model points, ``e`` the distance
+        to the mutual partner when there is one within ``tau``, else ``tau`` (pixels squared).
+    n_usable : int
+    n_pairs : int
+        Mutual pairs within ``tau``.
     """
-    s_img, s_mod, cnt = chamfer_row(u, v, usable, px, py, tau, robust, row)
-    if robust:
+    P = px.shape[0]
+    nearest_row(u, v, usable, px, py, img_nn, img_d2, mod_nn, mod_d2)
+    tau2 = tau * tau
+    s = 0.0
+    n_usable = 0
+    n_pairs = 0
+    for m in range(u.shape[0]):
+        if not usable[m]:
+            continue
+        n_usable += 1
+        p = mod_nn[m]
+        if p >= 0 and mod_d2[m] < tau2 and img_nn[p] == m:
+            s += 2.0 * mod_d2[m]
+            n_pairs += 1
+    s += tau2 * (P + n_usable - 2 * n_pairs)
+    return s, n_usable, n_pairs
+
+
+@nb.njit(cache=True, fastmath=_FASTMATH, nogil=True)
+def view_term_row(u, v, usable, px, py, tau, mode, img_nn, img_d2, mod_nn, mod_d2):  # pragma: no cover - compiled
+    """The view's term ``d^(k)`` for one pose (pixels); ``img_nn``, ``img_d2`` (>= P,), ``mod_nn``, ``mod_d2`` (M,)
+    are scratch.
+
+    ``mode`` :data:`PAPER`: the paper's eq. (1) ``sum_i min_j |p_i - m_j(s)|``;
+    :data:`ROBUST`: ``(sum_i min(d_i, tau) + sum_j min(d_j, tau)) / (P + n_usable)``, one mean over both
+    directions; :data:`MUTUAL`: the root mean square over both directions of the distance to the mutual
+    nearest partner, ``tau`` for a point without one within ``tau`` (:func:`mutual_row`).
+    """
+    if mode == MUTUAL:
+        s, n_usable, _ = mutual_row(u, v, usable, px, py, tau, img_nn, img_d2, mod_nn, mod_d2)
+        return np.sqrt(s / (px.shape[0] + n_usable))
+    s_img, s_mod, cnt = chamfer_row(u, v, usable, px, py, tau, mode == ROBUST, img_d2)
+    if mode == ROBUST:
         return (s_img + s_mod) / (px.shape[0] + cnt)
     return s_img
 
 
 @nb.njit(cache=True, fastmath=_FASTMATH, nogil=True)
-def view_terms(u, v, usable, px, py, tau, robust):  # pragma: no cover - compiled
+def view_terms(u, v, usable, px, py, tau, mode):  # pragma: no cover - compiled
     """:func:`view_term_row` for every pose: ``u``, ``v``, ``usable`` (N, M) -> (N,)."""
-    N = u.shape[0]
+    N, M = u.shape
+    P = px.shape[0]
     out = np.empty(N)
-    row = np.empty(px.shape[0])
+    img_nn = np.empty(P, np.int64)
+    img_d2 = np.empty(P)
+    mod_nn = np.empty(M, np.int64)
+    mod_d2 = np.empty(M)
     for n in range(N):
-        out[n] = view_term_row(u[n], v[n], usable[n], px, py, tau, robust, row)
+        out[n] = view_term_row(u[n], v[n], usable[n], px, py, tau, mode, img_nn, img_d2, mod_nn, mod_d2)
     return out
 
 

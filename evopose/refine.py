@@ -93,7 +93,7 @@ def refine(objective: PoseObjective, poses: np.ndarray, fitness: np.ndarray | No
     refine_population(poses, fitness, bounds.lo, bounds.hi, bounds.periodic, bounds.free, packed.model,
                       packed.normals, packed.use_normals, packed.intr, packed.cfw,
                       np.array(objective.weights, dtype=float), np.array(objective.taus, dtype=float),
-                      sigmas, packed.pts, packed.offsets, objective.kind == "robust", kinds, values,
+                      sigmas, packed.pts, packed.offsets, objective.mode, kinds, values,
                       SOFT_OUTLIER, damping)
     # count every projection of the model as an evaluation: 7 per step (pose + 6 Jacobian columns),
     # one fitness per hard step, and the fitness before the first hard step and at the end

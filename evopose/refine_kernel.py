@@ -17,7 +17,7 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
-from .kernels import nearest_row, view_term_row
+from .kernels import MUTUAL, nearest_row, view_term_row
 from .projection import FASTMATH as _FASTMATH
 from .projection import project_pose
 
@@ -82,8 +82,11 @@ def _soft_accumulate(u, v, J, usable, px, py, sigma, outlier, w_img, w_mod, H, g
 
 @nb.njit(cache=True, fastmath=_FASTMATH, nogil=True)
 def _hard_accumulate(u, v, J, usable, px, py, gate2, w_img, w_mod, H, g, img_nn, img_d2, mod_nn,
-                     mod_d2):  # pragma: no cover - compiled
-    """Nearest-neighbour normal equations of one pose in one view, both directions within a gate."""
+                     mod_d2, mutual):  # pragma: no cover - compiled
+    """Nearest-neighbour normal equations of one pose in one view, both directions within a gate.
+
+    With ``mutual`` only mutual nearest pairs count (the pairs of the mutual fitness, :func:`mutual_row`).
+    """
     P = px.shape[0]
     nearest_row(u, v, usable, px, py, img_nn, img_d2, mod_nn, mod_d2)
     n_usable = 0
@@ -93,10 +96,10 @@ def _hard_accumulate(u, v, J, usable, px, py, gate2, w_img, w_mod, H, g, img_nn,
     a = w_img / (P + n_usable)
     b = w_mod / (P + n_usable)
     for m in range(u.shape[0]):
-        if usable[m] and mod_d2[m] < gate2:
+        if usable[m] and mod_d2[m] < gate2 and (not mutual or img_nn[mod_nn[m]] == m):
             _add_pair(u, v, J, m, px[mod_nn[m]], py[mod_nn[m]], b, H, g)
     for p in range(P):
-        if img_d2[p] < gate2:
+        if img_d2[p] < gate2 and (not mutual or mod_nn[img_nn[p]] == p):
             _add_pair(u, v, J, img_nn[p], px[p], py[p], a, H, g)
 
 
@@ -125,16 +128,17 @@ def _to_bounds(s, lo, hi, periodic):  # pragma: no cover - compiled
 
 
 @nb.njit(cache=True, fastmath=_FASTMATH, nogil=True)
-def fitness_one(s, model, normals, use_normals, intr, cfw, weights, taus, pts, offsets, robust,
-                u, v, usable, row, R, Rc):  # pragma: no cover - compiled
-    """Eq. (4) for one pose: ``sum_k W_k d^(k)``, with the fitness's own view term."""
+def fitness_one(s, model, normals, use_normals, intr, cfw, weights, taus, pts, offsets, mode,
+                u, v, usable, img_nn, row, mod_nn, mod_d2, R, Rc):  # pragma: no cover - compiled
+    """Eq. (4) for one pose: ``sum_k W_k d^(k)``, with the fitness's own view term (``mode``: :mod:`evopose.kernels`)."""
     total = 0.0
     for k in range(intr.shape[0]):
         if weights[k] == 0.0:
             continue
         project_pose(s, model, normals, use_normals, intr[k], cfw[k], u, v, usable, R, Rc)
         a, b = offsets[k], offsets[k + 1]
-        total += weights[k] * view_term_row(u, v, usable, pts[a:b, 0], pts[a:b, 1], taus[k], robust, row)
+        total += weights[k] * view_term_row(u, v, usable, pts[a:b, 0], pts[a:b, 1], taus[k], mode, img_nn, row,
+                                                 mod_nn, mod_d2)
     return total
 
 
@@ -184,7 +188,7 @@ def _bounded_step(H, g, s, lo, hi, periodic, step_free, lam, A, clamp):  # pragm
 
 @nb.njit(cache=True, fastmath=_FASTMATH, nogil=True)
 def refine_population(poses, fitness, lo, hi, periodic, free, model, normals, use_normals, intr, cfw,
-                      weights, taus, sigmas, pts, offsets, robust, kinds, scales, outlier,
+                      weights, taus, sigmas, pts, offsets, mode, kinds, scales, outlier,
                       damping):  # pragma: no cover - compiled
     """Refine every pose (N, 6) in place along the schedule; fitness (N,) is updated.
 
@@ -193,6 +197,7 @@ def refine_population(poses, fitness, lo, hi, periodic, free, model, normals, us
     sigmas : (S, V) soft kernel width per step and view (pixels; ignored for hard steps)
     kinds : (S,) int, 0 = soft step, 1 = hard step, 2 = soft step on the position only
     scales : (S,) gate of hard steps in units of tau
+    mode : int, the view term (:data:`evopose.kernels.PAPER`, ``ROBUST`` or ``MUTUAL``)
     """
     N = poses.shape[0]
     M = model.shape[0]
@@ -259,7 +264,7 @@ def refine_population(poses, fitness, lo, hi, periodic, free, model, normals, us
                 else:
                     gate = scales[step] * taus[k]
                     _hard_accumulate(u, v, J, usable, px, py, gate * gate, w_k, w_k, H, g, img_nn, row, mod_nn,
-                                     mod_d2)
+                                     mod_d2, mode == MUTUAL)
             # damped step (Levenberg–Marquardt), fixed parameters held
             for i in range(6):
                 for j in range(i):
@@ -275,9 +280,9 @@ def refine_population(poses, fitness, lo, hi, periodic, free, model, normals, us
                 continue
             if not np.isfinite(f_cur):
                 f_cur = fitness_one(s, model, normals, use_normals, intr, cfw, weights, taus, pts, offsets,
-                                    robust, u, v, usable, row, R, Rc)
+                                    mode, u, v, usable, img_nn, row, mod_nn, mod_d2, R, Rc)
             f_try = fitness_one(s_try, model, normals, use_normals, intr, cfw, weights, taus, pts, offsets,
-                                robust, u, v, usable, row, R, Rc)
+                                mode, u, v, usable, img_nn, row, mod_nn, mod_d2, R, Rc)
             if f_try <= f_cur:
                 for d in range(6):
                     s[d] = s_try[d]
@@ -287,7 +292,7 @@ def refine_population(poses, fitness, lo, hi, periodic, free, model, normals, us
                 lam = min(lam * 10.0, 1e4)
         if not np.isfinite(f_cur):
             f_cur = fitness_one(s, model, normals, use_normals, intr, cfw, weights, taus, pts, offsets,
-                                robust, u, v, usable, row, R, Rc)
+                                mode, u, v, usable, img_nn, row, mod_nn, mod_d2, R, Rc)
         if f_cur <= f_start:  # never worse than the input
             for d in range(6):
                 poses[n, d] = s[d]

@@ -20,11 +20,14 @@ from .options import SearchOptions
 from .problem import PoseProblem, View
 from .refine import TRACK_HARD_SCHEDULE, TRACK_SCHEDULE, annealing, refine
 from .search import EvoPose
+from .uncertainty import Confidence, assess, track_confidence
 
 #: Final polish of the best pose: hard nearest-neighbour steps (accepted only when the fitness drops).
 POLISH_SCHEDULE = annealing(1, hard=6, start=1.0)
 #: Stop reasons that mean "the pose is good" (as opposed to a budget running out).
 GOOD_REASONS = ("good_fitness", "consensus", "stalled")
+#: Other basins of the final population that are polished and compared with the best (:func:`evopose.uncertainty.assess`).
+RIVALS = 8
 
 
 @dataclass
@@ -55,6 +58,16 @@ class Solution:
         A hint (or a descendant of one) reached the best basin.
     reinitialised : bool
         (track) the fit was lost and the search started over.
+    covariance : array, shape (6, 6)
+        Covariance of ``(x, y, z, roll, pitch, yaw)`` (metres, radians; ROS ``PoseWithCovariance`` order) from the
+        fitness landscape at the pose (:func:`evopose.uncertainty.covariance`); inf-filled when not computable.
+    confident : bool
+        In the right basin with high probability: enough marks matched one to one and no distinct pose found by
+        the search fits nearly as well (:func:`evopose.uncertainty.assess`; for :func:`track`, see there).
+        Unlike ``converged``, which says why the search stopped, this is a verdict on the answer, calibrated
+        against the truth in ``benchmarks/bench_confidence.py``.
+    confidence : Confidence or None
+        What the verdict rests on (matches, margin over the runner-up basin, the reason when not confident).
     """
 
     pose: np.ndarray
@@ -69,6 +82,9 @@ class Solution:
     history: list
     from_hint: bool = False
     reinitialised: bool = False
+    covariance: np.ndarray = field(default_factory=lambda: np.full((6, 6), np.inf))
+    confident: bool = False
+    confidence: Confidence | None = field(default=None, repr=False)
     problem: PoseProblem | None = field(default=None, repr=False)
     options: SearchOptions | None = field(default=None, repr=False)
 
@@ -120,12 +136,23 @@ def solution_of(problem: PoseProblem, options: SearchOptions, run: Run, seconds:
     mismatch = objective.mismatch(fitness)
     match = Match(None if mismatch is None else float(mismatch), state.best_match.unmatched)
     terms = objective.view_terms(pose[None])[0]
+    confidence = assess(objective, pose, _rivals(state, objective, options), options.confidence)
     return Solution(
         pose=pose, fitness=fitness, view_terms=terms, view_weights=objective.weights.copy(),
         generations=state.generation, evaluations=objective.evaluations, seconds=seconds + time.perf_counter() - t0,
         converged=run.told.stop_reason in GOOD_REASONS and options.is_good(match),
         stop_reason=run.told.stop_reason or "unfinished",
-        history=list(state.history), from_hint=state.best_from_hint, problem=problem, options=options)
+        history=list(state.history), from_hint=state.best_from_hint, problem=problem, options=options,
+        covariance=confidence.covariance.matrix, confident=confidence.confident, confidence=confidence)
+
+
+def _rivals(state, objective: PoseObjective, options: SearchOptions) -> np.ndarray:
+    """The best ``RIVALS`` other basins of the final population, polished like the best, shape (K, 6)."""
+    order = np.argsort(state.fitness, kind="stable")[1:RIVALS + 1]
+    poses, fitness = state.population[order], state.fitness[order]
+    if len(poses) and options.refine_steps:
+        poses, _ = refine(objective, poses, fitness, POLISH_SCHEDULE)
+    return poses
 
 
 def pose_mismatch(problem: PoseProblem, pose: np.ndarray, options: SearchOptions | None = None) -> float:

@@ -206,7 +206,7 @@ MALFORMED = [
      "hints[0].yaw: required field missing"),
     ("negative seed", _set("seed", -1), "seed: must be >= 0"),
     ("float seed", _set("seed", 1.5), "seed: expected an integer, got 1.5"),
-    ("unknown fitness", _set("options", {"fitness": "fast"}), "options.fitness: expected 'robust' or 'paper'"),
+    ("unknown fitness", _set("options", {"fitness": "fast"}), "options.fitness: expected 'mutual', 'robust' or 'paper'"),
     ("unknown option", _set("options", {"popsize": 10}), "options.popsize: unknown key"),
     ("option rejected by SearchOptions", _set("options", {"population": 1}), "options: population must be >= 2"),
 ]

@@ -40,9 +40,10 @@ def test_robustness_cases_are_solved(kind, seed, difficulty):
     assert solution.converged
 
 
-def test_robust_fitness_prefers_truth_where_plain_eq1_does_not():
+@pytest.mark.parametrize("kind", ["mutual", "robust"])
+def test_bounded_fitness_prefers_truth_where_plain_eq1_does_not(kind):
     """False points beyond one corner move the minimum of the paper's eq. (1) out of the right basin; the
-    robust fitness keeps the truth there, and the search finds it."""
+    bounded fitness kinds keep the truth there, and the search finds it."""
     sp = make_problem("random", np.random.default_rng(7), noise=0.5, clutter=0.0, missing=0.0)
     view = sp.problem.views[0]
     rng = np.random.default_rng(0)
@@ -50,13 +51,13 @@ def test_robust_fitness_prefers_truth_where_plain_eq1_does_not():
     cluttered = sp.problem.with_views([View(view.camera, np.concatenate([view.points, far_side]))])
     shifted = sp.true_pose.copy()
     shifted[:2] += 0.02 * sp.distance  # a wrong pose leaning towards the false points
-    robust = PoseObjective(cluttered, "robust")
+    bounded = PoseObjective(cluttered, kind)
     candidates = np.stack([sp.true_pose, shifted])
-    assert robust(candidates)[0] < robust(candidates)[1]
-    # the robust search lands in the right basin, at a fitness no worse than the truth's
-    found = solve(cluttered, seed=0)
+    assert bounded(candidates)[0] < bounded(candidates)[1]
+    # the bounded search lands in the right basin, at a fitness no worse than the truth's
+    found = solve(cluttered, SearchOptions(fitness=kind), seed=0)
     _assert_solved(sp, found)
-    assert found.fitness <= robust(sp.true_pose[None])[0]
+    assert found.fitness <= bounded(sp.true_pose[None])[0]
     # eq. (1) has a far better minimum in a wrong basin, and its search goes there
     paper = PoseObjective(cluttered, "paper")
     misled = solve(cluttered, SearchOptions(fitness="paper"), seed=0)
