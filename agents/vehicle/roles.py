@@ -75,12 +75,19 @@ class Vehicle:
         raise NotImplementedError
 
     def run(self, stop: threading.Event) -> dict:
-        # wait first: team-mates are present from the moment their bus opens, before their own (long) prepare;
-        # waiting after ours could miss a quick one that has already come and gone
+        # wait for the team-mates while warming up: they are present from the moment their bus opens, before
+        # their own warm-up, and a quick one may have come and gone by the time ours is over
         mates = [v for v in self.config.wait_for if v != self.config.vehicle]
-        if mates:
-            ok = self.bus.wait_for_teammates(mates, self.config.wait_timeout_s)
+        met: dict[str, bool] = {}
+        waiter = threading.Thread(target=lambda: met.update(ok=self.bus.wait_for_teammates(
+            mates, self.config.wait_timeout_s)), name="wait-for-team", daemon=True) if mates else None
+        if waiter is not None:
+            waiter.start()
+        self.prepare()
+        if waiter is not None:
+            waiter.join()
             alive = sorted(self.bus.teammates())
+            ok = met.get("ok", False) or set(mates) <= set(alive)  # all there at some moment, or now
             self.emit({"event": "teammates", "vehicle": self.config.vehicle, "ready": ok, "alive": alive})
             if not ok:  # a team that never met is an error, not a run alone (docs/security.md)
                 missing = sorted(set(mates) - set(alive))
@@ -88,7 +95,6 @@ class Vehicle:
                                       f"fleet {self.config.fleet!r} within {self.config.wait_timeout_s:g} s "
                                       "(--wait-timeout); check --connect/--listen (multicast scouting is off "
                                       "unless --multicast)")
-        self.prepare()
         self.emit({"event": "ready", "vehicle": self.config.vehicle, "role": self.role, "share": self.config.share,
                    "fps": self.clock.fps})
         n = None
