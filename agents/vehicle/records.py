@@ -62,6 +62,7 @@ class RunRecord:
     good: int = 0
     solves: int = 0
     late_frames: int = 0
+    stale_events: int = 0  #: times a live team-mate's data went stale (frozen or cut off)
     multi_view_frames: int = 0
     first_good_s: float | None = None
     first_confirmed_s: float | None = None

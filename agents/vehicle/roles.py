@@ -140,6 +140,8 @@ class CameraVehicle(Vehicle):
                                               SearchOptions(time_budget=config.time_budget_s), seed=config.seed)
         self._hints: list[np.ndarray] = []
         self._latest_hint: np.ndarray | None = None
+        self._sharing_mates: set[str] = set()  # team-mates that ever sent views
+        self._stale: set[str] = set()  # of those, the live ones whose data are stale now
         self._hints_lock = threading.Lock()
         self._hint_schedule = HintSchedule(config.hint_rate_hz)
         self._hint_send_lock = threading.Lock()
@@ -228,12 +230,25 @@ class CameraVehicle(Vehicle):
         alive = self.bus.teammates()
         self.team.keep_only(alive)
         expected = self.team.sharing(alive, stamp_ns, max_age + self.period_s)
+        self._report_staleness(alive, expected)
         deadline = time.monotonic() + self.sync_wait_s
         wait_until(lambda: set(self.team.at(stamp_ns, expected)) >= expected, deadline, poll)
         found = self.team.at(stamp_ns, expected)
         # a team-mate whose frame of this instant did not come in time: its newest fresh one
         found.update(self.team.newest(expected - set(found), stamp_ns, max_age))
         return list(found.values())
+
+    def _report_staleness(self, alive: frozenset[str], fresh: set[str]) -> None:
+        """A live team-mate whose data went stale (frozen, or a cut link: nothing newer than ``--max-age``) is no
+        longer waited for; say so once, and again when its data are fresh again."""
+        stale = set(alive) & self._sharing_mates - fresh
+        for mate in sorted(stale - self._stale):
+            self.record.stale_events += 1
+            self.emit({"event": "stale", "vehicle": mate, "by": self.config.vehicle})
+        for mate in sorted(self._stale & fresh):
+            self.emit({"event": "fresh", "vehicle": mate, "by": self.config.vehicle})
+        self._stale = stale
+        self._sharing_mates |= fresh
 
     # -- the frame ------------------------------------------------------------------------------
 
