@@ -17,10 +17,12 @@ from __future__ import annotations
 
 import json
 import os
+import queue
 import shutil
 import stat
 import subprocess
 import sys
+import threading
 import uuid
 from pathlib import Path
 
@@ -47,9 +49,6 @@ class Piped(Proc):
         self.args = args
         self.popen = subprocess.Popen(args, cwd=ROOT, stdin=subprocess.PIPE, stdout=subprocess.PIPE,
                                       stderr=subprocess.PIPE, text=True)
-        import queue
-        import threading
-
         self.lines = queue.Queue()
         self.records = []
         self._reader = threading.Thread(target=self._read, daemon=True)

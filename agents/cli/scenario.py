@@ -99,15 +99,23 @@ def run_command(
     listen: Annotated[str, typer.Option("--listen", help="Where the fleet can be reached from outside.")]
     = DEFAULT_ENDPOINT,
     secure: Annotated[bool, typer.Option("--secure", help="TLS with a certificate per vehicle and a router with a "
-                                                          "deny-by-default ACL (docs/security.md).")] = False,
+                                                          "deny-by-default ACL on the --listen address, as tls/ "
+                                                          "(docs/security.md).")] = False,
     credentials: Annotated[Path | None, typer.Option(
         "--credentials", metavar="DIR", help="With --secure: keep each run's credentials in DIR/<fleet> "
                                              "(default: a temporary directory, removed).")] = None,
     as_json: Annotated[bool, typer.Option("--json", help="One JSON object with every run's summaries.")] = False,
+    ros2: Annotated[bool, typer.Option("--ros2", help="Also mirror each run onto ROS 2 topics (evopose ros2, "
+                                                      "docs/ros2.md).")] = False,
+    ros2_domain: Annotated[int, typer.Option(min=0, max=232, help="ROS_DOMAIN_ID of --ros2.")] = 0,
 ) -> None:
     """Start every agent of the scenario as its own process, run, stop them all, print the results."""
     if credentials is not None and not secure:
         raise typer.BadParameter("needs --secure", param_hint="--credentials")
+    if ros2 and secure:
+        raise typer.BadParameter("the ROS 2 mirror has no fleet certificate; run evopose ros2 with one instead",
+                                 param_hint="--ros2")
+    mirror_domain = ros2_domain if ros2 else None
     from scenarios.fleet import load_fleet_scenario
 
     from agents.experiments.results import rows
@@ -118,7 +126,8 @@ def run_command(
     with stop_on_signals() as stop:
         if as_json:
             records = run_scenario(scenario, runs=runs, frames=frames, seed=seed, endpoint=listen,
-                                   variants=variant, stop=stop, fps=fps, secure=secure, credentials=credentials)
+                                   variants=variant, stop=stop, fps=fps, secure=secure, credentials=credentials,
+                                   ros2_domain=mirror_domain)
         else:
             with console.status(f"{scenario.name}: starting") as status:
                 def progress(p: dict) -> None:
@@ -131,7 +140,7 @@ def run_command(
 
                 records = run_scenario(scenario, runs=runs, frames=frames, seed=seed, endpoint=listen,
                                        variants=variant, stop=stop, on_run=finished, on_progress=progress,
-                                       fps=fps, secure=secure, credentials=credentials)
+                                       fps=fps, secure=secure, credentials=credentials, ros2_domain=mirror_domain)
     result_rows = rows(records)
     if as_json:
         emit_json({"scenario": scenario.name, "interrupted": stop.is_set(), "rows": result_rows, "runs": records})

@@ -50,6 +50,8 @@ from agents.errors import FleetError
 DEFAULT_ROUTER_ENDPOINT = "tls/127.0.0.1:7447"
 #: Names the router certificate is always valid for (a fleet on one host).
 LOOPBACK_HOSTS = ("127.0.0.1", "localhost")
+#: Addresses that mean "every interface": never a name to connect to.
+WILDCARDS = ("0.0.0.0", "::")
 #: Common name of the router's certificate: not a valid vehicle name (``@``), so it never matches a vehicle.
 ROUTER_COMMON_NAME = "@router"
 #: Validity of the certificates.
@@ -86,10 +88,6 @@ class FleetCredentials:
         if member not in self.vehicles and member not in self.observers:
             raise CredentialsError(f"{member!r} is not a member of fleet {self.fleet!r}")
         return self.directory / f"{member}.json5"
-
-    def files(self, member: str) -> tuple[str, ...]:
-        """The file names one member (or ``router``) needs: the CA certificate, its certificate, key and config."""
-        return (CA_CERT, f"{member}.pem", f"{member}.key", f"{member}.json5")
 
     def as_dict(self) -> dict:
         return {"directory": str(self.directory), "fleet": self.fleet, "vehicles": list(self.vehicles),
@@ -307,12 +305,11 @@ def create_credentials(directory: Path | str, fleet: str, vehicles: Sequence[str
             raise CredentialsError(f"the router's {what} endpoint must be a tls/ endpoint, got {endpoint!r}")
     if days < 1:
         raise CredentialsError(f"--days must be at least 1, got {days}")
-    if connect is None:
-        host = _endpoint_host(listen)
-        connect = listen if host not in ("0.0.0.0", "::") else listen.replace(f"/{host}:", "/127.0.0.1:", 1).replace(
-            "/[::]:", "/127.0.0.1:", 1)
-    hosts = tuple(dict.fromkeys((*LOOPBACK_HOSTS, *router_hosts, _endpoint_host(connect))))
-    hosts = tuple(h for h in hosts if h not in ("0.0.0.0", "::"))
+    if connect is None:  # the router's own endpoint; a wildcard address is reached on loopback
+        port = listen.split("#")[0].split("?")[0].rsplit(":", 1)[1]
+        connect = listen if _endpoint_host(listen) not in WILDCARDS else f"tls/127.0.0.1:{port}"
+    hosts = tuple(h for h in dict.fromkeys((*LOOPBACK_HOSTS, *router_hosts, _endpoint_host(connect)))
+                  if h not in WILDCARDS)
 
     directory = Path(directory).absolute()
     if directory.exists() and not directory.is_dir():
