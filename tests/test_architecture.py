@@ -27,6 +27,7 @@ ALLOWED = {
                      "scenarios"},
     "agents.experiments": {"agents.experiments", "agents.errors", "scenarios"},
     "agents.problem": {"agents.problem", "agents.errors", "evopose", "scenarios"},
+    "agents.bridges": {"agents.bridges", "agents.transport", "agents.errors", "protocol", "scenarios"},
     "agents.cli": {"agents.cli", "agents.errors", "agents.experiments", "agents.vehicle.config"},
 }
 PROJECT = ("evopose", "protocol", "scenarios", "agents")

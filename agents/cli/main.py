@@ -16,6 +16,7 @@ from rich.console import Console
 from rich.table import Table
 
 from agents.cli import agent as agent_commands
+from agents.cli import bridges as bridge_commands
 from agents.cli import fleet as fleet_commands
 from agents.cli import scenario as scenario_commands
 from agents.cli import world as world_commands
@@ -40,6 +41,7 @@ agent_commands.register(app)
 scenario_commands.register(app)
 scenario_commands.register_report(app)
 world_commands.register(app)
+bridge_commands.register(app)
 
 
 @app.command("solve")

@@ -135,13 +135,27 @@ def _stop_all(procs: list, sig: int = signal.SIGTERM) -> None:
             proc.wait(5)
 
 
+def start_ros2_mirror(fleet: str, domain: int, endpoint: str, use_router: bool, env: dict) -> subprocess.Popen:
+    """``evopose ros2`` on the fleet (an observer, like the meter), once it is subscribed; stopped with the agents.
+
+    Without a router it connects to the first agent's endpoint before that listens: Zenoh retries."""
+    network = ["--mode", "client", "--connect", endpoint] if use_router else ["--connect", endpoint]
+    mirror = subprocess.Popen([sys.executable, "-m", "agents.cli", "ros2", "--fleet", fleet, "--domain", str(domain),
+                               "--json", *network], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    if not mirror.stdout.readline():  # its "ready" line
+        raise ScenarioRunError(f"the ROS 2 mirror did not start: {mirror.stderr.read().strip()[-300:]}")
+    return mirror
+
+
 def run_variant(scenario: FleetScenario, variant: VariantSpec, run: int, *, frames: int, seed: int,
                 endpoint: str, stop: threading.Event, on_progress: Callable[[dict], None] | None = None,
-                fps: float | None = None, secure: bool = False, credentials: Path | None = None) -> dict:
+                fps: float | None = None, secure: bool = False, credentials: Path | None = None,
+                ros2_domain: int | None = None) -> dict:
     """One run of one variant: start its agents (and router), wait for their summaries, stop everything.
 
     ``secure``: TLS, mTLS and the router's ACL, with this run's credentials in ``credentials/<fleet>`` (kept)
-    or in a temporary directory (removed).
+    or in a temporary directory (removed). ``ros2_domain``: also run ``evopose ros2`` (docs/ros2.md) on the
+    fleet, publishing its ROS 2 mirror in that domain.
     """
     fps = fps or scenario.fps
     started = time.monotonic()
@@ -166,6 +180,8 @@ def run_variant(scenario: FleetScenario, variant: VariantSpec, run: int, *, fram
             children.append(router)
             if not router.stdout.readline():
                 raise ScenarioRunError(f"the router did not start: {router.stderr.read().strip()[-300:]}")
+        if ros2_domain is not None:  # before the agents, so that it mirrors their first frames
+            children.append(start_ros2_mirror(fleet, ros2_domain, endpoint, use_router, env))
         epoch_ns = time.time_ns() + int(START_MARGIN_S * 1e9)
         for i, agent in enumerate(variant.agents):
             if secure:  # the vehicle's file: a TLS client with its certificate
@@ -217,7 +233,7 @@ def run_scenario(scenario: FleetScenario, *, runs: int = 1, frames: int | None =
                  endpoint: str = DEFAULT_ENDPOINT, variants: list[str] | None = None, stop: threading.Event,
                  fps: float | None = None, keep_going: bool = False, secure: bool = False,
                  credentials: Path | None = None, on_run: Callable[[dict], None] | None = None,
-                 on_progress: Callable[[dict], None] | None = None) -> list[dict]:
+                 on_progress: Callable[[dict], None] | None = None, ros2_domain: int | None = None) -> list[dict]:
     """Every run of every (chosen) variant; returns one record per run (see :func:`run_variant`).
 
     A run that fails raises :class:`ScenarioRunError`; with ``keep_going`` it is recorded instead, as
@@ -232,7 +248,7 @@ def run_scenario(scenario: FleetScenario, *, runs: int = 1, frames: int | None =
             try:
                 record = run_variant(scenario, variant, run, frames=frames or scenario.frames, seed=seed,
                                      endpoint=endpoint, stop=stop, on_progress=on_progress, fps=fps,
-                                     secure=secure, credentials=credentials)
+                                     secure=secure, credentials=credentials, ros2_domain=ros2_domain)
             except ScenarioRunError as err:
                 if not keep_going:
                     raise
