@@ -56,5 +56,44 @@ def register(app: typer.Typer) -> None:
                                  domain=domain, legacy_attachment=legacy_attachment, duration=duration, emit=emit)
         emit_json(summary) if as_json else Console(stderr=True).print(summary)
 
+    @app.command("record")
+    def record_command(fleet: Fleet,
+                       out: Annotated[Path, typer.Option("--out", "-o", help="The MCAP file to write.")],
+                       duration: Duration = None,
+                       ros: Annotated[bool, typer.Option("--ros/--no-ros", help="The ROS 2 channels (CDR).")] = True,
+                       raw: Annotated[bool, typer.Option("--raw/--no-raw", help="The raw fleet channels (msgpack): "
+                                                         "what replay publishes.")] = True,
+                       as_json: Json = False, connect: Connect = None, listen: Listen = None, mode: Mode = None,
+                       config: ConfigFile = None, multicast: Multicast = False) -> None:
+        """Record every key of the fleet into one MCAP file: ROS 2 profile (CDR) plus the raw channels."""
+        from agents.bridges.recording import run_record
 
-__all__ = ["register", "Path"]
+        emit = _printer(as_json)
+        with stop_on_signals() as stop:
+            summary = run_record(session_options(mode, connect, listen, config, multicast), stop, fleet, out,
+                                 duration=duration, ros=ros, raw=raw, emit=emit)
+        emit_json(summary) if as_json else Console(stderr=True).print(summary)
+
+    @app.command("replay")
+    def replay_command(path: Annotated[Path, typer.Argument(metavar="RECORDING", help="An MCAP file of evopose "
+                                                                                      "record.")],
+                       rate: Annotated[float, typer.Option(min=0.01, max=100, help="Speed: 2 replays twice as fast.")]
+                       = 1.0,
+                       fleet: Annotated[str | None, typer.Option(help="Replay under this fleet name (default: the "
+                                                                      "recorded one).")] = None,
+                       keep_stamps: Annotated[bool, typer.Option("--keep-stamps", help="Send the recorded stamps "
+                                                                 "(receivers drop data older than their max age).")]
+                       = False,
+                       presence: Annotated[bool, typer.Option("--presence/--no-presence", help="Declare the recorded "
+                                                              "vehicles' liveliness while replaying.")] = True,
+                       wait: Annotated[float, typer.Option(min=0, help="Wait up to S seconds for subscribers.")] = 3.0,
+                       as_json: Json = False, connect: Connect = None, listen: Listen = None, mode: Mode = None,
+                       config: ConfigFile = None, multicast: Multicast = False) -> None:
+        """Publish a recording's raw channels back on the fleet keys with their original timing."""
+        from agents.bridges.recording import run_replay
+
+        emit = _printer(as_json)
+        with stop_on_signals() as stop:
+            summary = run_replay(session_options(mode, connect, listen, config, multicast), stop, path, rate=rate,
+                                 fleet=fleet, keep_stamps=keep_stamps, presence=presence, wait_s=wait, emit=emit)
+        emit_json(summary) if as_json else Console(stderr=True).print(summary)
