@@ -72,6 +72,10 @@ def register(app: typer.Typer) -> None:
         wait_for: Annotated[str, typer.Option(help="Comma-separated team-mates to wait for before frame 0.")] = "",
         wait_timeout: Annotated[float, typer.Option(min=0, help="How long to wait for them, s.")] = 10.0,
         time_budget: Annotated[float | None, typer.Option(min=0, help="Seconds per search from scratch.")] = None,
+        operating_radius: Annotated[float, typer.Option(help="Refuse team-mates' cameras and poses farther than "
+                                                             "this from the operating area, m.")] = 1000.0,
+        max_clock_offset: Annotated[float, typer.Option(help="Refuse data stamped further ahead than this, s "
+                                                             "(team-mates' clocks must agree to within it).")] = 0.5,
         as_json: Annotated[bool, typer.Option("--json", help="One JSON object per event on stdout.")] = False,
         connect: Connect = None, listen: Listen = None, mode: Mode = None, config: ConfigFile = None,
         multicast: Multicast = False,
@@ -84,7 +88,7 @@ def register(app: typer.Typer) -> None:
             epoch_ns=epoch_ns, seed=seed, world_seed=world_seed, max_age_s=max_age, sync_wait_s=sync_wait,
             hint_rate_hz=hint_rate, image_encoding=image_encoding, use_attitude=imu, attitude_sigmas=imu_sigmas,
             wait_for=tuple(v.strip() for v in wait_for.split(",") if v.strip()), wait_timeout_s=wait_timeout,
-            time_budget_s=time_budget)
+            time_budget_s=time_budget, operating_radius_m=operating_radius, max_clock_offset_s=max_clock_offset)
         console = Console(stderr=True)
 
         def emit(record: dict) -> None:

@@ -45,6 +45,8 @@ class AgentConfig:
     wait_for: tuple[str, ...] = ()
     wait_timeout_s: float = 10.0
     time_budget_s: float | None = None
+    operating_radius_m: float = 1000.0
+    max_clock_offset_s: float = 0.5
 
     def check(self) -> None:
         """Raise :class:`FleetError` naming the first bad field."""
@@ -60,7 +62,8 @@ class AgentConfig:
         if self.image_encoding not in ENCODINGS:
             raise FleetError(f"--image-encoding must be one of {', '.join(ENCODINGS)}, got {self.image_encoding!r}")
         for name, option in (("fps", "--fps"), ("hint_rate_hz", "--hint-rate"), ("max_age_s", "--max-age"),
-                             ("attitude_sigmas", "--imu-sigmas")):
+                             ("attitude_sigmas", "--imu-sigmas"), ("operating_radius_m", "--operating-radius"),
+                             ("max_clock_offset_s", "--max-clock-offset")):
             value = getattr(self, name)
             if value is not None and not (math.isfinite(value) and value > 0):
                 raise FleetError(f"{option} must be a number > 0, got {value}")

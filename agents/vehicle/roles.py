@@ -16,6 +16,7 @@ import threading
 import time
 from collections.abc import Callable
 
+import cv2
 import numpy as np
 
 from evopose import SearchOptions
@@ -28,6 +29,7 @@ from agents.transport.bus import FleetBus, Received
 from agents.vehicle.config import IDLE_GENERATIONS, TARGET_IMU_STREAM, AgentConfig
 from agents.vehicle.frames import NS, FrameClock, SimulatedCamera
 from agents.vehicle.memory import release_free_memory
+from agents.vehicle.plausibility import Plausibility
 from agents.vehicle.records import RunRecord, pose_dict, pose_error
 from agents.vehicle.step import FrameInputs, Outgoing, share, step
 from agents.vehicle.team_views import TeamViews, attitude_knowledge, build_views, mate_view, own_view, wait_until
@@ -136,6 +138,7 @@ class CameraVehicle(Vehicle):
         self.sync_wait_s = self.period_s / 2 if config.sync_wait_s is None else config.sync_wait_s
         self.team = TeamViews()
         self.camera = SimulatedCamera(scenario, config.vehicle)
+        self.plausible = Plausibility(scenario.bounds(), config.operating_radius_m, config.max_clock_offset_s)
         self.estimator = CooperativeEstimator(scenario.model.evopose_model(), scenario.bounds(),
                                               SearchOptions(time_budget=config.time_budget_s), seed=config.seed)
         self._hints: list[np.ndarray] = []
@@ -185,7 +188,18 @@ class CameraVehicle(Vehicle):
 
     # -- inputs ---------------------------------------------------------------------------------
 
-    def _on_hint(self, rx: Received) -> None:  # bus worker thread: append only
+    def refused(self, topic: Topic, rx: Received, reason: str | None) -> bool:
+        """Count a received message that a sane team-mate could not have sent (:mod:`.plausibility`)."""
+        if reason is None:
+            reason = self.plausible.stamp(rx.stamp_ns, time.time_ns())
+        if reason is None:
+            return False
+        self.bus.counters.count_rejected(topic.value, reason)
+        return True
+
+    def _on_hint(self, rx: Received) -> None:  # bus worker thread: check and append only
+        if self.refused(Topic.HINT, rx, self.plausible.pose_in_box(rx.message.pose)):
+            return
         with self._hints_lock:
             self._latest_hint = np.asarray(rx.message.pose, float)
             self._hints.append(self._latest_hint)
@@ -219,11 +233,14 @@ class CameraVehicle(Vehicle):
             rx = self.bus.recv(topic, timeout=timeout)
             while rx is not None:
                 self.record.mate_latency_s.append((rx.received_ns - rx.stamp_ns) / NS)
-                try:
-                    self.team.add(mate_view(rx.vehicle, rx.message, self.camera.extract))
-                except ValueError as err:  # a frame that does not decode: count it, carry on
-                    self.bus.counters.count_rejected(topic.value, "undecodable")
-                    self.emit({"event": "rejected", "vehicle": rx.vehicle, "reason": str(err)})
+                reason = (self.plausible.feature_set(rx.message) if topic == Topic.FEATURES
+                          else self.plausible.camera(rx.message.camera))
+                if not self.refused(topic, rx, reason):
+                    try:
+                        self.team.add(mate_view(rx.vehicle, rx.message, self.camera.extract))
+                    except (ValueError, cv2.error) as err:  # a frame that does not decode: count it, carry on
+                        self.bus.counters.count_rejected(topic.value, "undecodable")
+                        self.emit({"event": "rejected", "vehicle": rx.vehicle, "reason": str(err)[:200]})
                 rx = self.bus.recv(topic, timeout=0)
 
         poll(0)
@@ -349,6 +366,8 @@ class GroundStation(CameraVehicle):
         target = self.scenario.spec.target.name
         for rx in self.bus.latest(Topic.ATTITUDE).values():
             if isinstance(rx.message, Attitude) and rx.message.body == target:
+                if self.refused(Topic.ATTITUDE, rx, self.plausible.attitude(rx.message)):
+                    continue
                 return attitude_knowledge(rx.message, self.config.attitude_sigmas)
         return []
 
@@ -378,8 +397,17 @@ class Airship(Vehicle):
         while rx is not None:
             message = rx.message
             if isinstance(message, PoseEstimate) and message.target == self.config.vehicle:
-                self._own_pose(rx, message)
+                if self._plausible_own_pose(message):
+                    self._own_pose(rx, message)
+                else:
+                    self.bus.counters.count_rejected(Topic.POSE.value, "outside-operating-area")
             rx = self.bus.recv(Topic.POSE, timeout=0)
+
+    def _plausible_own_pose(self, message: PoseEstimate) -> bool:
+        """Within the operating radius of where the airship is now (a 1e300 m pose is not taken as its own)."""
+        here = self.scenario.target_pose(0)[:3]
+        distance = np.linalg.norm(np.asarray(message.pose[:3], float) - here)
+        return bool(np.isfinite(distance) and distance <= self.config.operating_radius_m)
 
     def _own_pose(self, rx: Received, message: PoseEstimate) -> None:
         k = self.clock.index_of(message.stamp_ns)

@@ -1,0 +1,87 @@
+"""Messages a sane team-mate cannot send are refused and counted before they reach the estimator (issue 12):
+unit checks of agents.vehicle.plausibility, and a ground station that survives a hostile IMU reading."""
+
+from __future__ import annotations
+
+import json
+import math
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import zenoh
+
+from agents.vehicle.plausibility import Plausibility
+from evopose import Bounds
+from protocol import Attitude, CameraInfo, FeatureSet, encode, topic_key
+
+ROOT = Path(__file__).resolve().parents[1]
+BOX = Bounds.from_dict({"x": (-3, 3), "y": (-3, 3), "z": (-0.2, 0.5)})
+CAMERA = CameraInfo(fx=1700, fy=1700, cx=320, cy=240, width=640, height=480, world_from_camera=(-27, 6, 12, 0, 0, 0))
+
+
+def test_what_a_sane_team_mate_cannot_send_is_refused():
+    check = Plausibility(BOX, operating_radius_m=100.0, max_clock_offset_s=0.5)
+    assert check.camera(CAMERA) is None
+    assert check.camera(CAMERA.model_copy(update={"fx": 1e9})) == "implausible-focal-length"
+    assert check.camera(CAMERA.model_copy(update={"world_from_camera": (1e300, 0, 0, 0, 0, 0)})) \
+        == "outside-operating-area"
+    assert check.pose_in_box([0.1, 0.2, 0.0, 0, 0, 1.0]) is None
+    assert check.pose_in_box([10.0, 0.2, 0.0, 0, 0, 1.0]) == "outside-search-box"
+    assert check.pose_in_box([np.nan, 0, 0, 0, 0, 0]) == "non-finite-pose"
+    attitude = Attitude(sender="airship", seq=0, stamp_ns=0, body="airship", roll=0.1, pitch=0, yaw=0,
+                        sigma=(0.01, 0.01, 0.01))
+    assert check.attitude(attitude) is None
+    assert check.attitude(attitude.model_copy(update={"sigma": (1e308, 0.01, 0.01)})) == "implausible-sigma"
+    assert check.attitude(attitude.model_copy(update={"sigma": (0.0, 0.01, 0.01)})) == "implausible-sigma"
+    now = time.time_ns()
+    assert check.stamp(now + int(0.1e9), now) is None and check.stamp(now + int(60e9), now) == "future-stamp"
+    features = FeatureSet(sender="H1", seq=0, stamp_ns=0, camera=CAMERA, points=b"", best=(50.0, 0, 0, 0, 0, 0))
+    assert check.feature_set(features) == "outside-search-box"
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def test_a_hostile_imu_reading_is_counted_and_the_station_keeps_going():
+    """An Attitude with sigma = 1e308 (valid per the schema) once killed the ground station."""
+    port, fleet = _free_port(), "hostile-attitude"
+    epoch = time.time_ns() + int(4e9)
+    station = subprocess.Popen([sys.executable, "-m", "agents.cli", "agent", "--scenario", "exp1-airship", "--fleet",
+                                fleet, "--vehicle", "ground-station", "--frames", "25", "--epoch-ns", str(epoch),
+                                "--listen", f"tcp/127.0.0.1:{port}", "--json"], cwd=ROOT, stdout=subprocess.PIPE,
+                               stderr=subprocess.PIPE, text=True)
+    config = zenoh.Config()
+    config.insert_json5("mode", '"peer"')
+    config.insert_json5("connect/endpoints", json.dumps([f"tcp/127.0.0.1:{port}"]))
+    config.insert_json5("listen/endpoints", "[]")
+    config.insert_json5("scouting/multicast/enabled", "false")
+    try:
+        with zenoh.open(config) as session:
+            token = session.liveliness().declare_token(f"evopose/{fleet}/@alive/airship")
+            key = topic_key(fleet, "airship", "attitude")
+            deadline = time.monotonic() + 60
+            seq = 0
+            while station.poll() is None and time.monotonic() < deadline:
+                hostile = Attitude(sender="airship", seq=seq, stamp_ns=time.time_ns(), body="airship", roll=1e308,
+                                   pitch=0.0, yaw=0.0, sigma=(1e308, 1e308, 1e308))
+                session.put(key, encode(hostile))
+                seq += 1
+                time.sleep(0.05)
+            token.undeclare()
+        out, err = station.communicate(timeout=60)
+    finally:
+        station.kill()
+    assert station.returncode == 0, err[-1500:]
+    records = [json.loads(line) for line in out.splitlines() if line.startswith("{")]
+    summary = [r for r in records if r.get("event") == "summary"][0]
+    frames = [r for r in records if r.get("event") == "frame"]
+    assert summary["frames"] == 25 and summary["traffic"]["rejected"].get("implausible-sigma", 0) > 0
+    assert all(not r["knowledge"] for r in frames)  # the hostile reading never became eq. (3) knowledge
+    assert all(math.isfinite(r["pose"]["x"]) for r in frames)
