@@ -36,6 +36,7 @@ from .problem import Bounds, Model, PoseProblem, View
 from .refine import TRACK_SCHEDULE
 from .search import EvoPose, Told
 from .solver import Solution, solution_of, track
+from .uncertainty import assess
 
 #: Fitness values kept in a solution's history by :meth:`CooperativeEstimator.generation` (bounded memory).
 HISTORY_KEPT = 256
@@ -215,7 +216,9 @@ class CooperativeEstimator:
         self._frame = frame
         start = self._start(problem, candidates, candidate_margin)
         if start is not None:
-            previous = self.last if self.last is not None else self._solution_at(start, problem)
+            own_last = self.last is not None and self._search is None and np.array_equal(start, self.last.pose)
+            previous = (self.last if own_last
+                        else self._solution_at(start, problem, self._rivals(start, candidates)))
             predicted = self._predicted(frame, start)
             extra = problem.hints if predicted is None else np.concatenate([problem.hints, predicted[None]])
             solution = track(previous.with_(pose=start), list(views), problem=problem, options=self.options,
@@ -272,14 +275,27 @@ class CooperativeEstimator:
         both = np.concatenate([own[None], pool])
         return both[np.lexsort((*both.T[::-1], np.concatenate([[own_fitness], fitness])))[0]]
 
-    def _solution_at(self, pose: np.ndarray, problem: PoseProblem) -> Solution:
-        """A stand-in previous solution at ``pose`` for :func:`track`."""
+    def _solution_at(self, pose: np.ndarray, problem: PoseProblem, rivals: np.ndarray | None = None) -> Solution:
+        """A stand-in previous solution at ``pose`` (a team-mate's best) for :func:`track`, with its confidence
+        judged on ``problem`` against ``rivals`` (K, 6): the other candidates and the own search's basins."""
         objective = PoseObjective(problem, self.options.fitness, self.options.tau)
         fitness = float(objective(pose[None])[0])
+        confidence = assess(objective, pose, rivals, self.options.confidence)
         return Solution(pose=np.array(pose), fitness=fitness, view_terms=objective.view_terms(pose[None])[0],
                         view_weights=objective.weights.copy(), generations=0, evaluations=0, seconds=0.0,
                         converged=False, stop_reason="candidate", history=[fitness], problem=problem,
-                        options=self.options)
+                        options=self.options, covariance=confidence.covariance.matrix,
+                        confident=confidence.confident, confidence=confidence)
+
+    def _rivals(self, start: np.ndarray, candidates: np.ndarray | None) -> np.ndarray:
+        """Other answers to weigh a start against: the other candidates and the own search's population."""
+        rivals = [np.zeros((0, 6))]
+        if candidates is not None and np.size(candidates):
+            rivals.append(np.atleast_2d(np.asarray(candidates, float)).reshape(-1, 6))
+        if self._search is not None and len(self._search.run.state.population):
+            rivals.append(np.asarray(self._search.run.state.population, float))
+        pool = np.concatenate(rivals)
+        return pool[np.any(np.abs(pool - start) > 1e-9, axis=1)]
 
     def _advance(self, deadline: float | None, current: PoseProblem | None, generations: int | None = None) -> Estimate:
         """Resume the search in progress until ``deadline`` (or for ``generations``); a finished good search is

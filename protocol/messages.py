@@ -224,7 +224,10 @@ class PoseEstimate(Message):
     ``quaternion`` is derived from the Euler angles and sent for convenience; receivers ignore
     the one on the wire. ``mismatch`` is in [0, 1] (0 best: :attr:`evopose.fitness.Match.mismatch`, the
     fitness over its value when nothing matches); ``inputs`` names the team-mates whose
-    data (images, features, hints, attitude) went into the estimate.
+    data (images, features, hints, attitude) went into the estimate. ``confident``: no distinct pose fits
+    nearly as well and enough marks are matched (:mod:`evopose.uncertainty`); ``covariance``: the 6x6
+    covariance of ``(x, y, z, roll, pitch, yaw)``, row-major, metres and radians (the order of ROS
+    ``PoseWithCovariance``), absent when it could not be computed.
     """
 
     TOPIC: ClassVar[Topic] = Topic.POSE
@@ -238,6 +241,8 @@ class PoseEstimate(Message):
     seconds: NonNegative
     from_hint: bool = False
     inputs: Annotated[tuple[str, ...], Field(max_length=32)] = ()
+    confident: bool = False
+    covariance: Annotated[tuple[Float, ...], Field(min_length=36, max_length=36)] | None = None
 
     _check_target = field_validator("target")(classmethod(lambda cls, v: _name(v)))
 

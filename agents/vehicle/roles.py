@@ -312,17 +312,17 @@ class CameraVehicle(Vehicle):
         if estimate.solved and rec.first_solve_s is None:
             rec.first_history = [float(f) for f in sol.history]
             rec.first_solve_s = result.seconds
-        if estimate.good_at is not None and rec.first_good_s is None:
-            rec.first_good_s = estimate.good_at - self._image_ready
-        error = result.event.get("error")
-        if estimate.good:
+        error, good = result.event.get("error"), result.event["good"]  # good: converged and confident
+        if good and rec.first_good_s is None:  # the paper's time to a good pose: when the best first was good
+            rec.first_good_s = (estimate.good_at or time.perf_counter()) - self._image_ready
+        if good:
             rec.good += 1
             if error is not None:
                 rec.errors.add(error)
             if rec.first_confirmed_s is None:
                 rec.first_confirmed_s = time.perf_counter() - self._image_ready
         rec.last_pose, rec.last_error = list(result.outbox[0].fields["pose"]), error
-        rec.poses.append([result.event["frame"], *rec.last_pose, bool(estimate.good)])
+        rec.poses.append([result.event["frame"], *rec.last_pose, bool(good)])
 
     # -- between frames ---------------------------------------------------------------------------
 
@@ -343,7 +343,8 @@ class CameraVehicle(Vehicle):
         while not stop.is_set() and not self._done.is_set():
             with self._estimator_lock:
                 estimate = self.estimator.generation(self.take_hints() if hint_mode else None, budget_s=period)
-            if estimate is not None and estimate.good and hint_mode:  # a search's best so far is no hint
+            # a search's best so far, or an unsure pose, is no hint
+            if estimate is not None and estimate.good and estimate.solution.confident and hint_mode:
                 self.send_hint(estimate.pose)
             now = time.monotonic()
             next_s = max(next_s + period, now - period)

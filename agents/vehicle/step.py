@@ -59,6 +59,12 @@ def share(mode: str, encoding: str, frame: Frame, own: MateView, best: np.ndarra
     return None
 
 
+def _covariance(solution) -> tuple[float, ...] | None:
+    """The solution's 6x6 covariance as 36 floats (row-major, ROS order), or None when it is not finite."""
+    cov = np.asarray(getattr(solution, "covariance", np.full((6, 6), np.inf)), float)
+    return tuple(float(v) for v in cov.ravel()) if cov.shape == (6, 6) and np.all(np.isfinite(cov)) else None
+
+
 @dataclass(frozen=True)
 class FrameInputs:
     """Everything one frame's estimate depends on.
@@ -130,18 +136,21 @@ def step(estimator: CooperativeEstimator, inputs: FrameInputs, *, vehicle: str, 
                                   candidate_margin=margin, generations=generations)
     seconds = time.perf_counter() - t0
     sol = estimate.solution
+    # good = the search judged it good and it is confident (no distinct pose fits nearly as well)
+    good = bool(estimate.good and getattr(sol, "confident", False))
     pose = pose_from_matrix(matrix_from_pose(np.asarray(sol.pose, float)))  # canonical: pitch within +-90 deg
     mates = tuple(v for v in used if v != vehicle)
     outbox = [Outgoing("pose", own.stamp_ns, {
         "target": target, "pose": tuple(float(v) for v in pose), "fitness": float(sol.fitness),
         "mismatch": estimate.mismatch, "converged": estimate.good, "generations": int(sol.generations),
-        "seconds": seconds, "from_hint": bool(sol.from_hint), "inputs": mates})]
-    if share_mode == "hint" and estimate.good:
+        "seconds": seconds, "from_hint": bool(sol.from_hint), "inputs": mates, "confident": good,
+        "covariance": _covariance(sol)})]
+    if share_mode == "hint" and good:
         outbox.append(Outgoing("hint", own.stamp_ns, {"pose": pose}))
     event = {"event": "frame", "vehicle": vehicle, "frame": inputs.index, "stamp_ns": own.stamp_ns,
              "points": len(own.points), "views": list(used), "knowledge": [k.name for k in inputs.knowledge],
              "pose": pose_dict(pose), "fitness": float(sol.fitness), "mismatch": estimate.mismatch,
-             "good": estimate.good, "solved": estimate.solved, "searching": estimator.searching,
+             "good": good, "converged": estimate.good, "solved": estimate.solved, "searching": estimator.searching,
              "from_hint": bool(sol.from_hint), "seconds": seconds}
     if inputs.truth is not None:
         event["error"] = pose_error(pose, inputs.truth)
