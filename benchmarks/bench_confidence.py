@@ -75,7 +75,7 @@ def one(task: tuple[str, int, int]) -> dict:
     """Solve problem ``index`` of ``group`` with EvoPose and the oracle; what the benchmark needs of it."""
     from evopose import solve
 
-    from .peers import pnp_oracle
+    from .peers import pnp_oracle_views
     from .problems import in_right_basin, is_success, marks_identified, pose_errors
 
     group, seed, index = task
@@ -90,18 +90,28 @@ def one(task: tuple[str, int, int]) -> dict:
            "evaluations": sol.evaluations, "converged": bool(sol.converged), "stop_reason": sol.stop_reason,
            "confident": bool(sol.confident), "reason": conf.reason, "pairs": int(conf.n_pairs), "unmatched": float(conf.unmatched),
            "margin": float(conf.margin) if np.isfinite(conf.margin) else None,
-           "sigmas": [float(x) for x in conf.covariance.sigmas] if conf.covariance.ok else None}
+           "sigmas": [float(x) for x in conf.covariance.sigmas] if conf.covariance.ok else None,
+           "s2": float(conf.covariance.residual_variance), "s_best": float(conf.sum_of_squares),
+           "s_alt": float(conf.runner_up_sum_of_squares) if np.isfinite(conf.runner_up_sum_of_squares) else None,
+           "tau": float(np.mean(sol.problem and [t for t in _taus(sp)])), "visible": int(round(conf.n_pairs / max(
+               1e-9, 1 - conf.unmatched))) if conf.unmatched < 1 else 0}
     if absent:
         return rec
     rot, pos = pose_errors(sol.pose, sp.true_pose, sp.symmetries, sp.problem.model.points.mean(axis=0))
     rec.update(right=bool(in_right_basin(sp, sol.pose)), identified=float(marks_identified(sp, sol.pose)),
                accurate=bool(is_success(rot, pos, sp.distance)), rot_deg=float(np.rad2deg(rot)), pos_m=float(pos),
                errors=[float(x) for x in parameter_errors(sp, sol.pose)])
-    oracle = pnp_oracle(sp)
+    oracle = pnp_oracle_views(sp)
     o_rot, o_pos = pose_errors(oracle.pose, sp.true_pose, sp.symmetries, sp.problem.model.points.mean(axis=0))
     rec.update(oracle_right=bool(in_right_basin(sp, oracle.pose)),
                oracle_accurate=bool(is_success(o_rot, o_pos, sp.distance)))
     return rec
+
+
+def _taus(sp) -> list[float]:
+    from evopose.fitness import PoseObjective
+
+    return list(PoseObjective(sp.problem).taus)
 
 
 def tasks(per_group: int, absent: int, seed: int) -> list[tuple[str, int, int]]:
@@ -172,7 +182,7 @@ def markdown(records: list[dict], args: argparse.Namespace, seconds: float) -> s
              "solves; 1-sigma coverage of each parameter 55-80 % (68 % for a Gaussian); absent target confident "
              "<= 1 %. Right basin = at least half of the true marks identified one to one (scale-free); accurate "
              "= rotation < 5 deg and position < 5 % of the distance. The oracle is `cv2.solvePnP` given the true "
-             "correspondences. Coverage is over the confident estimates.", ""]
+             "correspondences (with two views, then least squares over both). Coverage is over the confident estimates.", ""]
     for scale, title in (("paper", "Paper's image scale (Pioneer ~25 px wide)"),
                          ("telephoto", "Telephoto scale (targets 150-350 px wide)")):
         lines += [f"### {title}", ""] + md_table(HEADER, scale_rows(records, scale)) + [""]

@@ -88,4 +88,29 @@ def pnp_oracle(sp: SyntheticProblem, view_index: int = 0) -> PeerResult:
     return PeerResult(pose_from_matrix(world_from_target), time.perf_counter() - t0, 1)
 
 
-__all__ = ["PeerResult", "cma_solve", "pnp_oracle"]
+def pnp_oracle_views(sp: SyntheticProblem) -> PeerResult:
+    """The oracle over every view (eq. 4 with true correspondences): :func:`pnp_oracle` on the view with the most
+    true marks, then Levenberg-Marquardt on the reprojection residuals of all views together."""
+    from scipy.optimize import least_squares
+
+    from evopose.fitness import project_into_view
+
+    t0 = time.perf_counter()
+    first = int(np.argmax([len(c[0]) for c in sp.correspondences]))
+    start = pnp_oracle(sp, first).pose
+    if len(sp.problem.views) == 1:
+        return PeerResult(start, time.perf_counter() - t0, 1)
+    model = sp.problem.model
+
+    def residuals(s: np.ndarray) -> np.ndarray:
+        out = []
+        for view, (idx, pts) in zip(sp.problem.views, sp.correspondences):
+            uv = project_into_view(model, view, s[None], use_normals=False).uv[0, idx]
+            out.append((uv - pts).ravel())
+        return np.concatenate(out)
+
+    fit = least_squares(residuals, start, method="lm")
+    return PeerResult(fit.x, time.perf_counter() - t0, int(fit.nfev))
+
+
+__all__ = ["PeerResult", "cma_solve", "pnp_oracle", "pnp_oracle_views"]

@@ -24,14 +24,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .fitness import PoseObjective
+from .fitness import POINT_NOISE_PX, PoseObjective
 from .kernels import chamfer_matches
 from .pose import wrap_angle
 
 #: Central-difference steps of the projection Jacobian: metres (x, y, z), radians (roll, pitch, yaw).
 JACOBIAN_STEP = np.array([1e-4, 1e-4, 1e-4, 1e-5, 1e-5, 1e-5])
-#: Smallest residual variance used (pixels^2), so that noise-free synthetic points still give a finite covariance.
-MIN_RESIDUAL_VARIANCE = 1e-6
+#: Smallest residual variance used (pixels^2): the expected point noise. A tighter fit of a handful of pairs is
+#: luck (or a pose that chose its pairs), not evidence of a more precise estimate.
+MIN_RESIDUAL_VARIANCE = POINT_NOISE_PX ** 2
 
 
 @dataclass(frozen=True)
@@ -44,22 +45,38 @@ class ConfidenceRules:
         Mutual matches (over all weighted views) needed at least.
     max_unmatched : float
         Largest share of the visible marks without a mutual match (:meth:`Matches.unmatched`).
+    max_residual_px : float
+        Largest residual sigma ``s`` (pixels) of the matched pairs: a fit looser than a few times the point noise
+        matches chance points, not marks (an absent target seen through a wide tau).
     margin : float
         The best distinct alternative must be worse by at least this much of ``(S_alt - S_best) / s^2``
-        (:func:`sum_of_squares`, ``s^2`` the residual variance at the estimate).
+        (:func:`sum_of_squares`, ``s^2`` the residual variance at the estimate: twice a log-likelihood ratio).
     distinct_sigmas : float
         An alternative is distinct when its Mahalanobis distance from the estimate, under the estimate's
-        covariance, exceeds this.
+        covariance, exceeds this...
+    same_pairs : float
+        ...and it shares fewer than this share of the estimate's mutual pairs (the same marks on the same image
+        points are one basin) and does not show the model the same (:func:`same_image`, a symmetry).
     track_sigmas : float
         (tracking) The new pose must lie within this Mahalanobis distance of the previous one, under the sum of
-        both covariances and the motion allowance.
+        both covariances and the motion allowance...
+    track_motion : tuple of 6 floats
+        ...``diag(track_motion^2)``: the 1-sigma change of each parameter from one frame to the next (metres,
+        radians; 0.1 m and 0.1 rad: a vehicle at a few m/s filmed at 10 fps, not a flip).
+    converged_margin : float
+        :attr:`evopose.solver.Solution.converged` also needs the runner-up worse by this margin (a search that
+        stopped with a distinct pose about as good has not settled anything).
     """
 
-    min_pairs: int = 6
+    min_pairs: int = 7
     max_unmatched: float = 0.4
-    margin: float = 6.0
+    max_residual_px: float = 3.0 * POINT_NOISE_PX
+    margin: float = 12.0
     distinct_sigmas: float = 4.0
+    same_pairs: float = 0.5
     track_sigmas: float = 4.0
+    track_motion: tuple[float, float, float, float, float, float] = (0.1, 0.1, 0.1, 0.1, 0.1, 0.1)
+    converged_margin: float = 4.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -198,6 +215,27 @@ class CovarianceEstimate:
         return np.sqrt(np.clip(np.diag(self.matrix), 0.0, None))
 
 
+def untruncated_variance(s2: float, tau2: float, iterations: int = 20) -> float:
+    """The per-coordinate variance ``sigma^2`` of 2-D Gaussian residuals whose sample, kept only within radius
+    ``tau`` (pairs farther away are not matched), has per-coordinate variance ``s2``.
+
+    ``E[|r|^2 | |r| < tau] = 2 sigma^2 g(a)``, ``a = tau^2 / (2 sigma^2)``, ``g(a) = 1 - a e^-a / (1 - e^-a)``;
+    solved by fixed-point iteration. Matters at the paper's image scale, where tau is 2-4 sigma (at 2 sigma
+    the kept pairs understate the variance by a third). A sample as wide as a uniform disc (``s2 >= tau2 / 4``)
+    gives ``tau2``.
+    """
+    if not (np.isfinite(s2) and tau2 > 0) or s2 <= 0:
+        return s2
+    if s2 >= 0.25 * tau2:
+        return tau2
+    sigma2 = s2
+    for _ in range(iterations):
+        a = tau2 / (2 * sigma2)
+        g = 1.0 - a * np.exp(-a) / -np.expm1(-a) if a < 700 else 1.0
+        sigma2 = min(s2 / g, tau2)
+    return float(sigma2)
+
+
 def _unknown() -> CovarianceEstimate:
     return CovarianceEstimate(np.full((6, 6), np.inf), np.inf, 0)
 
@@ -206,9 +244,16 @@ def covariance(objective: PoseObjective, pose: np.ndarray, matches: Matches | No
     """Covariance of ``pose`` (6,) from the matched residuals and the box / eq. (3) priors.
 
     ``Sigma = (J^T W J / s^2 + P)^-1`` over the free parameters, ``W`` the eq. (4) view weights (normalised),
-    ``s^2 = sum_pairs W |r|^2 / (2m - n_free)`` and ``P`` the prior information ``12 / width^2`` of each
-    non-periodic free parameter (uniform over its interval ``[lo, hi]``, ``eps = width / 2``: ``3 / eps^2``).
-    Fixed parameters get variance 0.
+    ``s^2 = sum_pairs W |r|^2 / (2m - n_free)`` corrected for the truncation at tau
+    (:func:`untruncated_variance`) and at least :data:`MIN_RESIDUAL_VARIANCE`, and ``P`` the prior
+    information ``12 / width^2`` of each non-periodic free parameter (uniform over its interval ``[lo, hi]``,
+    ``eps = width / 2``: ``3 / eps^2``). Fixed parameters get variance 0.
+
+    That Gaussian stand-in for the box is used only when the exact one cannot be sampled: the uniform prior
+    truncates the likelihood to the box, and the covariance is its second moment about the estimate
+    (:func:`in_box_second_moment`). The two differ where it matters at the paper's image scale: the depth
+    is so loosely determined that the estimate often sits on a bound of a narrow box (exp2's z in
+    [-0.2, 0.5] m); the truth then lies anywhere back inside, not within the stand-in's +-0.2 m.
     """
     matches = mutual_matches(objective, pose) if matches is None else matches
     bounds = objective.problem.bounds
@@ -224,7 +269,8 @@ def covariance(objective: PoseObjective, pose: np.ndarray, matches: Matches | No
     J = projection_jacobian(objective, pose, matches)[use][:, :, free]  # (m, 2, n_free)
     r = matches.residuals[use]
     w = w[use]
-    s2 = max(float(np.sum(w[:, None] * r ** 2)) / dof, MIN_RESIDUAL_VARIANCE)
+    tau2 = float(np.sum(w * objective.taus[matches.view[use]] ** 2) / np.sum(w))
+    s2 = max(untruncated_variance(float(np.sum(w[:, None] * r ** 2)) / dof, tau2), MIN_RESIDUAL_VARIANCE)
     normal = np.einsum("m,mai,maj->ij", w, J, J)
     width = bounds.width[free]
     prior = np.where(bounds.periodic[free], 0.0, 12.0 / np.maximum(width, 1e-300) ** 2)
@@ -235,10 +281,40 @@ def covariance(objective: PoseObjective, pose: np.ndarray, matches: Matches | No
         inner = np.linalg.inv(information)
     except np.linalg.LinAlgError:
         return _unknown()
-    inner = 0.5 * (inner + inner.T)
+    box = in_box_second_moment(np.asarray(pose, float).reshape(6)[free], normal / s2 + 0.01 * np.diag(prior),
+                               bounds.lo[free], bounds.hi[free], bounds.periodic[free])
+    inner = 0.5 * (inner + inner.T) if box is None else box
     full = np.zeros((6, 6))
     full[np.ix_(free, free)] = inner
     return CovarianceEstimate(full, s2, dof)
+
+
+#: Samples of the likelihood drawn by :func:`in_box_second_moment`, and how many must fall in the box.
+BOX_SAMPLES, MIN_IN_BOX = 4096, 256
+
+
+def in_box_second_moment(estimate: np.ndarray, information: np.ndarray, lo: np.ndarray, hi: np.ndarray,
+                         periodic: np.ndarray) -> np.ndarray | None:
+    """Second moment about ``estimate`` (n,) of the Gaussian likelihood ``N(estimate, information^-1)``
+    truncated to the box ``[lo, hi]`` (a uniform prior; periodic parameters are not truncated), shape (n, n).
+
+    Monte Carlo with a fixed seed (the same input gives the same covariance); None when fewer than
+    ``MIN_IN_BOX`` of ``BOX_SAMPLES`` samples fall in the box (e.g. a narrow eq. 3 constraint), or when the
+    information is not positive definite.
+    """
+    try:
+        cov = np.linalg.inv(information)
+        chol = np.linalg.cholesky(0.5 * (cov + cov.T))
+    except np.linalg.LinAlgError:
+        return None
+    z = np.random.default_rng(0).standard_normal((BOX_SAMPLES, len(estimate)))
+    samples = estimate + z @ chol.T
+    bounded = ~np.asarray(periodic, bool)
+    inside = np.all((samples[:, bounded] >= lo[bounded]) & (samples[:, bounded] <= hi[bounded]), axis=1)
+    if np.count_nonzero(inside) < MIN_IN_BOX:
+        return None
+    d = samples[inside] - estimate
+    return d.T @ d / len(d)
 
 
 def pose_difference(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -279,10 +355,10 @@ class Confidence:
     runner_up : array (6,) or None
         That alternative.
     reason : str
-        Why not confident ("" when confident): "no covariance", "few matches", "unmatched marks", "ambiguous"
-        (and for tracking "previous not confident", "jumped").
-    sum_of_squares : float
-        :func:`sum_of_squares` of the estimate.
+        Why not confident ("" when confident): "no covariance", "few matches", "unmatched marks", "loose fit",
+        "ambiguous" (and for tracking "previous not confident", "jumped").
+    sum_of_squares, runner_up_sum_of_squares : float
+        :func:`sum_of_squares` of the estimate and of the runner-up (inf when there is none).
     """
 
     confident: bool
@@ -293,44 +369,85 @@ class Confidence:
     runner_up: np.ndarray | None = None
     reason: str = ""
     sum_of_squares: float = np.nan
+    runner_up_sum_of_squares: float = np.inf
 
 
 def assess(objective: PoseObjective, pose: np.ndarray, alternatives: np.ndarray | None = None,
-           rules: ConfidenceRules = ConfidenceRules()) -> Confidence:
+           rules: ConfidenceRules = ConfidenceRules(), judge: PoseObjective | None = None) -> Confidence:
     """Covariance and confidence of ``pose`` (6,) given the search's other basins ``alternatives`` (K, 6).
 
     The alternatives should be local optima of the same objective (the search's final population, polished):
-    the best of them outside ``rules.distinct_sigmas`` of the estimate's covariance is the runner-up.
+    the best of them outside ``rules.distinct_sigmas`` of the estimate's covariance is the runner-up. The
+    covariance and the margin use ``objective`` (eq. 4 with the weights in force); the match rules (pairs,
+    unmatched marks) use ``judge`` (default ``objective``): with every view at its own weight, a view the
+    step rule dropped still counts its unmatched marks against the pose.
     """
     pose = np.asarray(pose, float).reshape(6)
     matches = mutual_matches(objective, pose)
     cov = covariance(objective, pose, matches)
     s_best = sum_of_squares(objective, pose, matches)
-    n_pairs, unmatched = matches.n_pairs, matches.unmatched()
-    margin, runner_up = np.inf, None
+    judged = matches if judge is None else mutual_matches(judge, pose)
+    n_pairs, unmatched = judged.n_pairs, judged.unmatched()
+    s_alt, runner_up = np.inf, None
     if cov.ok and alternatives is not None and len(alternatives):
         alternatives = np.atleast_2d(alternatives)
         far = mahalanobis(pose_difference(alternatives, pose), cov.matrix) > rules.distinct_sigmas
         for alt in alternatives[far]:
-            m = (sum_of_squares(objective, alt) - s_best) / cov.residual_variance
-            if m < margin:
-                margin, runner_up = float(m), alt.copy()
+            if same_image(objective, pose, alt):
+                continue  # a symmetry of the model: no image tells the two apart, they are one answer
+            alt_matches = mutual_matches(objective, alt)
+            if shared_pairs(matches, alt_matches) >= rules.same_pairs:
+                continue  # the same marks on the same image points: one basin, however far the noise moved it
+            s = sum_of_squares(objective, alt, alt_matches)
+            if s < s_alt:
+                s_alt, runner_up = s, alt.copy()
+    margin = (s_alt - s_best) / cov.residual_variance if np.isfinite(s_alt) else np.inf
     reason = ("no covariance" if not cov.ok else "few matches" if n_pairs < rules.min_pairs
               else "unmatched marks" if unmatched > rules.max_unmatched
+              else "loose fit" if cov.residual_variance > rules.max_residual_px ** 2
               else "ambiguous" if margin < rules.margin else "")
-    return Confidence(reason == "", cov, n_pairs, unmatched, margin, runner_up, reason, s_best)
+    return Confidence(reason == "", cov, n_pairs, unmatched, float(margin), runner_up, reason, s_best, s_alt)
+
+
+def shared_pairs(a: Matches, b: Matches) -> float:
+    """Share of ``a``'s mutual pairs (view, image point, mark) that ``b`` has too (0 when ``a`` has none)."""
+    if not len(a.view):
+        return 0.0
+    mine = set(zip(a.view.tolist(), a.image_index.tolist(), a.model_index.tolist()))
+    theirs = set(zip(b.view.tolist(), b.image_index.tolist(), b.model_index.tolist()))
+    return len(mine & theirs) / len(mine)
+
+
+def same_image(objective: PoseObjective, a: np.ndarray, b: np.ndarray, tolerance: float = POINT_NOISE_PX) -> bool:
+    """Whether poses ``a`` and ``b`` (6,) show the model the same in every weighted view: the same number of
+    usable marks, each within ``tolerance`` pixels of one of the other pose's (a symmetry of the model, such
+    as a chessboard's half turn)."""
+    poses = np.stack([np.asarray(a, float), np.asarray(b, float)])
+    for k in range(objective.n_views):
+        if objective.weights[k] == 0:
+            continue
+        proj = objective.project(k, poses)
+        ua, ub = proj.uv[0][proj.usable[0]], proj.uv[1][proj.usable[1]]
+        if len(ua) != len(ub):
+            return False
+        if len(ua):
+            d = np.linalg.norm(ua[:, None, :] - ub[None, :, :], axis=2)
+            if max(d.min(axis=0).max(), d.min(axis=1).max()) > tolerance:
+                return False
+    return True
 
 
 def track_confidence(previous_pose: np.ndarray, previous_cov: np.ndarray, previous_confident: bool,
-                     current: Confidence, pose: np.ndarray, motion: np.ndarray,
-                     rules: ConfidenceRules = ConfidenceRules()) -> Confidence:
+                     current: Confidence, pose: np.ndarray, rules: ConfidenceRules = ConfidenceRules()) -> Confidence:
     """Confidence of a warm-started estimate (eq. 2), which has no population of other basins to compare with.
 
-    Confident when the previous estimate was, the new pose is still matched well (``current`` passes the match
-    rules) and it moved less than ``rules.track_sigmas`` under ``previous_cov + current covariance +
-    diag(motion^2)`` (``motion`` (6,): the 1-sigma change allowed per frame). The runner-up margin is not
-    re-examined: the previous verdict carries over while the fit stays inside the previous uncertainty.
+    Confident when the previous estimate was, the new pose (6,) is still matched well (``current``, from
+    :func:`assess` without alternatives, passes the match rules) and it moved less than ``rules.track_sigmas``
+    under ``previous_cov + current covariance + diag(rules.track_motion^2)``. The runner-up margin is not
+    re-examined: the previous verdict carries over while the fit holds and stays within the previous
+    uncertainty plus a frame's motion.
     """
+    motion = np.asarray(rules.track_motion, float)
     cov = current.covariance
     reason = current.reason if current.reason != "ambiguous" else ""
     if not reason and not previous_confident:
@@ -340,4 +457,4 @@ def track_confidence(previous_pose: np.ndarray, previous_cov: np.ndarray, previo
         if mahalanobis(pose_difference(pose, previous_pose), gate)[0] > rules.track_sigmas:
             reason = "jumped"
     return Confidence(reason == "", cov, current.n_pairs, current.unmatched, current.margin, current.runner_up,
-                      reason, current.sum_of_squares)
+                      reason, current.sum_of_squares, current.runner_up_sum_of_squares)
