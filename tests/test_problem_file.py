@@ -279,3 +279,23 @@ def test_solution_to_dict_has_design_keys_and_is_json():
     assert (out["fitness"], out["generations"], out["evaluations"], out["seconds"], out["converged"]) == \
         (1.25, 7, 321, 0.5, True)
     assert out["stop_reason"] == "consensus" and out["view_weights"] == [1.0]
+
+
+def test_solution_to_dict_carries_confidence_and_a_covariance_without_nan():
+    """Issue 11: "confident" and a 6x6 "covariance" (ROS order, row by row); an unknown covariance is null,
+    never NaN or Infinity, so the output stays strict JSON."""
+    base = dict(pose=np.zeros(6), fitness=1.0, view_terms=np.array([1.0]), view_weights=np.array([1.0]),
+                generations=1, evaluations=1, seconds=0.1, converged=False, stop_reason="stalled", history=[1.0])
+    unknown = solution_to_dict(Solution(**base))  # the default: no covariance computed
+    text = json.dumps(unknown, allow_nan=False)
+    assert json.loads(text)["confident"] is False
+    assert json.loads(text)["covariance"] == [[None] * 6] * 6
+    cov = np.diag([1e-4, 2e-4, 3e-4, 1e-3, 2e-3, 3e-3])
+    cov[0, 5] = cov[5, 0] = 5e-5
+    known = json.loads(json.dumps(solution_to_dict(Solution(**base, covariance=cov, confident=True)),
+                                  allow_nan=False))
+    assert known["confident"] is True and np.array_equal(np.array(known["covariance"]), cov)
+    partly = cov.copy()
+    partly[2, 2] = np.nan
+    out = json.loads(json.dumps(solution_to_dict(Solution(**base, covariance=partly)), allow_nan=False))
+    assert out["covariance"][2][2] is None and out["covariance"][0][0] == 1e-4

@@ -412,8 +412,14 @@ def problem_to_dict(problem: PoseProblem, constraints: dict[str, tuple[float, fl
 
 
 def solution_to_dict(solution: Solution) -> dict:
-    """The solver's output object (DESIGN.md §3), plus ``stop_reason``, ``view_terms`` and ``view_weights``."""
+    """The solver's output object (DESIGN.md §3), plus ``stop_reason``, ``view_terms`` and ``view_weights``.
+
+    ``confident`` is the calibrated verdict (:attr:`evopose.Solution.confident`); ``covariance`` the 6x6
+    covariance of (x, y, z, roll, pitch, yaw), metres and radians, ROS ``PoseWithCovariance`` order, row by row;
+    an entry that is not finite (no covariance could be computed) is null, never NaN or Infinity.
+    """
     pose = np.asarray(solution.pose, float)
+    covariance = np.asarray(solution.covariance, float).reshape(6, 6)
     return {
         "pose": {**_pose_dict(pose), "quaternion": quaternion_from_euler(pose[3:]).tolist()},
         "fitness": float(solution.fitness),
@@ -421,6 +427,8 @@ def solution_to_dict(solution: Solution) -> dict:
         "evaluations": int(solution.evaluations),
         "seconds": float(solution.seconds),
         "converged": bool(solution.converged),
+        "confident": bool(solution.confident),
+        "covariance": [[float(c) if math.isfinite(c) else None for c in row] for row in covariance.tolist()],
         "stop_reason": solution.stop_reason,
         "view_terms": np.asarray(solution.view_terms, float).tolist(),
         "view_weights": np.asarray(solution.view_weights, float).tolist(),
