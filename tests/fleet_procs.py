@@ -54,6 +54,14 @@ class Proc:
             if where(record):
                 return record
 
+    def first_record(self, timeout: float, where=lambda record: True) -> dict:
+        """The first JSON line satisfying ``where``, among those already read or, waiting up to ``timeout`` s, the
+        next ones (for events whose order with others is not fixed)."""
+        for record in self.all_records():
+            if where(record):
+                return record
+        return self.next_record(timeout, where)
+
     def stderr_now(self) -> str:
         return "" if self.popen.poll() is None else self.popen.stderr.read()
 

@@ -124,13 +124,16 @@ def run_publisher(options: SessionOptions, stop: threading.Event, fleet: str, ve
                   spec: PublishSpec, *, wait_s: float = 0.0, stay: bool = False) -> dict:
     """Publish per ``spec`` as ``vehicle``; with ``stay``, keep the session (and presence) until ``stop``.
 
-    Before sending, wait up to ``wait_s`` for a subscriber to match, then a little longer for the
-    other subscribers' declarations to arrive.
+    With ``wait_s`` > 0, first wait up to that long for a subscriber of the topic; ``matched`` in the
+    result says whether one came (None: not waited for). With BLOCK topics that subscriber then gets
+    every message; others that subscribe later miss the first ones. ``stats_sent`` counts this
+    vehicle's Stats messages, the final one (sent at close) included.
     """
     rng = np.random.default_rng(spec.seed)
+    matched = None
     with FleetBus.open(options, fleet, vehicle, stats_period_s=1.0) as bus:
-        if wait_s > 0 and bus.wait_for_subscribers(spec.topic, wait_s):
-            stop.wait(0.2)
+        if wait_s > 0:
+            matched = bus.wait_for_subscribers(spec.topic, wait_s)
         sent, total_bytes, sizes = 0, 0, set()
         started = next_time = time.monotonic()
         while not stop.is_set() and (spec.count is None or sent < spec.count) and (
@@ -148,30 +151,56 @@ def run_publisher(options: SessionOptions, stop: threading.Event, fleet: str, ve
         seconds = time.monotonic() - started
         while stay and not stop.wait(0.2):
             pass
-        return {"vehicle": vehicle, "topic": spec.topic.value, "payload": spec.payload, "sent": sent,
-                "bytes": total_bytes, "size_min": min(sizes, default=0), "size_max": max(sizes, default=0),
-                "seconds": seconds, "rate_hz": (sent - 1) / seconds if sent > 1 and seconds > 0 else 0.0}
+    stats_sent = bus.counters.snapshot()["sent"].get(Topic.STATS.value, 0)  # after close: the final one too
+    return {"vehicle": vehicle, "topic": spec.topic.value, "payload": spec.payload, "matched": matched, "sent": sent,
+            "bytes": total_bytes, "size_min": min(sizes, default=0), "size_max": max(sizes, default=0),
+            "seconds": seconds, "rate_hz": (sent - 1) / seconds if sent > 1 and seconds > 0 else 0.0,
+            "stats_sent": stats_sent}
 
 
 # -- listener (a receiving agent without the per-frame loop) --------------------------------------
 
 def run_listener(options: SessionOptions, stop: threading.Event, fleet: str, vehicle: str,
                  topics: tuple[Topic, ...], *, duration: float | None = None, max_age_s: float | None = 1.0,
-                 emit: Callable[[dict], None]) -> dict:
-    """Receive ``topics`` from the team-mates as ``vehicle``, emitting join/leave events; returns the counters."""
+                 emit: Callable[[dict], None], period_s: float = 1.0) -> dict:
+    """Receive ``topics`` from the team-mates as ``vehicle``; returns the counters (after close: complete).
+
+    Emits ``ready`` once subscribed; ``join`` and ``leave`` of team-mates; ``data`` for the first
+    message of a team-mate per topic since it (re)joined, i.e. when it is used (again); and the
+    counters (``counters``) every ``period_s``.
+    """
     started = time.monotonic()
-    with FleetBus.open(options, fleet, vehicle, max_age_s=max_age_s, stats_period_s=1.0,
-                       on_join=lambda v: emit({"event": "join", "vehicle": v, "t_s": time.monotonic() - started}),
-                       on_leave=lambda v: emit({"event": "leave", "vehicle": v,
-                                                "t_s": time.monotonic() - started})) as bus:
+    lock = threading.Lock()
+    used: set[tuple[str, str]] = set()  # (vehicle, topic) received since the vehicle last joined; worker thread
+
+    def say(record: dict) -> None:  # from the main and the bus's worker thread
+        with lock:
+            emit({**record, "t_s": time.monotonic() - started})
+
+    def on_join(mate: str) -> None:
+        used.difference_update({key for key in used if key[0] == mate})
+        say({"event": "join", "vehicle": mate})
+
+    def on_message(rx) -> None:
+        if (rx.vehicle, rx.topic.value) not in used:
+            used.add((rx.vehicle, rx.topic.value))
+            say({"event": "data", "vehicle": rx.vehicle, "topic": rx.topic.value,
+                 "teammates": sorted(bus.teammates())})
+
+    with FleetBus.open(options, fleet, vehicle, max_age_s=max_age_s, stats_period_s=1.0, on_join=on_join,
+                       on_leave=lambda mate: say({"event": "leave", "vehicle": mate})) as bus:
         for topic in topics:
-            bus.subscribe(topic)
-        emit({"event": "ready", "vehicle": vehicle})
+            bus.subscribe(topic, on_message)
+        say({"event": "ready", "vehicle": vehicle})
+        next_counters = time.monotonic() + period_s
         while not stop.wait(0.1):
             for topic in topics:  # drain, as an agent loop would
                 while bus.recv(topic, timeout=0) is not None:
                     pass
+            if time.monotonic() >= next_counters:
+                next_counters += period_s
+                say({"event": "counters", "vehicle": vehicle, **bus.counters.snapshot()})
             if duration is not None and time.monotonic() - started >= duration:
                 break
-        return {"event": "summary", "vehicle": vehicle, "teammates": sorted(bus.teammates()),
-                **bus.counters.snapshot()}
+    # after close: what reached this process before it stopped is counted
+    return {"event": "summary", "vehicle": vehicle, "teammates": sorted(bus.teammates()), **bus.counters.snapshot()}

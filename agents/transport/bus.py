@@ -6,9 +6,11 @@ vehicle as ``sender`` and a per-topic ``seq``.
 
 Receiving: the Zenoh callback does only cheap work — drop DELETE samples and our own echoes,
 reject payloads over the size limit without copying them, copy the bytes into a bounded inbox
-(images into a ring of the newest few). One worker thread decodes, checks the sender against the
-key, drops stale data (``stamp_ns`` older than ``max_age_s``), counts lost messages by ``seq``,
-keeps the newest message per team-mate and hands messages to :meth:`recv` and to handlers.
+(images into a ring of the newest few); what does not fit is dropped and counted (``overflow``).
+One worker thread decodes, checks the sender against the key, drops stale data (``stamp_ns`` older
+than ``max_age_s``), counts lost messages by ``seq``, keeps the newest message per team-mate and
+hands messages to :meth:`recv` (a bounded queue: the oldest unread one is pushed out and counted
+as ``unread``) and to handlers. At close, what was already received is still handled.
 A bad payload is counted under its reason, logged (rate-limited), and never stops the receiver.
 
 Presence: the vehicle's liveliness token ``evopose/<fleet>/@alive/<vehicle>``; a liveliness
@@ -50,6 +52,8 @@ log = logging.getLogger("evopose.bus")
 
 #: Time given to queued outgoing messages to leave at close, s.
 FLUSH_S = 0.2
+#: Longest time close() spends handing already received messages to the worker, s.
+DRAIN_S = 2.0
 
 #: Handler of received messages, called in the bus's worker thread (keep it short).
 MessageHandler = Callable[["Received"], None]
@@ -167,6 +171,7 @@ class FleetBus:
         self._seq: dict[Topic, int] = {topic: 0 for topic in Topic}
         self._publishers: dict[Topic, zenoh.Publisher] = {}
         self._subscribers: dict[Topic, zenoh.Subscriber] = {}
+        self._callbacks_done: list[threading.Event] = []
         self._rejections = RateLimitedLog()
         self._closed = threading.Event()
         self._token = session.liveliness().declare_token(alive_key(fleet, vehicle)) if announce else None
@@ -252,10 +257,15 @@ class FleetBus:
         return publisher
 
     def wait_for_subscribers(self, topic: Topic | str, timeout: float) -> bool:
-        """Wait until some subscriber matches this vehicle's ``topic`` key; False on timeout."""
+        """Wait until some subscriber matches this vehicle's ``topic`` key; False on timeout.
+
+        Only that a subscriber exists: with several, the others may not be known yet.
+        """
         publisher = self._publisher(check_topic(topic))
         deadline = time.monotonic() + timeout
-        while not publisher.matching_status:
+        # zenoh-python 1.x returns a MatchingStatus object here (its stub says bool); the object itself is
+        # always truthy, so testing it instead of its ``matching`` never waited at all
+        while not publisher.matching_status.matching:
             if time.monotonic() >= deadline or self._closed.is_set():
                 return False
             time.sleep(0.01)
@@ -313,7 +323,10 @@ class FleetBus:
                 self._reject(topic, "overflow", f"{key}: receiver queue full, {'oldest frame' if ring else 'sample'} "
                                                 "dropped")
 
-        self._subscribers[topic] = self.session.declare_subscriber(topic_selector(self.fleet, topic), on_sample)
+        done = threading.Event()  # set by Zenoh once no more on_sample calls can come (after undeclare)
+        self._callbacks_done.append(done)
+        self._subscribers[topic] = self.session.declare_subscriber(
+            topic_selector(self.fleet, topic), zenoh.handlers.Callback(on_sample, done.set))
 
     def recv(self, topic: Topic | str, timeout: float | None = None) -> Received | None:
         """The oldest undelivered message of a subscribed ``topic``, waiting up to ``timeout`` s; None if none."""
@@ -347,14 +360,16 @@ class FleetBus:
 
     def _work(self) -> None:
         next_stats = time.monotonic() + (self.stats_period_s or 0)
-        while not self._closed.is_set():
+        while True:
             item = self._inbox.get(timeout=0.1)
+            if item is None and self._closed.is_set():
+                return  # closing, and everything received before is handled
             if item is not None:
                 try:
                     self._handle(item)
                 except Exception:  # a handler bug must not kill the receiver
                     log.exception("error while handling %s", item[:2])
-            if self.stats_period_s and time.monotonic() >= next_stats:
+            if self.stats_period_s and not self._closed.is_set() and time.monotonic() >= next_stats:
                 next_stats = time.monotonic() + self.stats_period_s
                 try:
                     self.publish_stats()
@@ -388,7 +403,10 @@ class FleetBus:
         self.counters.count_received(topic.value, rx.size)
         with self._delivered:
             self._latest[topic][rx.vehicle] = rx
-            self._delivery[topic].append(rx)
+            queue = self._delivery[topic]
+            if len(queue) == queue.maxlen:  # the oldest is pushed out before recv() returned it
+                self.counters.count_unread(topic.value)
+            queue.append(rx)
             self._delivered.notify_all()
             handlers = list(self._handlers.get(topic, ()))
         for handler in handlers:
@@ -397,7 +415,11 @@ class FleetBus:
     # -- shutdown ---------------------------------------------------------------------------
 
     def close(self) -> None:
-        """Publish final Stats (if periodic), undeclare everything, stop the worker, close an owned session."""
+        """Publish final Stats (if periodic), stop receiving, handle what was received, undeclare the rest.
+
+        Messages that reached this process before close are decoded, counted and delivered (to handlers
+        and :meth:`recv`) before the worker stops, within :data:`DRAIN_S`.
+        """
         if self._closed.is_set():
             return
         if self.stats_period_s:
@@ -407,23 +429,30 @@ class FleetBus:
                 log.debug("final stats not published: %s", err)
         if self._publishers:
             time.sleep(FLUSH_S)  # Zenoh has no flush: let the last messages leave before undeclaring
-        self._closed.set()
+        self._undeclare(*self._subscribers.values(), self._presence)
+        self._subscribers.clear()
+        deadline = time.monotonic() + DRAIN_S
+        for done in self._callbacks_done:  # the subscribers' last samples are in the inbox
+            done.wait(max(deadline - time.monotonic(), 0.0))
+        self._closed.set()  # the worker stops once the inbox is empty
         self._inbox.wake()
         with self._delivered:
             self._delivered.notify_all()
-        entities = [*self._subscribers.values(), self._presence, *self._publishers.values(), self._token]
+        if self._worker is not threading.current_thread():
+            self._worker.join(timeout=max(deadline - time.monotonic(), 0.1))
+        self._undeclare(*self._publishers.values(), self._token)
+        self._publishers.clear()
+        if self._owns_session:
+            self.session.close()
+
+    @staticmethod
+    def _undeclare(*entities) -> None:
         for entity in entities:
             if entity is not None:
                 try:
                     entity.undeclare()
                 except Exception as err:  # already undeclared by a closed session
                     log.debug("undeclare: %s", err)
-        self._subscribers.clear()
-        self._publishers.clear()
-        if self._worker is not threading.current_thread():
-            self._worker.join(timeout=2.0)
-        if self._owns_session:
-            self.session.close()
 
     def __enter__(self) -> "FleetBus":
         return self

@@ -22,6 +22,7 @@ class TrafficCounters:
     rejected: Counter = field(default_factory=Counter)          #: reason -> count
     rejected_by_topic: Counter = field(default_factory=Counter)  #: topic -> count
     lost: Counter = field(default_factory=Counter)              #: topic -> messages missing by ``seq``
+    unread: Counter = field(default_factory=Counter)            #: topic -> pushed out of a full recv() queue
     _lock: threading.Lock = field(default_factory=threading.Lock, repr=False)
 
     def count_sent(self, topic: str, size: int) -> None:
@@ -43,11 +44,16 @@ class TrafficCounters:
         with self._lock:
             self.lost[topic] += missing
 
+    def count_unread(self, topic: str) -> None:
+        with self._lock:
+            self.unread[topic] += 1
+
     def snapshot(self) -> dict[str, dict[str, int]]:
         """A copy of every table, as plain dicts (JSON-ready)."""
         with self._lock:
             return {name: dict(getattr(self, name)) for name in
-                    ("sent", "received", "bytes_sent", "bytes_received", "rejected", "rejected_by_topic", "lost")}
+                    ("sent", "received", "bytes_sent", "bytes_received", "rejected", "rejected_by_topic", "lost",
+                     "unread")}
 
 
 class RateLimitedLog:

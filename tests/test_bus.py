@@ -1,0 +1,226 @@
+"""FleetBus in one process: two peer sessions on loopback (multicast scouting off), one listening on a free port,
+the other connecting to it. What the receiving bus does with a slow consumer (bounded queues, every drop counted),
+stale data, sequence gaps, bad payloads, a team-mate that leaves and comes back, and what is queued at close.
+
+Every wait has a deadline; no test depends on how fast anything is."""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections.abc import Callable
+from queue import Queue
+
+import numpy as np
+import pytest
+
+from protocol import SIZE_LIMITS, Topic, encode
+from agents.tools.runners import PublishSpec, sample_message
+from agents.transport.bus import FleetBus
+from agents.transport.session import SessionOptions
+from tests.fleet_procs import free_port
+
+FLEET = "bus-test"
+DEADLINE = 10.0  #: s; generous, only reached when something is broken
+
+
+@pytest.fixture
+def endpoint() -> str:
+    return f"tcp/127.0.0.1:{free_port()}"
+
+
+def open_bus(vehicle: str, endpoint: str, *, listen: bool = False, **kwargs) -> FleetBus:
+    options = SessionOptions(mode="peer", listen=(endpoint,) if listen else (), connect=() if listen else (endpoint,),
+                             multicast=False)
+    return FleetBus.open(options, FLEET, vehicle, **kwargs)
+
+
+def until(condition: Callable[[], bool], timeout: float = DEADLINE) -> bool:
+    """Poll ``condition`` until it holds (True) or ``timeout`` passes (False)."""
+    deadline = time.monotonic() + timeout
+    while not condition():
+        if time.monotonic() >= deadline:
+            return False
+        time.sleep(0.01)
+    return True
+
+
+def message(bus: FleetBus, topic: Topic, *, seq: int, age_s: float = 0.0, **spec):
+    """A well-formed message of ``topic`` from ``bus``'s vehicle with the given ``seq``, acquired ``age_s`` ago."""
+    header = {"sender": bus.vehicle, "seq": seq, "stamp_ns": time.time_ns() - int(age_s * 1e9)}
+    return sample_message(PublishSpec(topic, **spec), header, np.random.default_rng(seq))
+
+
+def joined(rx_kwargs: dict) -> threading.Event:
+    """An event set when the receiver's worker has handled a team-mate joining (so no join is still queued)."""
+    event = threading.Event()
+    rx_kwargs["on_join"] = lambda vehicle: event.set()
+    return event
+
+
+def test_wait_for_subscribers_waits_until_someone_subscribes(endpoint):
+    with open_bus("tx", endpoint, listen=True) as tx, open_bus("rx", endpoint) as rx:
+        assert rx.wait_for_teammates({"tx"}, DEADLINE) and tx.wait_for_teammates({"rx"}, DEADLINE)
+        assert not tx.wait_for_subscribers(Topic.FEATURES, 0.5)  # connected, but nobody subscribes
+        rx.subscribe(Topic.FEATURES)
+        assert tx.wait_for_subscribers(Topic.FEATURES, DEADLINE)
+        for seq in range(3):  # matched: nothing is lost at the start of the stream
+            tx.publish(message(tx, Topic.FEATURES, seq=seq))
+        got = [rx.recv(Topic.FEATURES, timeout=DEADLINE) for _ in range(3)]
+    assert [r.message.seq for r in got if r is not None] == [0, 1, 2]
+
+
+def test_a_slow_consumer_keeps_at_most_queue_size_messages_and_counts_every_one_dropped(endpoint):
+    n, queue_size = 200, 8
+    entered, release = threading.Event(), threading.Event()
+
+    def slow(rx):  # the worker is stuck here until released: the receiver is slower than the sender
+        entered.set()
+        release.wait(DEADLINE)
+
+    kwargs = {"queue_size": queue_size}
+    mate = joined(kwargs)
+    with open_bus("tx", endpoint, listen=True) as tx, open_bus("rx", endpoint, **kwargs) as rx:
+        rx.subscribe(Topic.HINT, slow)
+        assert mate.wait(DEADLINE) and tx.wait_for_subscribers(Topic.HINT, DEADLINE)
+        tx.publish_hint(np.zeros(6))
+        assert entered.wait(DEADLINE)
+        for i in range(1, n):
+            tx.publish_hint(np.array([i, 0, 10, 0, 0, 0]))
+        # one in the handler, queue_size waiting in the inbox, every other one dropped and counted
+        assert until(lambda: rx.counters.rejected["overflow"] == n - 1 - queue_size), rx.counters.snapshot()
+        release.set()
+        assert until(lambda: rx.counters.received["hint"] == 1 + queue_size), rx.counters.snapshot()
+        # nobody calls recv(): its queue keeps the newest queue_size, the one pushed out is counted as unread
+        received = []
+        while (rx_msg := rx.recv(Topic.HINT, timeout=0)) is not None:
+            received.append(rx_msg.message.pose[0])
+        snap = rx.counters.snapshot()
+    assert snap["received"] == {"hint": 1 + queue_size} and snap["rejected"] == {"overflow": n - 1 - queue_size}
+    assert snap["rejected_by_topic"] == {"hint": n - 1 - queue_size} and snap["unread"] == {"hint": 1}
+    assert received == pytest.approx(list(range(1, 1 + queue_size)))  # the first 8 after the one being handled
+
+
+def test_images_keep_the_newest_frames_and_count_the_older_ones_dropped(endpoint):
+    n, ring = 10, 2
+    entered, release = threading.Event(), threading.Event()
+    seqs: list[int] = []
+
+    def slow(rx):
+        seqs.append(rx.message.seq)
+        entered.set()
+        release.wait(DEADLINE)
+
+    kwargs = {"image_ring": ring}
+    mate = joined(kwargs)
+    with open_bus("tx", endpoint, listen=True) as tx, open_bus("rx", endpoint, **kwargs) as rx:
+        rx.subscribe(Topic.IMAGE, slow)
+        assert mate.wait(DEADLINE) and tx.wait_for_subscribers(Topic.IMAGE, DEADLINE)
+        small = {"width": 32, "height": 24}
+        tx.publish(message(tx, Topic.IMAGE, seq=0, **small))
+        assert entered.wait(DEADLINE)
+        for seq in range(1, n):
+            tx.publish(message(tx, Topic.IMAGE, seq=seq, **small))
+        assert until(lambda: rx.counters.rejected["overflow"] == n - 1 - ring), rx.counters.snapshot()
+        release.set()
+        assert until(lambda: rx.counters.received["image"] == 1 + ring), rx.counters.snapshot()
+    assert seqs == [0, n - 2, n - 1]  # the oldest frames were dropped, the newest kept
+    assert rx.counters.snapshot()["lost"] == {"image": n - 3}  # and the receiver sees the gap in seq
+
+
+def test_stale_data_is_counted_and_never_returned(endpoint):
+    with open_bus("tx", endpoint, listen=True) as tx, open_bus("rx", endpoint, max_age_s=5.0) as rx:
+        rx.subscribe(Topic.ATTITUDE)
+        assert rx.wait_for_teammates({"tx"}, DEADLINE) and tx.wait_for_subscribers(Topic.ATTITUDE, DEADLINE)
+        tx.publish(message(tx, Topic.ATTITUDE, seq=0, age_s=60.0))  # acquired a minute ago: stale on arrival
+        tx.publish(message(tx, Topic.ATTITUDE, seq=1, age_s=2.0))   # within max_age_s on arrival
+        first = rx.recv(Topic.ATTITUDE, timeout=DEADLINE)
+        assert first is not None and first.message.seq == 1
+        assert rx.recv(Topic.ATTITUDE, timeout=0) is None
+        snap = rx.counters.snapshot()
+        assert snap["rejected"] == {"stale": 1} and snap["received"] == {"attitude": 1}
+        # latest(): the newest per team-mate, unless it is older than the age asked for
+        assert rx.latest(Topic.ATTITUDE, max_age_s=30.0)["tx"].message.seq == 1
+        assert rx.latest(Topic.ATTITUDE, max_age_s=1.0) == {}
+        assert first.age_s() >= 2.0
+
+
+def test_sequence_gaps_are_counted_and_a_restart_is_not_a_gap(endpoint):
+    seqs = [0, 1, 2, 5, 6, 10, 0, 1]  # 2 missing, 3 missing, then the sender starts again at 0
+    with open_bus("tx", endpoint, listen=True) as tx, open_bus("rx", endpoint) as rx:
+        rx.subscribe(Topic.ATTITUDE)
+        assert rx.wait_for_teammates({"tx"}, DEADLINE) and tx.wait_for_subscribers(Topic.ATTITUDE, DEADLINE)
+        for seq in seqs:
+            tx.publish(message(tx, Topic.ATTITUDE, seq=seq))
+        got = [rx.recv(Topic.ATTITUDE, timeout=DEADLINE) for _ in seqs]
+    assert [r.message.seq for r in got if r is not None] == seqs
+    assert rx.counters.snapshot()["lost"] == {"attitude": 5}
+
+
+def test_bad_payloads_are_counted_by_reason_and_not_delivered(endpoint):
+    with open_bus("tx", endpoint, listen=True) as tx, open_bus("rx", endpoint) as rx:
+        rx.subscribe(Topic.ATTITUDE)
+        assert rx.wait_for_teammates({"tx"}, DEADLINE) and tx.wait_for_subscribers(Topic.ATTITUDE, DEADLINE)
+        tx.put_raw(Topic.ATTITUDE, b"\xc1 is never msgpack")                     # malformed
+        tx.put_raw(Topic.ATTITUDE, encode(message(tx, Topic.ATTITUDE, seq=0))[:20])  # truncated: malformed
+        tx.put_raw(Topic.ATTITUDE, b"\x00" * (SIZE_LIMITS[Topic.ATTITUDE] + 1))   # oversized
+        spoofed = message(tx, Topic.ATTITUDE, seq=0).model_copy(update={"sender": "other"})
+        tx.put_raw(Topic.ATTITUDE, encode(spoofed))                                # sender is not the key's
+        tx.publish(message(tx, Topic.ATTITUDE, seq=7))                             # then a good one
+        good = rx.recv(Topic.ATTITUDE, timeout=DEADLINE)
+        assert good is not None and good.message.seq == 7
+        assert rx.recv(Topic.ATTITUDE, timeout=0) is None  # the bad ones came first and were not delivered
+        snap = rx.counters.snapshot()
+        assert rx.latest(Topic.ATTITUDE)["tx"].message.seq == 7
+    assert snap["rejected"] == {"malformed": 2, "oversized": 1, "invalid": 1}, snap
+    assert snap["rejected_by_topic"] == {"attitude": 4} and snap["received"] == {"attitude": 1}
+
+
+def test_a_teammate_that_leaves_is_dropped_and_used_again_when_it_is_back(endpoint):
+    events: Queue[tuple[str, str]] = Queue()
+    with open_bus("rx", endpoint, listen=True, on_join=lambda v: events.put(("join", v)),
+                  on_leave=lambda v: events.put(("leave", v))) as rx:
+        rx.subscribe(Topic.ATTITUDE)
+        for incarnation in range(2):
+            with open_bus("tx", endpoint) as tx:
+                assert events.get(timeout=DEADLINE) == ("join", "tx")
+                assert tx.wait_for_subscribers(Topic.ATTITUDE, DEADLINE)
+                tx.publish(message(tx, Topic.ATTITUDE, seq=0))  # each incarnation counts from 0 again
+                got = rx.recv(Topic.ATTITUDE, timeout=DEADLINE)
+                assert got is not None and got.vehicle == "tx", incarnation
+                assert rx.teammates() == {"tx"} and set(rx.latest(Topic.ATTITUDE)) == {"tx"}
+            assert events.get(timeout=DEADLINE) == ("leave", "tx")
+            assert rx.teammates() == frozenset() and rx.latest(Topic.ATTITUDE) == {}
+        snap = rx.counters.snapshot()
+    assert snap["received"] == {"attitude": 2} and snap["lost"] == {}
+
+
+def test_close_hands_over_what_was_already_received(endpoint):
+    n = 50
+    entered, release = threading.Event(), threading.Event()
+
+    def slow(rx):
+        entered.set()
+        release.wait(DEADLINE)
+
+    kwargs: dict = {}
+    mate = joined(kwargs)
+    with open_bus("tx", endpoint, listen=True) as tx:
+        rx = open_bus("rx", endpoint, **kwargs)
+        try:
+            rx.subscribe(Topic.ATTITUDE, slow)
+            assert mate.wait(DEADLINE) and tx.wait_for_subscribers(Topic.ATTITUDE, DEADLINE)
+            for seq in range(n):
+                tx.publish(message(tx, Topic.ATTITUDE, seq=seq))
+            assert entered.wait(DEADLINE)
+            # white box: everything sent is in the receiver's hands (one in the handler, the rest in its inbox)
+            assert until(lambda: len(rx._inbox.fifo) == n - 1)
+            closing = threading.Thread(target=rx.close)
+            closing.start()
+            release.set()
+            closing.join(DEADLINE)
+            assert not closing.is_alive()
+        finally:
+            release.set()
+            rx.close()
+    assert rx.counters.snapshot()["received"] == {"attitude": n}
