@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 
 from agents.cli.main import main
-from agents.experiments.results import agreement, rows
+from agents.experiments.results import agreement
 from scenarios.errors import ScenarioError
 from scenarios.fleet import fleet_scenario_names, load_fleet_scenario
 from tests.fleet_procs import Proc, free_port
@@ -46,6 +46,20 @@ def start_endless_run(scenario: str) -> tuple[Proc, str]:
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     return Proc([sys.executable, "-m", "agents.cli", "scenario", "run", scenario, "--frames", "10000", "--listen",
                  endpoint, "--json"]), endpoint
+
+
+def watch(endpoint: str) -> Proc:
+    """`evopose meter` on the fleet at ``endpoint``; its per-second records name every key an agent has published on."""
+    return Proc([sys.executable, "-m", "agents.cli", "meter", "--connect", endpoint, "--no-multicast", "--json"])
+
+
+def published(meter: Proc, *key_suffixes: str, timeout: float = 60.0) -> None:
+    """Wait until the meter has seen messages on keys ending with each of ``key_suffixes`` (e.g. ``/H1/pose``)."""
+    missing = set(key_suffixes)
+    deadline = time.monotonic() + timeout
+    while missing:
+        record = meter.next_record(max(deadline - time.monotonic(), 0.01), lambda r: r.get("type") == "rate")
+        missing = {suffix for suffix in missing if not record["key"].endswith(suffix)}
 
 
 def test_shipped_scenarios_validate_and_name_the_paper_experiments():
@@ -93,19 +107,35 @@ def test_scenario_run_is_watchable_and_leaves_nothing_running():
     by_vehicle = {r["vehicle"]: r for r in result["rows"]}
     assert set(by_vehicle) == {"H1", "H2"} and all(r["good_fraction"] > 0.8 for r in by_vehicle.values())
     assert agreement(result["runs"], "H1", "H2")["position_max"] <= 0.01
-    assert [r["vehicle"] for r in rows(result["runs"])] == [r["vehicle"] for r in result["rows"]]
+    # the rows, by hand from the run's agent summaries: one run, so each mean is that run's value and each σ 0
+    [run] = result["runs"]
+    assert set(run["agents"]) == {"H1", "H2", "pioneer"}  # the target estimates nothing: no row
+    for vehicle, row in by_vehicle.items():
+        s = run["agents"][vehicle]
+        assert (row["scenario"], row["variant"], row["share"], row["runs"]) == (
+            "exp2a-features", run["variant"], "features", 1)
+        for name in ("roll", "pitch", "yaw", "x", "y", "z", "position"):
+            assert (row[name], row[f"{name}_sd"]) == (s[f"error_{name}"], 0.0), name
+        assert row["good_fraction"] == s["good"] / s["frames"] and s["frames"] == 25
+        assert row["multi_view_fraction"] == s["multi_view_frames"] / s["estimates"]
+        seconds = s["frames"] / s["fps"]
+        assert row["traffic"]["features"] == pytest.approx(
+            {"rate_hz": s["traffic"]["sent"]["features"] / seconds,
+             "bytes_per_message": s["traffic"]["bytes_sent"]["features"] / s["traffic"]["sent"]["features"],
+             "bytes_per_s": s["traffic"]["bytes_sent"]["features"] / seconds})
     assert running_with(endpoint) == []
 
 
 def test_sigint_stops_every_agent_of_a_running_scenario():
     runner, endpoint = start_endless_run("exp2b-hints")
+    meter = watch(endpoint)
     try:
-        # the three agents run (the runner's own command line names the endpoint too)
-        assert wait_for(lambda: running_with(endpoint) if len(running_with(endpoint)) >= 4 else [])
-        time.sleep(8)  # past frame 0
+        published(meter, "/H1/pose", "/H1/hint")  # past frame 0: H1 has published an estimate and a hint
+        meter.kill()
         code, seconds = runner.stop(signal.SIGINT, timeout=20)
         result = runner.next_record(5, lambda r: "rows" in r)
     finally:
+        meter.kill()
         runner.kill()
     assert code == 0 and seconds < 15 and result["interrupted"]
     assert running_with(endpoint) == []
@@ -125,13 +155,16 @@ def test_scenario_list_and_show(capsys):
 
 def test_a_crashed_agent_ends_the_run_with_one_line_and_stops_the_others():
     runner, endpoint = start_endless_run("exp2a-features")
+    meter = watch(endpoint)
     try:
         victim = wait_for(lambda: [pid for pid in running_with(endpoint) if pid in running_with("--vehicle H2 ")])
         assert victim
-        time.sleep(8)  # running
+        published(meter, "/H2/features")  # running: H2 shares its feature sets
+        meter.kill()
         os.kill(victim[0], signal.SIGKILL)
         code = runner.wait(30)
     finally:
+        meter.kill()
         runner.kill()
     err = runner.popen.stderr.read()
     assert code == 2 and err.startswith("error: run 0 of exp2a-features/H1+H2: H2 exited -9"), err
