@@ -290,7 +290,7 @@ def covariance(objective: PoseObjective, pose: np.ndarray, matches: Matches | No
 
 
 #: Samples of the likelihood drawn by :func:`in_box_second_moment`, and how many must fall in the box.
-BOX_SAMPLES, MIN_IN_BOX = 4096, 256
+BOX_SAMPLES, MIN_IN_BOX = 16384, 512
 
 
 def in_box_second_moment(estimate: np.ndarray, information: np.ndarray, lo: np.ndarray, hi: np.ndarray,

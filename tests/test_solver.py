@@ -7,8 +7,9 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from benchmarks.problems import is_success, make_problem, pose_errors
+from benchmarks.problems import in_right_basin, is_success, make_paper_scale_problem, make_problem, pose_errors
 from evopose import Bounds, Evaluator, EvoPose, PoseObjective, PoseProblem, SearchOptions, View, refine, solve, track
+from evopose.fitness import TAU_MIN_PX
 from evopose.pose import PARAM_NAMES
 from evopose.solver import POLISH_SCHEDULE
 
@@ -247,3 +248,50 @@ def test_bounds_are_respected_by_the_result():
     lo[:3], hi[:3] = sp.true_pose[:3] - 1.0, sp.true_pose[:3] + 1.0
     solution = solve(PoseProblem(sp.problem.model, sp.problem.views, Bounds(lo, hi)), seed=0)
     assert Bounds(lo, hi).contains(solution.pose)
+
+
+# --- the paper's image scale (issue 11) ----------------------------------------------------------------------
+
+@pytest.mark.parametrize("seed", [0, 8, 10])
+def test_mutual_fitness_keeps_the_right_basin_where_the_chamfer_sum_prefers_a_flip(seed):
+    """The Pioneer ~25 px wide in H1 (marks 3-5 px apart), 1.3 px noise, 20 % clutter: the robust chamfer mean
+    rates a flipped robot better than the right pose, so its search ends there; the mutual fitness (one-to-one
+    pairs, squared) rates the right pose better, and its search finds it."""
+    sp = make_paper_scale_problem(np.random.default_rng([13, seed]), cameras=("H1",), noise=1.3, clutter=0.2)
+    mutual = solve(sp.problem, seed=0)
+    robust = solve(sp.problem, SearchOptions(fitness="robust", view_reject=0.6), seed=0)
+    assert in_right_basin(sp, mutual.pose) and not in_right_basin(sp, robust.pose)
+    both = np.stack([mutual.pose, robust.pose])
+    assert PoseObjective(sp.problem, "robust")(both)[1] < PoseObjective(sp.problem, "robust")(both)[0]
+    assert PoseObjective(sp.problem, "mutual")(both)[0] < PoseObjective(sp.problem, "mutual")(both)[1]
+
+
+def test_paper_scale_in_the_issue_s_setting():
+    """Issue 11's setting: 1 px noise, 25 % clutter, 10 % missing, the exp2-paper-scale cameras. Every seeded
+    problem in the right basin; what is called converged or confident is right; tau is the noise floor."""
+    for i in range(8):
+        sp = make_paper_scale_problem(np.random.default_rng([12, i]), cameras=("H1",) if i % 2 == 0 else ("H2",),
+                                      noise=1.0, clutter=0.25)
+        assert PoseObjective(sp.problem).taus[0] == TAU_MIN_PX  # marks closer than 8 px: the 4-sigma floor
+        solution = solve(sp.problem, seed=0)
+        assert in_right_basin(sp, solution.pose), i
+        assert np.all(np.isfinite(solution.covariance))
+
+
+def test_solutions_carry_a_covariance_and_a_verdict():
+    """The robustness cases (telephoto scale) are confident, but for the box with a fifth of its marks missing:
+    right, with too few marks matched to be sure."""
+    for kind, seed, difficulty, confident in [
+        ("box", 101, dict(noise=2.0, clutter=0.0, missing=0.0), True),
+        ("box", 102, dict(noise=1.0, clutter=0.0, missing=0.2), False),
+        ("random", 104, dict(noise=1.5, clutter=0.3, missing=0.2), True),
+        ("grid", 106, dict(noise=1.0, clutter=0.25, missing=0.1, distance=6.0), True),
+    ]:
+        sp = make_problem(kind, np.random.default_rng(seed), **difficulty)
+        solution = solve(sp.problem, seed=seed)
+        _assert_solved(sp, solution)
+        cov = solution.covariance
+        assert np.allclose(cov, cov.T) and np.linalg.eigvalsh(cov).min() > -1e-12
+        assert solution.confident == confident, (kind, solution.confidence.reason)
+        if not confident:
+            assert solution.confidence.reason == "few matches"

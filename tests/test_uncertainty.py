@@ -1,0 +1,223 @@
+"""Honest confidence (issue 11): the covariance of an estimate and the verdict ``confident``, at the paper's image
+scale (the Pioneer ~25 px wide) and at the telephoto scale; absent targets; tracking."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from agents.problem.problem_file import solution_to_dict
+from benchmarks.problems import (absent_target, in_right_basin, make_paper_scale_problem, make_problem, observe,
+                                 pose_errors)
+from evopose import PoseObjective, PoseProblem, SearchOptions, View, refine, solve, track
+from evopose.pose import euler_from_rotation, rotation_from_euler
+from evopose.solver import POLISH_SCHEDULE
+from evopose.uncertainty import (ConfidenceRules, assess, covariance, in_box_second_moment, mutual_matches,
+                                 same_image, sum_of_squares, untruncated_variance)
+
+
+def _paper(seed: int, cameras=("H1",), noise: float = 0.7, clutter: float = 0.2):
+    return make_paper_scale_problem(np.random.default_rng([11, seed]), cameras=cameras, noise=noise, clutter=clutter)
+
+
+def _assert_psd_symmetric(cov: np.ndarray) -> None:
+    assert cov.shape == (6, 6) and np.all(np.isfinite(cov))
+    np.testing.assert_allclose(cov, cov.T, rtol=0, atol=1e-15)
+    assert np.linalg.eigvalsh(cov).min() >= -1e-12 * np.abs(cov).max()
+
+
+# --- the verdict on seeded problems at the paper's image scale -----------------------------------------------
+
+def test_confident_at_paper_scale_when_the_marks_are_clear():
+    """0.7 px noise, 20 % clutter, one helicopter (H1, f = 1700 px at 30 m): right, and sure of it."""
+    sp = _paper(0)
+    sol = solve(sp.problem, seed=0)
+    assert in_right_basin(sp, sol.pose)
+    assert sol.confident and sol.converged and sol.confidence.reason == ""
+    assert sol.confidence.n_pairs >= ConfidenceRules().min_pairs
+    assert sol.confidence.margin >= ConfidenceRules().margin
+
+
+def test_not_confident_in_a_wrong_basin_at_paper_scale():
+    """1.8 px noise on marks 3-5 px apart: the search ends in a wrong basin, and says it is not sure (a distinct
+    pose fits about as well), nor converged."""
+    sp = _paper(2, noise=1.8)
+    sol = solve(sp.problem, seed=0)
+    assert not in_right_basin(sp, sol.pose)
+    assert not sol.confident and sol.confidence.reason == "ambiguous"
+    assert not sol.converged
+    assert sol.confidence.runner_up is not None
+
+
+def test_not_confident_when_right_but_a_distinct_pose_fits_as_well():
+    """Right basin, but at 1.8 px noise a flipped pose fits nearly as well: confident means sure, not lucky."""
+    sp = _paper(0, noise=1.8)
+    sol = solve(sp.problem, seed=0)
+    assert in_right_basin(sp, sol.pose)
+    assert not sol.confident and sol.confidence.margin < ConfidenceRules().margin
+    rot, _ = pose_errors(sol.confidence.runner_up, sp.true_pose, sp.symmetries, sp.problem.model.points.mean(0))
+    assert np.rad2deg(rot) > 30  # the rival is another basin, not the same pose moved by the noise
+
+
+@pytest.mark.parametrize("mode", ["clutter", "noise"])
+@pytest.mark.parametrize("scale", ["paper", "telephoto"])
+def test_an_absent_target_is_never_confident(scale, mode):
+    """Only false points (clutter where the target would be, or noise over the image): not confident; the JSON
+    output stays strict (no NaN even when no covariance can be computed)."""
+    base = _paper(3) if scale == "paper" else make_problem("box", np.random.default_rng(31))
+    sp = absent_target(base, np.random.default_rng(5), mode)
+    sol = solve(sp.problem, seed=0)
+    assert not sol.confident
+    out = json.loads(json.dumps(solution_to_dict(sol), allow_nan=False))
+    assert out["confident"] is False and len(out["covariance"]) == 6
+
+
+# --- the covariance ------------------------------------------------------------------------------------------
+
+def test_covariance_is_symmetric_psd_and_shrinks_with_a_second_view():
+    """Eq. (4) with both helicopters: more matched marks seen from another side, a smaller covariance (the depth
+    of one view is the other's lateral position)."""
+    one = _paper(4, cameras=("H1",))
+    rng = np.random.default_rng(9)
+    h2 = make_paper_scale_problem(np.random.default_rng([11, 4]), cameras=("H2",), noise=0.7, clutter=0.2)
+    seen = observe(one.problem.model, h2.problem.views[0].camera, one.true_pose, rng, noise=0.7, clutter=0.2,
+                   missing=0.1)
+    both = one.problem.with_views([one.problem.views[0], seen[0]])
+    cov_one = solve(one.problem, seed=0).covariance
+    cov_both = solve(both, seed=0).covariance
+    _assert_psd_symmetric(cov_one)
+    _assert_psd_symmetric(cov_both)
+    assert np.trace(cov_both[:3, :3]) < 0.25 * np.trace(cov_one[:3, :3])
+    assert np.trace(cov_both[3:, 3:]) < np.trace(cov_one[3:, 3:])
+
+
+def test_covariance_is_calibrated_on_repeated_noise():
+    """The same pose seen with fresh 1 px noise 40 times: the spread of the estimates matches the covariance
+    (each parameter within a factor 2 of its predicted sigma)."""
+    sp = make_problem("random", np.random.default_rng(41), noise=1.0, clutter=0.0, missing=0.0, size_px=200)
+    view = sp.problem.views[0]
+    idx = sp.correspondences[0][0]
+    proj = PoseObjective(sp.problem).project(0, sp.true_pose[None])
+    clean = proj.uv[0, idx]
+    rng = np.random.default_rng(0)
+    estimates, sigmas = [], []
+    for _ in range(40):
+        problem = sp.problem.with_views([View(view.camera, clean + rng.standard_normal(clean.shape))])
+        objective = PoseObjective(problem)
+        pose, _ = refine(objective, sp.true_pose[None], None, POLISH_SCHEDULE)
+        estimates.append(pose[0])
+        sigmas.append(covariance(objective, pose[0]).sigmas)
+    spread = np.std(np.array(estimates), axis=0)
+    predicted = np.median(np.array(sigmas), axis=0)
+    assert np.all(spread < 2 * predicted) and np.all(spread > 0.5 * predicted), (spread, predicted)
+
+
+def test_a_fixed_parameter_has_no_variance_and_a_narrow_constraint_bounds_it():
+    """Eq. (3): a value known exactly has variance 0; one known within +-eps at most eps^2 / 3 (uniform)."""
+    sp = make_problem("box", np.random.default_rng(51), noise=1.0, clutter=0.1, missing=0.1)
+    bounds = sp.problem.bounds.constrained("yaw", sp.true_pose[5], 0.0).constrained("roll", sp.true_pose[3], 0.002)
+    problem = PoseProblem(sp.problem.model, sp.problem.views, bounds)
+    cov = covariance(PoseObjective(problem), sp.true_pose).matrix
+    assert np.all(cov[5] == 0) and np.all(cov[:, 5] == 0)
+    # a uniform over +-eps has variance eps^2 / 3 (the most a likelihood truncated there can have about its
+    # centre); the Monte Carlo second moment carries ~1.5 % standard error with its ~4000 samples in the box
+    assert 0 < cov[3, 3] <= 0.002 ** 2 / 3 * 1.05
+
+
+def test_covariance_unknown_without_enough_matches():
+    sp = make_problem("box", np.random.default_rng(52), noise=1.0, clutter=0.0, missing=0.0)
+    view = sp.problem.views[0]
+    problem = sp.problem.with_views([View(view.camera, view.points[:2])])
+    cov = covariance(PoseObjective(problem), sp.true_pose)
+    assert not cov.ok and np.all(np.isinf(cov.matrix))
+    verdict = assess(PoseObjective(problem), sp.true_pose)
+    assert not verdict.confident and verdict.reason == "no covariance"
+
+
+def test_untruncated_variance_undoes_the_gate():
+    """Pairs are kept only within tau: their spread understates the noise; the correction recovers it."""
+    rng = np.random.default_rng(0)
+    for sigma in (0.5, 1.0, 2.0):
+        r = rng.normal(0.0, sigma, (100_000, 2))
+        kept = r[np.linalg.norm(r, axis=1) < 4.0]
+        s2 = float(np.mean(kept ** 2))
+        assert untruncated_variance(s2, 16.0) == pytest.approx(sigma ** 2, rel=0.03)
+    # at tau = 4 sigma the gate drops exp(-8) of the pairs: a correction of 1 / g(8), a quarter of a percent
+    a = 8.0
+    assert untruncated_variance(1.0, 16.0) == pytest.approx(1 / (1 - a * np.exp(-a) / (1 - np.exp(-a))), rel=1e-3)
+
+
+def test_the_box_prior_is_the_likelihood_truncated_to_the_box():
+    """Far from the bounds the box changes nothing; at a bound the truth lies back inside, and the second moment
+    about the estimate grows beyond the likelihood's own variance on that side."""
+    info = np.diag([1 / 0.2 ** 2, 1 / 0.3 ** 2])
+    lo, hi = np.array([-10.0, -10.0]), np.array([10.0, 10.0])
+    free = in_box_second_moment(np.zeros(2), info, lo, hi, np.zeros(2, bool))
+    np.testing.assert_allclose(np.diag(free), [0.04, 0.09], rtol=0.1)
+    narrow_hi = np.array([10.0, 0.0])  # the estimate sits on the upper bound of the second parameter
+    at_bound = in_box_second_moment(np.zeros(2), info, lo, narrow_hi, np.zeros(2, bool))
+    np.testing.assert_allclose(at_bound[1, 1], 0.09, rtol=0.15)  # half a Gaussian: the same second moment
+    assert in_box_second_moment(np.zeros(2), info, lo, np.array([10.0, -2.0]), np.zeros(2, bool)) is None
+
+
+# --- alternatives: symmetries, the same pairs ----------------------------------------------------------------
+
+def test_a_symmetry_of_the_model_is_not_an_ambiguity():
+    """The chessboard's half turn shows the same image: one answer, confident."""
+    sp = make_problem("grid", np.random.default_rng(61), noise=0.7, clutter=0.1, missing=0.05, distance=6.0)
+    sol = solve(sp.problem, seed=0)
+    objective = PoseObjective(sp.problem)
+    c = sp.problem.model.points.mean(axis=0)
+    R = rotation_from_euler(sol.pose[3:])
+    turned_R = R @ sp.symmetries[1]
+    turned = np.r_[sol.pose[:3] + R @ c - turned_R @ c, euler_from_rotation(turned_R)]
+    assert same_image(objective, sol.pose, turned)
+    verdict = assess(objective, sol.pose, turned[None])
+    assert verdict.margin == np.inf and verdict.confident
+
+
+def test_sum_of_squares_counts_pairs_and_unmatched_points():
+    sp = make_problem("random", np.random.default_rng(71), noise=0.0, clutter=0.0, missing=0.0)
+    objective = PoseObjective(sp.problem, tau=5.0)
+    matches = mutual_matches(objective, sp.true_pose)
+    assert matches.n_pairs == len(sp.problem.views[0].points) and matches.unmatched() == 0.0
+    assert sum_of_squares(objective, sp.true_pose, matches) == pytest.approx(0.0, abs=1e-12)
+    far = sp.true_pose + np.r_[5.0, 5.0, 0, 0, 0, 0]  # nothing matches: every point pays tau^2 / 2
+    n = len(sp.problem.views[0].points) + int(objective.project(0, far[None]).usable.sum())
+    assert sum_of_squares(objective, far) == pytest.approx(0.5 * 25.0 * n)
+
+
+# --- tracking (eq. 2) ----------------------------------------------------------------------------------------
+
+def test_tracking_keeps_confidence_while_the_fit_holds_and_drops_it_on_a_jump():
+    sp = _paper(5, cameras=("H1", "H2"))
+    first = solve(sp.problem, seed=0)
+    assert first.confident
+    rng = np.random.default_rng(3)
+    pose, previous = sp.true_pose.copy(), first
+    cameras = [v.camera for v in sp.problem.views]
+    for _ in range(3):
+        pose = pose + np.r_[0.03, -0.02, 0.0, 0.0, 0.0, 0.02]  # 0.5 m/s at 10 fps, turning
+        views = [observe(sp.problem.model, c, pose, rng, noise=0.7, clutter=0.1, missing=0.1)[0] for c in cameras]
+        previous = track(previous, views)
+        assert previous.stop_reason == "tracked" and previous.confident
+        _assert_psd_symmetric(previous.covariance)
+    # the previous estimate was not confident: tracking cannot make it so
+    unsure = previous.with_(confident=False)
+    views = [observe(sp.problem.model, c, pose, rng, noise=0.7, clutter=0.1, missing=0.1)[0] for c in cameras]
+    assert not track(unsure, views).confident
+    # a pose far outside the previous covariance plus a frame's motion is not confident
+    moved = previous.with_(pose=previous.pose + np.r_[0.0, 0.0, 0.0, 0.0, 0.0, 0.6],
+                           covariance=np.diag([1e-4] * 3 + [1e-4] * 3))
+    jumped = track(moved, views, search_when_lost=False)
+    assert not jumped.confident
+
+
+def test_rules_are_options():
+    """Stricter rules make fewer confident answers: the verdict is the rules', not hard-wired."""
+    sp = _paper(0)
+    assert solve(sp.problem, seed=0).confident
+    never = solve(sp.problem, SearchOptions(confidence=ConfidenceRules(margin=1e9)), seed=0)
+    assert not never.confident and never.confidence.reason == "ambiguous"
