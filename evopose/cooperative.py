@@ -28,47 +28,24 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from .fitness import PoseObjective
+from .knowledge import Knowledge, constrained_bounds
 from .local import LocalSearch
 from .loop import Evaluator, Run, evolve
 from .options import SearchOptions
-from .pose import PARAM_NAMES
 from .problem import Bounds, Model, PoseProblem, View
 from .refine import TRACK_SCHEDULE
 from .search import EvoPose, Told
 from .solver import Solution, solution_of, track
-from .uncertainty import assess
+from .uncertainty import assess, mahalanobis, pose_difference
 
+#: A confirming search's confident pose within this many sigmas (its covariance) of the tracked one confirms it.
+CONFIRM_SIGMAS = 4.0
 #: Fitness values kept in a solution's history by :meth:`CooperativeEstimator.generation` (bounded memory).
 HISTORY_KEPT = 256
 #: Children of the best per :meth:`CooperativeEstimator.generation`.
 GENERATION_CHILDREN = 4
 #: Mutation step of those children: fraction of the target's distance (position), radians (angles).
 CHILD_STEP_POSITION, CHILD_STEP_ANGLE = 0.002, 0.005
-
-
-@dataclass(frozen=True)
-class Knowledge:
-    """External knowledge of one parameter (eq. 3): ``s_k`` is ``value`` within ``tolerance`` (0 fixes it).
-
-    ``name`` is one of ``x, y, z, roll, pitch, yaw``; metres or radians.
-    """
-
-    name: str
-    value: float
-    tolerance: float = 0.0
-
-    def __post_init__(self) -> None:
-        if self.name not in PARAM_NAMES:
-            raise ValueError(f"knowledge of {self.name!r}: expected one of {', '.join(PARAM_NAMES)}")
-        if not np.isfinite(self.value) or not np.isfinite(self.tolerance) or self.tolerance < 0:
-            raise ValueError(f"knowledge of {self.name}: value and tolerance must be finite, tolerance >= 0")
-
-
-def constrained_bounds(bounds: Bounds, knowledge: Sequence[Knowledge]) -> Bounds:
-    """``bounds`` narrowed by every piece of ``knowledge`` (eq. 3)."""
-    for k in knowledge:
-        bounds = bounds.constrained(k.name, k.value, k.tolerance)
-    return bounds
 
 
 @dataclass(frozen=True)
@@ -115,6 +92,8 @@ class _Search:
     #: perf_counter when it started, and when its best was first good (or None)
     started: float
     good_at: float | None = None
+    #: a confirming search: the tracked pose at the frame it started (its answer is compared with this)
+    anchor: np.ndarray | None = None
 
 
 class CooperativeEstimator:
@@ -150,13 +129,14 @@ class CooperativeEstimator:
         self._evaluator: Evaluator | None = None
         self._best_fitness = np.inf  # of ``last`` under ``_evaluator.objective``
         self._rng = np.random.default_rng([seed, 1])
+        self._confirm: _Search | None = None  # a search confirming a tracked pose that is not confident
         self._frame = 0  # the frame being estimated
         self._good: tuple[int, np.ndarray] | None = None  # (frame, pose) of the last good estimate
         self._motion: tuple[int, np.ndarray] | None = None  # (frame, pose change per frame) at the last good one
 
     def reset(self) -> None:
         """Forget the last pose and any search in progress: the next frame is searched from scratch."""
-        self.last, self._evaluator, self._search = None, None, None
+        self.last, self._evaluator, self._search, self._confirm = None, None, None, None
 
     @property
     def searching(self) -> bool:
@@ -226,6 +206,7 @@ class CooperativeEstimator:
                              hints=extra if len(extra) else None, search_when_lost=False)
             if solution.converged:
                 self._search = None
+                solution = self._confirmed(solution, problem, frame, deadline, generations)
                 return self._keep(solution, problem, False, time.perf_counter())
             if self._search is None:  # lost: search again, with the lost pose as a hint
                 self.last = None
@@ -239,6 +220,40 @@ class CooperativeEstimator:
             self._search = replace(self._search, run=replace(
                 self._search.run, state=self._search.optimiser.inject(self._search.run.state, hints)))
         return self._advance(deadline, problem, generations)
+
+    def _confirmed(self, solution: Solution, problem: PoseProblem, frame: int, deadline: float | None,
+                   generations: int | None) -> Solution:
+        """A tracked pose that is not confident (its chain of warm starts broke, or began at a team-mate's best)
+        is confirmed by a global search in slices beside the tracking: confident when that search, which sees
+        every basin, finds this pose confidently; replaced when it finds another basin confidently."""
+        if solution.confident:
+            self._confirm = None
+            return solution
+        if self._confirm is None:
+            optimiser = EvoPose(problem, self.options, np.random.default_rng([self.seed, frame, 2]))
+            evaluator = Evaluator.for_search(problem, self.options)
+            self._confirm = _Search(optimiser, Run(optimiser.start(), Told(0, np.inf, False, None), evaluator, 0.0),
+                                    problem, frame, time.perf_counter(), anchor=np.array(solution.pose))
+        search = self._confirm
+        until = None if generations is None else search.run.told.generation + generations
+        run = evolve(search.optimiser, search.run.state, search.run.evaluator, deadline=deadline,
+                     elapsed_before=search.run.seconds, until_generation=until)
+        if not run.finished:
+            self._confirm = replace(search, run=run)
+            return solution
+        self._confirm = None
+        found = solution_of(search.problem, self.options, run, run.seconds)
+        if not (found.converged and found.confident):
+            return solution
+        distance = mahalanobis(pose_difference(found.pose, search.anchor), found.covariance)[0]
+        if distance <= CONFIRM_SIGMAS:  # the search's confident answer is the pose tracked then: confident again
+            return solution.with_(confident=True, confidence=found.confidence)
+        moved = pose_difference(solution.pose, search.anchor)  # the target's motion since the search began
+        relocated = track(found.with_(pose=found.pose + moved), list(problem.views), problem=problem,
+                          options=self.options,
+                          seed=np.random.default_rng([self.seed, frame, 3]), lost_mismatch=self.lost_mismatch,
+                          search_when_lost=False)
+        return relocated if relocated.converged else solution
 
     def _predicted(self, frame: int, start: np.ndarray) -> np.ndarray | None:
         """Eq. (2) with a constant-velocity guess: ``start`` moved on by the motion between the last two good
