@@ -10,8 +10,8 @@ bytes), no schema; log time = receive time, publish time = the message's acquisi
 Replay publishes the raw channels on their keys (or another fleet's, ``fleet``) with the recorded spacing (divided by
 ``rate``). The fleet's receivers drop data older than their ``max_age``, so by default each message's ``stamp_ns``
 is moved to the replay's clock (:func:`restamp`: at rate 1 one shift for all, replay start - first recorded stamp):
-the messages are the same but for that, and their stamps keep their spacing. The vehicles' presence tokens are declared for the replay's duration, so fresh agents
-see their team-mates.
+the messages are the same but for that, and their stamps keep their spacing. The vehicles' presence tokens are
+declared for the replay's duration, so fresh agents see their team-mates.
 """
 
 from __future__ import annotations

@@ -97,3 +97,24 @@ def register(app: typer.Typer) -> None:
             summary = run_replay(session_options(mode, connect, listen, config, multicast), stop, path, rate=rate,
                                  fleet=fleet, keep_stamps=keep_stamps, presence=presence, wait_s=wait, emit=emit)
         emit_json(summary) if as_json else Console(stderr=True).print(summary)
+
+    @app.command("view")
+    def view_command(fleet: Fleet,
+                     port: Annotated[int, typer.Option(min=0, max=65535, help="WebSocket port (0: a free one).")]
+                     = 8765,
+                     host: Annotated[str, typer.Option(help="Address to serve on (default: loopback only).")]
+                     = "127.0.0.1",
+                     model: Annotated[str, typer.Option(help="Target model drawn at the estimates (a shipped name "
+                                                             "or a file; 'none' for none).")] = "pioneer",
+                     duration: Duration = None, as_json: Json = False, connect: Connect = None,
+                     listen: Listen = None, mode: Mode = None, config: ConfigFile = None,
+                     multicast: Multicast = False) -> None:
+        """A live Foxglove view of the fleet: 3-D scene, feature points, fitness and error plots (open
+        docs/foxglove-layout.json in Foxglove and connect to ws://HOST:PORT)."""
+        from agents.bridges.view import run_view
+
+        emit = _printer(as_json)
+        with stop_on_signals() as stop:
+            summary = run_view(session_options(mode, connect, listen, config, multicast), stop, fleet, host=host,
+                               port=port, model=None if model == "none" else model, duration=duration, emit=emit)
+        emit_json(summary) if as_json else Console(stderr=True).print(summary)
