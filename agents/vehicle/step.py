@@ -22,8 +22,8 @@ from agents.vehicle.records import pose_dict, pose_error
 from agents.vehicle.team_views import MateView, build_views, encode_image
 
 
-#: Generations a search from scratch runs per frame when team-mates share the same views (~25 ms each).
-GENERATIONS_PER_FRAME = 2
+#: Generations a search from scratch runs per frame when team-mates share the same views (25-100 ms each).
+GENERATIONS_PER_FRAME = 1
 #: Hint mode: a team-mate's pose whose mismatch on the own views is at most this much higher than the own
 #: best's is taken (the own views cannot tell the two apart; the team-mate sees from elsewhere).
 HINT_MARGIN = 0.1
