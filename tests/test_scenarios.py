@@ -63,7 +63,13 @@ def published(meter: Proc, *key_suffixes: str, timeout: float = 60.0) -> None:
 
 
 def test_shipped_scenarios_validate_and_name_the_paper_experiments():
-    assert set(fleet_scenario_names()) == {"exp1-airship", "exp2-solo", "exp2a-features", "exp2b-hints", "exp2-raw"}
+    assert set(fleet_scenario_names()) == {"exp1-airship", "exp2-solo", "exp2a-features", "exp2b-hints", "exp2-raw",
+                                           "exp2-four-features", "exp2-four-hints", "exp2-eight-features",
+                                           "exp2-eight-hints"}
+    for n, count in (("four", 4), ("eight", 8)):
+        team = load_fleet_scenario(f"exp2-{n}-features")
+        assert team.world.name == f"exp2-{n}" and len(team.world.vehicles) == count and team.spec.router
+        assert {a.share for a in team.spec.variants[0].agents if a.vehicle.startswith("H")} == {"features"}
     exp1 = load_fleet_scenario("exp1-airship")
     assert [v.name for v in exp1.spec.variants] == ["EvoPose", "EvoPose+IMU"]
     shares = {n: {a.share for a in load_fleet_scenario(n).spec.variants[0].agents if a.vehicle.startswith("H")}
