@@ -45,6 +45,7 @@ from protocol import (QOS, SIZE_LIMITS, Message, Payload, ProtocolError, Stats, 
                       alive_selector, check_name, check_topic, decode_sample, encode, encode_hint,
                       parse_alive_key, topic_key, topic_selector)
 
+from agents.transport.inbox import BoundedSenders, Inbox, SenderBudget
 from agents.transport.traffic import RateLimitedLog, TrafficCounters
 from agents.transport.session import SessionOptions, open_session
 
@@ -89,43 +90,6 @@ class Received:
         return ((time.time_ns() if now_ns is None else now_ns) - self.stamp_ns) * 1e-9
 
 
-class _Inbox:
-    """Bounded hand-off from Zenoh callbacks to the worker: a FIFO, plus a ring for images."""
-
-    def __init__(self, fifo_size: int, ring_size: int) -> None:
-        self.fifo: deque = deque()
-        self.ring: deque = deque(maxlen=ring_size)
-        self.fifo_size = fifo_size
-        self.ready = threading.Condition()
-
-    def put(self, item: tuple, *, ring: bool = False, force: bool = False) -> bool:
-        """Queue ``item``; False if it (or, for the ring, the oldest frame) had to be dropped."""
-        with self.ready:
-            if ring:
-                kept = len(self.ring) < (self.ring.maxlen or 0)
-                self.ring.append(item)
-            else:
-                kept = force or len(self.fifo) < self.fifo_size
-                if kept:
-                    self.fifo.append(item)
-            self.ready.notify()
-        return kept
-
-    def get(self, timeout: float) -> tuple | None:
-        with self.ready:
-            if not self.fifo and not self.ring:
-                self.ready.wait(timeout)
-            if self.fifo:
-                return self.fifo.popleft()
-            if self.ring:
-                return self.ring.popleft()
-            return None
-
-    def wake(self) -> None:
-        with self.ready:
-            self.ready.notify_all()
-
-
 class FleetBus:
     """One vehicle on the fleet bus; see the module docstring. Use as a context manager or call :meth:`close`.
 
@@ -160,7 +124,9 @@ class FleetBus:
         self._owns_session = owns_session
         self._on_join, self._on_leave = on_join, on_leave
         self._queue_size, self._image_ring = queue_size, image_ring
-        self._inbox = _Inbox(queue_size, image_ring)
+        self._inbox = Inbox(queue_size, image_ring)
+        self._budget = SenderBudget()
+        self._senders = BoundedSenders()
         self._lock = threading.Lock()
         self._alive: set[str] = set()
         self._latest: dict[Topic, dict[str, Received]] = {topic: {} for topic in Topic}
@@ -319,6 +285,9 @@ class FleetBus:
             if size > limit:
                 self._reject(topic, "oversized", f"{key}: payload of {size} bytes exceeds the {limit}-byte limit")
                 return
+            if not self._budget.admit(topic, key, time.monotonic()):  # a flood: dropped before any decoding
+                self._reject(topic, "rate-limited", f"{key}: over {self._budget.rate(topic):g} messages/s")
+                return
             if not self._inbox.put(("sample", topic, key, sample.payload.to_bytes(), time.time_ns()), ring=ring):
                 self._reject(topic, "overflow", f"{key}: receiver queue full, {'oldest frame' if ring else 'sample'} "
                                                 "dropped")
@@ -402,6 +371,11 @@ class FleetBus:
             self._last_seq[(topic, rx.vehicle)] = message.seq
         self.counters.count_received(topic.value, rx.size)
         with self._delivered:
+            for gone in self._senders.seen(rx.vehicle):  # per-sender state is bounded: the longest silent goes
+                for per_topic in self._latest.values():
+                    per_topic.pop(gone, None)
+                for seq_key in [k for k in self._last_seq if k[1] == gone]:
+                    del self._last_seq[seq_key]
             self._latest[topic][rx.vehicle] = rx
             queue = self._delivery[topic]
             if len(queue) == queue.maxlen:  # the oldest is pushed out before recv() returned it

@@ -1,0 +1,93 @@
+"""Floods cost counters, not the vehicle (issue 12): a flood of valid feature sets from one sender, and one under a
+new sender name each message, against a real agent; its camera rate holds and its memory stays bounded."""
+
+from __future__ import annotations
+
+import json
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import zenoh
+
+from agents.transport.inbox import MAX_SENDERS, BoundedSenders, SenderBudget
+from protocol import CameraInfo, FeatureSet, Topic, encode, topic_key
+
+ROOT = Path(__file__).resolve().parents[1]
+CAMERA = CameraInfo(fx=1700, fy=1700, cx=320, cy=240, width=640, height=480, world_from_camera=(-27, 6, 12, 0, 0, 0))
+
+
+def test_a_sender_over_its_rate_is_dropped_and_the_senders_kept_are_bounded():
+    budget = SenderBudget({Topic.FEATURES: 10.0}, max_senders=4)
+    admitted = sum(budget.admit(Topic.FEATURES, "evopose/f/H2/features", 0.0) for _ in range(100))
+    assert admitted == 10  # the burst: one second of its rate
+    assert budget.admit(Topic.FEATURES, "evopose/f/H2/features", 0.5)  # half a second later: 5 tokens back
+    assert budget.admit(Topic.FEATURES, "evopose/f/H3/features", 0.0)  # another sender has its own budget
+    senders = BoundedSenders(max_senders=3)
+    gone = [g for name in ("a", "b", "c", "d", "e") for g in senders.seen(name)]
+    assert gone == ["a", "b"]
+
+
+def _rss_kb(pid: int) -> int:
+    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+        if line.startswith("VmRSS:"):
+            return int(line.split()[1])
+    return 0
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def test_a_flood_of_valid_feature_sets_leaves_the_camera_rate_and_memory_alone():
+    port, fleet, frames = _free_port(), "flooded", 60
+    epoch = time.time_ns() + int(4e9)
+    victim = subprocess.Popen([sys.executable, "-m", "agents.cli", "agent", "--fleet", fleet, "--vehicle", "H1",
+                               "--share", "features", "--frames", str(frames), "--epoch-ns", str(epoch), "--json",
+                               "--listen", f"tcp/127.0.0.1:{port}"], cwd=ROOT, stdout=subprocess.PIPE,
+                              stderr=subprocess.PIPE, text=True)
+    config = zenoh.Config()
+    config.insert_json5("mode", '"peer"')
+    config.insert_json5("connect/endpoints", json.dumps([f"tcp/127.0.0.1:{port}"]))
+    config.insert_json5("listen/endpoints", "[]")
+    config.insert_json5("scouting/multicast/enabled", "false")
+    points = np.random.default_rng(0).uniform(300, 340, (30, 2)).astype("<f4").tobytes()
+    sent, rss = 0, []
+    try:
+        ready = victim.stdout.readline()
+        while ready and json.loads(ready).get("event") != "ready":
+            ready = victim.stdout.readline()
+        with zenoh.open(config) as session:
+            token = session.liveliness().declare_token(f"evopose/{fleet}/@alive/H2")
+            publisher = session.declare_publisher(topic_key(fleet, "H2", "features"))
+            time.sleep(max(0.0, (epoch - time.time_ns()) / 1e9))
+            rss.append(_rss_kb(victim.pid))
+            end = time.monotonic() + 4.0
+            while time.monotonic() < end:  # one sender, as fast as this loop goes (~10 kHz)
+                message = FeatureSet(sender="H2", seq=sent, stamp_ns=time.time_ns(), camera=CAMERA, points=points)
+                publisher.put(encode(message))
+                sent += 1
+            end = time.monotonic() + 2.0
+            while time.monotonic() < end:  # a new sender name on each message (no presence token)
+                name = f"x{sent}"
+                message = FeatureSet(sender=name, seq=0, stamp_ns=time.time_ns(), camera=CAMERA, points=points)
+                session.put(topic_key(fleet, name, "features"), encode(message))
+                sent += 1
+            rss.append(_rss_kb(victim.pid))
+            publisher.undeclare()
+            token.undeclare()
+        out, err = victim.communicate(timeout=60)
+    finally:
+        victim.kill()
+    assert victim.returncode == 0, err[-1500:]
+    summary = [json.loads(line) for line in out.splitlines() if line.startswith("{")][-1]
+    assert sent > 5000
+    assert summary["frames"] == frames and summary["late_frames"] <= 0.05 * frames, summary["late_frames"]
+    assert summary["traffic"]["rejected"].get("rate-limited", 0) > 0.5 * sent
+    assert rss[1] - rss[0] < 20 * 1024, rss  # kB: within +20 MB while flooded
+    assert MAX_SENDERS < sent
