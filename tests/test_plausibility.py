@@ -85,3 +85,25 @@ def test_a_hostile_imu_reading_is_counted_and_the_station_keeps_going():
     assert summary["frames"] == 25 and summary["traffic"]["rejected"].get("implausible-sigma", 0) > 0
     assert all(not r["knowledge"] for r in frames)  # the hostile reading never became eq. (3) knowledge
     assert all(math.isfinite(r["pose"]["x"]) for r in frames)
+
+
+def test_a_compressed_image_is_decoded_only_within_the_pixel_budget():
+    import cv2
+    import pytest
+
+    from agents.vehicle.team_views import MAX_DECODED_PIXELS, image_of
+    from protocol import ImageFrame
+
+    ok, png = cv2.imencode(".png", np.zeros((64, 64, 3), np.uint8))
+    camera = CAMERA.model_copy(update={"width": 64, "height": 64})
+    frame = ImageFrame(sender="H2", seq=0, stamp_ns=0, camera=camera, encoding="png", width=64, height=64,
+                       channels=3, data=png.tobytes())
+    assert image_of(frame).shape == (64, 64, 3)
+    side = int(np.sqrt(MAX_DECODED_PIXELS)) + 1
+    huge = frame.model_copy(update={"width": side, "height": side,
+                                    "camera": camera.model_copy(update={"width": side, "height": side})})
+    with pytest.raises(ValueError, match="over the budget"):
+        image_of(huge)
+    lying = frame.model_copy(update={"width": 32, "height": 32})
+    with pytest.raises(ValueError, match="header says 64x64"):
+        image_of(lying)

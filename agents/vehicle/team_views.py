@@ -8,6 +8,7 @@ sharing to deliver frame ``n``; a team-mate that left, or has sent nothing fresh
 
 from __future__ import annotations
 
+import io
 import time
 from collections import deque
 from collections.abc import Callable, Iterable
@@ -41,10 +42,29 @@ def camera_from_info(info: CameraInfo) -> Camera:
                   matrix_from_pose(np.array(info.world_from_camera, float)))
 
 
+#: Most pixels a team-mate's compressed image may decode to (a 1 MB PNG can claim 1.2 GB of pixels).
+MAX_DECODED_PIXELS = 4096 * 4096
+
+
 def image_of(frame: ImageFrame) -> np.ndarray:
-    """The pixels of a raw, JPEG or PNG frame as uint8 BGR (or mono), shape (H, W[, 3])."""
+    """The pixels of a raw, JPEG or PNG frame as uint8 BGR (or mono), shape (H, W[, 3]).
+
+    A compressed frame is decoded only after its file header was read and found to hold the frame's own
+    size, within :data:`MAX_DECODED_PIXELS` (the pixel budget: nothing is allocated for a lying header).
+    """
     if frame.encoding == "raw":
         return frame.to_array()
+    if frame.width * frame.height > MAX_DECODED_PIXELS:
+        raise ValueError(f"{frame.width}x{frame.height} is over the budget of {MAX_DECODED_PIXELS} pixels")
+    from PIL import Image, UnidentifiedImageError
+
+    try:
+        with Image.open(io.BytesIO(frame.data)) as header:  # reads the header only
+            size = header.size
+    except (UnidentifiedImageError, OSError, ValueError) as err:
+        raise ValueError(f"{frame.encoding} data has no readable header: {err}") from None
+    if size != (frame.width, frame.height):
+        raise ValueError(f"{frame.encoding} header says {size[0]}x{size[1]}, the frame {frame.width}x{frame.height}")
     image = cv2.imdecode(np.frombuffer(frame.data, np.uint8), cv2.IMREAD_UNCHANGED)
     if image is None or image.shape[:2] != (frame.height, frame.width):
         raise ValueError(f"{frame.encoding} data does not decode to a {frame.width}x{frame.height} image")
