@@ -69,6 +69,21 @@ def meter_table(records: list[dict]) -> Table:
     return table
 
 
+def print_ros2_lines(records: list[dict], period_s: float = 1.0) -> None:
+    """Per key with a message in the last period (as ``ros2 topic hz`` prints only then): the key, then exactly the
+    lines of ``ros2 topic hz`` and ``ros2 topic bw`` (agents/tools/meter.py)."""
+    from agents.tools.meter import ros2_bw_line, ros2_hz_line
+
+    for record in records:
+        if record["age_s"] > period_s or record.get("ros2_hz") is None:
+            continue
+        lines = [f"[{record['key']}]", ros2_hz_line(record["ros2_hz"])]
+        if record.get("ros2_bw") is not None:
+            lines.append(ros2_bw_line(record["ros2_bw"]))
+        sys.stdout.write("\n".join(lines) + "\n")
+    sys.stdout.flush()
+
+
 def agents_table(agents: dict[str, dict]) -> Table:
     """The agents' own sent/received counts per topic."""
     table = Table(title="agents' own counts", title_justify="left")
@@ -164,8 +179,10 @@ def register(app: typer.Typer) -> None:
                       window: Annotated[int, typer.Option(min=2, help="Messages per key in the window.")] = 100,
                       duration: Annotated[float | None, typer.Option(min=0, help="Stop after S seconds.")] = None,
                       as_json: Annotated[bool, typer.Option("--json", help="One JSON object per key per second.")]
-                      = False) -> None:
-        """Print per key, once a second, the rate, period statistics, bandwidth and message sizes."""
+                      = False,
+                      table: Annotated[bool, typer.Option("--table", help="A table per second instead of the "
+                                                                          "ros2 topic hz / bw lines.")] = False) -> None:
+        """Print per key, once a second, what `ros2 topic hz` and `ros2 topic bw` print (--table: a table)."""
         from agents.tools.runners import run_meter
 
         console = Console(width=None if sys.stdout.isatty() else 160)
@@ -174,8 +191,11 @@ def register(app: typer.Typer) -> None:
             if as_json:
                 for record in records:
                     emit_json({"type": "rate", **record})
-            elif records:
-                console.print(meter_table(records))
+            elif table:
+                if records:
+                    console.print(meter_table(records))
+            else:
+                print_ros2_lines(records)
 
         with stop_on_signals() as stop:
             summary = run_meter(session_options(mode, connect, listen, config, multicast), stop, emit, fleet=fleet,

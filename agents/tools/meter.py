@@ -4,10 +4,14 @@ The Zenoh callback only appends ``(arrival time, payload size)`` to the key's wi
 Stats payloads, which are decoded later in the report loop). Once a second the meter reports, per
 key: average rate over the window, min/max/std dev of the period, window size, bandwidth (mean
 size x rate) and mean/min/max payload size; at the end, totals and the agents' own Stats.
+``ros2_hz`` and ``ros2_bw`` are the numbers ``ros2 topic hz`` and ``ros2 topic bw`` print, computed as ros2cli does
+(ros2topic/verb/hz.py and bw.py: ``window`` periods; bandwidth = the window's bytes over the time from its first
+arrival to now, so it falls when a topic stops), and :func:`ros2_hz_line` / :func:`ros2_bw_line` their exact lines.
 """
 
 from __future__ import annotations
 
+import math
 import statistics
 import threading
 import time
@@ -30,7 +34,7 @@ class KeyWindow:
     total_bytes: int = 0
 
     def add(self, arrival_s: float, size: int) -> None:
-        if len(self.arrivals_s) == self.size:
+        if len(self.arrivals_s) == self.size + 1:  # ``ros2 topic hz`` keeps ``size`` periods: size + 1 arrivals
             self.arrivals_s.popleft()
             self.sizes.popleft()
         self.arrivals_s.append(arrival_s)
@@ -40,7 +44,8 @@ class KeyWindow:
 
     def report(self, now_s: float) -> dict:
         """Rate (Hz), period min/max/std (s), window, bandwidth (B/s), sizes (B), age of the last message (s)."""
-        times, sizes = list(self.arrivals_s), list(self.sizes)
+        all_times = list(self.arrivals_s)
+        times, sizes = all_times[-self.size:], list(self.sizes)[-self.size:]
         periods = [b - a for a, b in zip(times, times[1:])]
         span = times[-1] - times[0] if len(times) > 1 else 0.0
         rate = (len(times) - 1) / span if span > 0 else 0.0
@@ -55,7 +60,49 @@ class KeyWindow:
             "size_mean": mean_size, "size_min": min(sizes), "size_max": max(sizes),
             "count": self.count, "total_bytes": self.total_bytes,
             "age_s": now_s - times[-1],
+            "ros2_hz": ros2_hz(all_times), "ros2_bw": ros2_bw(times, sizes, now_s),
         }
+
+
+def ros2_hz(arrivals_s: list[float]) -> dict | None:
+    """``ros2 topic hz`` over these arrivals (ros2cli ``ROSTopicHz.get_hz``): rate = 1 / mean period, min, max and
+    population std dev of the periods, window = number of periods; None with fewer than two arrivals."""
+    periods = [b - a for a, b in zip(arrivals_s, arrivals_s[1:])]
+    if not periods:
+        return None
+    mean = sum(periods) / len(periods)
+    return {"rate": 1.0 / mean if mean > 0 else 0.0, "min": min(periods), "max": max(periods),
+            "std_dev": math.sqrt(sum((p - mean) ** 2 for p in periods) / len(periods)), "window": len(periods)}
+
+
+def ros2_bw(arrivals_s: list[float], sizes: list[int], now_s: float) -> dict | None:
+    """``ros2 topic bw`` (ros2cli ``ROSTopicBandwidth.get_bw``): the sum of the window's sizes over the time from its
+    first arrival to now (so it falls when a topic stops), the number of messages, mean, min and max size."""
+    if len(arrivals_s) < 2 or now_s <= arrivals_s[0]:
+        return None
+    total = sum(sizes)
+    return {"bytes_per_s": total / (now_s - arrivals_s[0]), "messages": len(sizes), "mean": total / len(sizes),
+            "min": min(sizes), "max": max(sizes)}
+
+
+def ros2_hz_line(hz: dict) -> str:
+    """The lines ``ros2 topic hz`` prints (ros2cli ``print_hz``)."""
+    return ("average rate: %.3f\n\tmin: %.3fs max: %.3fs std dev: %.5fs window: %s"
+            % (hz["rate"], hz["min"], hz["max"], hz["std_dev"], hz["window"]))
+
+
+def ros2_bw_line(bw: dict) -> str:
+    """The lines ``ros2 topic bw`` prints (ros2cli ``print_bw``: one unit for all four numbers, chosen by the
+    bandwidth: B without decimals, KB or MB, powers of 1000, with two)."""
+    rate = bw["bytes_per_s"]
+    if rate < 1000:
+        unit = lambda b: f"{b:.0f} B"  # noqa: E731
+    elif rate < 1000000:
+        unit = lambda b: f"{b / 1000:.2f} KB"  # noqa: E731
+    else:
+        unit = lambda b: f"{b / 1000 / 1000:.2f} MB"  # noqa: E731
+    return (f"{unit(rate)}/s from {bw['messages']} messages\n"
+            f"\tMessage size mean: {unit(bw['mean'])} min: {unit(bw['min'])} max: {unit(bw['max'])}")
 
 
 class Meter:
