@@ -1,7 +1,7 @@
 """Honest confidence (issue 11): is ``confident`` right, is the covariance calibrated, does an absent target stay
 unconfident? Seeded problems at the telephoto scale and at the paper's image scale, beside the solvePnP oracle.
 
-    python -m benchmarks.bench_confidence [--per-group 40] [--absent 24] [--jobs 2] [--seed 2026]
+    python -m benchmarks.bench_confidence [--per-group 60] [--absent 40] [--jobs 2] [--seed 7]
                                           [--out benchmarks/results/confidence.md] [--dump records.json]
 
 Groups: the paper's image scale (the Pioneer seen by exp2-paper-scale's H1, H2, and both: eq. 4) and the
@@ -9,6 +9,8 @@ telephoto scale (the synthetic box, airship, random points and grid, 150-350 px 
 clutter; plus absent targets at both scales (only false points: clutter where the target would be, or pure noise
 over the image). "Right basin" is scale-free: at least half of the true marks identified one to one
 (:func:`benchmarks.problems.in_right_basin`); "accurate" is rotation < 5 deg and position < 5 % of the distance.
+The rules of :class:`evopose.uncertainty.ConfidenceRules` were calibrated with ``--seed 2026``; the default seed
+reports on other problems. Times are CPU times per solve (the machine is shared).
 """
 
 from __future__ import annotations
@@ -80,9 +82,9 @@ def one(task: tuple[str, int, int]) -> dict:
 
     group, seed, index = task
     sp = make(group, seed, index)
-    t0 = time.perf_counter()
+    t0 = time.process_time()
     sol = solve(sp.problem, seed=index)
-    seconds = time.perf_counter() - t0
+    seconds = time.process_time() - t0
     absent = "absent" in sp.meta
     conf = sol.confidence
     rec = {"group": group, "index": index, "kind": sp.kind, "absent": absent, "noise": float(sp.noise),
@@ -171,7 +173,7 @@ def scale_rows(records: list[dict], scale: str) -> list[list]:
 
 HEADER = ["group", "problems", "right basin", "oracle right basin", "accurate", "oracle accurate",
           "precision of confident", "confident where the oracle is right",
-          "1-sigma coverage x / y / z / roll / pitch / yaw (%)", "converged in a wrong basin", "median ms"]
+          "1-sigma coverage x / y / z / roll / pitch / yaw (%)", "converged in a wrong basin", "median CPU ms"]
 
 
 def markdown(records: list[dict], args: argparse.Namespace, seconds: float) -> str:
@@ -196,7 +198,17 @@ def markdown(records: list[dict], args: argparse.Namespace, seconds: float) -> s
                              f"{1000 * np.median([r['seconds'] for r in recs]):.0f}"])
     lines += ["### Absent target", "", "Only false points: `clutter` where the target would be (as many points as "
               "the target problem had), `noise` 10-40 points over the whole image.", ""]
-    lines += md_table(["scale", "points", "problems", "confident", "converged", "median ms"], rows) + [""]
+    lines += md_table(["scale", "points", "problems", "confident", "converged", "median CPU ms"], rows) + [""]
+    rows = []
+    for lo, hi in ((0.5, 1.0), (1.0, 1.5), (1.5, 2.0)):
+        for scale in ("paper", "telephoto"):
+            recs = [r for r in records if not r["absent"] and GROUPS[r["group"]][0] == scale and lo <= r["noise"] < hi]
+            conf = [r for r in recs if r["confident"]]
+            rows.append([f"{lo}-{hi} px", scale, len(recs), _pct(sum(r["right"] for r in recs), len(recs)),
+                         _pct(len(conf), len(recs)), _pct(sum(r["right"] for r in conf), len(conf))])
+    lines += ["### By point noise", ""]
+    lines += md_table(["noise", "scale", "problems", "right basin", "confident", "precision of confident"], rows)
+    lines += [""]
     reasons: dict[str, int] = {}
     for r in records:
         if not r["confident"]:
@@ -207,10 +219,10 @@ def markdown(records: list[dict], args: argparse.Namespace, seconds: float) -> s
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--per-group", type=int, default=40, help="problems per group with a target")
-    parser.add_argument("--absent", type=int, default=24, help="absent-target problems per scale and kind")
+    parser.add_argument("--per-group", type=int, default=60, help="problems per group with a target")
+    parser.add_argument("--absent", type=int, default=40, help="absent-target problems per scale and kind")
     parser.add_argument("--jobs", type=int, default=min(2, os.cpu_count() or 1))
-    parser.add_argument("--seed", type=int, default=2026)
+    parser.add_argument("--seed", type=int, default=7, help="2026 is the calibration set")
     parser.add_argument("--out", type=Path, default=Path("benchmarks/results/confidence.md"))
     parser.add_argument("--dump", type=Path, default=None, help="also write every record as JSON")
     args = parser.parse_args(argv)

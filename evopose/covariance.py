@@ -10,6 +10,7 @@ eq. (3) constraints enter as a uniform prior (:func:`covariance`). Metres and ra
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 
@@ -216,6 +217,14 @@ def covariance(objective: PoseObjective, pose: np.ndarray, matches: Matches | No
 BOX_SAMPLES, MIN_IN_BOX = 16384, 512
 
 
+@lru_cache(maxsize=8)
+def _standard_normal(n: int) -> np.ndarray:
+    """The fixed draws of :func:`in_box_second_moment`, shape (BOX_SAMPLES, n), read-only (drawn once)."""
+    z = np.random.default_rng(0).standard_normal((BOX_SAMPLES, n))
+    z.flags.writeable = False
+    return z
+
+
 def in_box_second_moment(estimate: np.ndarray, information: np.ndarray, lo: np.ndarray, hi: np.ndarray,
                          periodic: np.ndarray) -> np.ndarray | None:
     """Second moment about ``estimate`` (n,) of the Gaussian likelihood ``N(estimate, information^-1)``
@@ -234,8 +243,7 @@ def in_box_second_moment(estimate: np.ndarray, information: np.ndarray, lo: np.n
     sigma = np.sqrt(np.clip(np.diag(cov), 0.0, None))
     if np.all((estimate - 4 * sigma >= lo)[bounded] & (estimate + 4 * sigma <= hi)[bounded]):
         return 0.5 * (cov + cov.T)  # the box is 4 sigma away: the truncation changes nothing that matters
-    z = np.random.default_rng(0).standard_normal((BOX_SAMPLES, len(estimate)))
-    samples = estimate + z @ chol.T
+    samples = estimate + _standard_normal(len(estimate)) @ chol.T
     inside = np.all((samples[:, bounded] >= lo[bounded]) & (samples[:, bounded] <= hi[bounded]), axis=1)
     if np.count_nonzero(inside) < MIN_IN_BOX:
         return None
