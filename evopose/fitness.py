@@ -30,6 +30,7 @@ nothing matches; squared for the mutual kind, a share of squared distances) and 
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 from dataclasses import dataclass, field
 from functools import cached_property
@@ -256,8 +257,18 @@ class PoseObjective:
         object.__setattr__(self, "weights", weights)
 
     def with_weights(self, weights: np.ndarray) -> "PoseObjective":
-        """The same objective with other eq. (4) weights ``W_k`` (V,); counts into the same counter."""
-        return dataclasses.replace(self, weights=np.asarray(weights, float))
+        """The same objective with other eq. (4) weights ``W_k`` (V,); counts into the same counter.
+
+        The per-view taus and spreads are the same: they are carried over, not computed again."""
+        weights = _read_only(np.asarray(weights, float))
+        base = self.base_weights
+        if weights.shape != base.shape or not np.all(np.isfinite(weights)) or np.any(weights < 0) \
+                or not np.any(weights > 0):
+            raise ValueError(f"weights must be {len(base)} finite numbers >= 0, not all 0, got {weights!r}")
+        other = copy.copy(self)
+        object.__setattr__(other, "weights", weights)
+        other.__dict__.pop("packed", None)  # a cached_property of the weights
+        return other
 
     @property
     def bounded(self) -> bool:

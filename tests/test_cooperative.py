@@ -135,13 +135,19 @@ def test_the_estimator_never_mutates_an_objective(exp2, monkeypatch):
     """Eq. (4)'s step rule drops a view without the target; the estimator solves, tracks and runs generations
     with hints. Every objective made on the way ends as it was made: new weights make a new objective."""
     made = []
-    post_init = PoseObjective.__post_init__
+    post_init, with_weights = PoseObjective.__post_init__, PoseObjective.with_weights
 
     def record(self):
         post_init(self)
         made.append((self, _snapshot(self)))
 
+    def record_reweighted(self, weights):
+        other = with_weights(self, weights)
+        made.append((other, _snapshot(other)))
+        return other
+
     monkeypatch.setattr(PoseObjective, "__post_init__", record)
+    monkeypatch.setattr(PoseObjective, "with_weights", record_reweighted)
     scenario, frames = exp2
     views, _ = _views(frames, ("H1", "H2"))
     junk = np.random.default_rng(3).uniform([50, 50], [590, 430], (len(views[1].points), 2))
