@@ -80,11 +80,12 @@ def chamfer_row(u, v, usable, px, py, tau, robust, row):  # pragma: no cover - c
 
 
 @nb.njit(cache=True, fastmath=_FASTMATH, nogil=True)
-def mutual_row(u, v, usable, px, py, tau, img_nn, img_d2, mod_nn, mod_d2):  # pragma: no cover - compiled
+def mutual_row(u, v, usable, px, py, tau, row, col):  # pragma: no cover - compiled
     """One-to-one matching of one pose in one view: mutual nearest neighbours closer than ``tau``.
 
-    Fills the scratch arrays as :func:`nearest_row` does (``img_nn``, ``img_d2`` (>= P,), ``mod_nn``,
-    ``mod_d2`` (M,)).
+    ``row`` (>= P,) and ``col`` (M,) are scratch: one branch-free pass gives every image point's and every
+    usable model point's nearest squared distance; then each model point closer than ``tau`` to an image point
+    finds that point and is its mutual partner when it is also the point's nearest.
 
     Returns
     -------
@@ -96,7 +97,22 @@ def mutual_row(u, v, usable, px, py, tau, img_nn, img_d2, mod_nn, mod_d2):  # pr
         Mutual pairs within ``tau``.
     """
     P = px.shape[0]
-    nearest_row(u, v, usable, px, py, img_nn, img_d2, mod_nn, mod_d2)
+    for p in range(P):
+        row[p] = NO_MATCH_D2
+    for m in range(u.shape[0]):
+        col[m] = NO_MATCH_D2
+        if not usable[m]:
+            continue
+        um = u[m]
+        vm = v[m]
+        best = NO_MATCH_D2
+        for p in range(P):
+            dx = px[p] - um
+            dy = py[p] - vm
+            d2 = dx * dx + dy * dy
+            row[p] = min(row[p], d2)
+            best = min(best, d2)
+        col[m] = best
     tau2 = tau * tau
     s = 0.0
     n_usable = 0
@@ -105,18 +121,26 @@ def mutual_row(u, v, usable, px, py, tau, img_nn, img_d2, mod_nn, mod_d2):  # pr
         if not usable[m]:
             continue
         n_usable += 1
-        p = mod_nn[m]
-        if p >= 0 and mod_d2[m] < tau2 and img_nn[p] == m:
-            s += 2.0 * mod_d2[m]
-            n_pairs += 1
+        best = col[m]
+        if best >= tau2:
+            continue
+        um = u[m]
+        vm = v[m]
+        for p in range(P):  # the nearest image point (recomputed: equal up to rounding, first one wins)
+            dx = px[p] - um
+            dy = py[p] - vm
+            if dx * dx + dy * dy <= best * (1.0 + 1e-9):
+                if best <= row[p]:  # and this model point is the image point's nearest: a mutual pair
+                    s += 2.0 * best
+                    n_pairs += 1
+                break
     s += tau2 * (P + n_usable - 2 * n_pairs)
     return s, n_usable, n_pairs
 
 
 @nb.njit(cache=True, fastmath=_FASTMATH, nogil=True)
-def view_term_row(u, v, usable, px, py, tau, mode, img_nn, img_d2, mod_nn, mod_d2):  # pragma: no cover - compiled
-    """The view's term ``d^(k)`` for one pose (pixels); ``img_nn``, ``img_d2`` (>= P,), ``mod_nn``, ``mod_d2`` (M,)
-    are scratch.
+def view_term_row(u, v, usable, px, py, tau, mode, row, col):  # pragma: no cover - compiled
+    """The view's term ``d^(k)`` for one pose (pixels); ``row`` (>= P,) and ``col`` (M,) are scratch.
 
     ``mode`` :data:`PAPER`: the paper's eq. (1) ``sum_i min_j |p_i - m_j(s)|``;
     :data:`ROBUST`: ``(sum_i min(d_i, tau) + sum_j min(d_j, tau)) / (P + n_usable)``, one mean over both
@@ -124,9 +148,9 @@ def view_term_row(u, v, usable, px, py, tau, mode, img_nn, img_d2, mod_nn, mod_d
     nearest partner, ``tau`` for a point without one within ``tau`` (:func:`mutual_row`).
     """
     if mode == MUTUAL:
-        s, n_usable, _ = mutual_row(u, v, usable, px, py, tau, img_nn, img_d2, mod_nn, mod_d2)
+        s, n_usable, _ = mutual_row(u, v, usable, px, py, tau, row, col)
         return np.sqrt(s / (px.shape[0] + n_usable))
-    s_img, s_mod, cnt = chamfer_row(u, v, usable, px, py, tau, mode == ROBUST, img_d2)
+    s_img, s_mod, cnt = chamfer_row(u, v, usable, px, py, tau, mode == ROBUST, row)
     if mode == ROBUST:
         return (s_img + s_mod) / (px.shape[0] + cnt)
     return s_img
@@ -136,14 +160,11 @@ def view_term_row(u, v, usable, px, py, tau, mode, img_nn, img_d2, mod_nn, mod_d
 def view_terms(u, v, usable, px, py, tau, mode):  # pragma: no cover - compiled
     """:func:`view_term_row` for every pose: ``u``, ``v``, ``usable`` (N, M) -> (N,)."""
     N, M = u.shape
-    P = px.shape[0]
     out = np.empty(N)
-    img_nn = np.empty(P, np.int64)
-    img_d2 = np.empty(P)
-    mod_nn = np.empty(M, np.int64)
-    mod_d2 = np.empty(M)
+    row = np.empty(px.shape[0])
+    col = np.empty(M)
     for n in range(N):
-        out[n] = view_term_row(u[n], v[n], usable[n], px, py, tau, mode, img_nn, img_d2, mod_nn, mod_d2)
+        out[n] = view_term_row(u[n], v[n], usable[n], px, py, tau, mode, row, col)
     return out
 
 

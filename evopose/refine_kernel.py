@@ -129,7 +129,7 @@ def _to_bounds(s, lo, hi, periodic):  # pragma: no cover - compiled
 
 @nb.njit(cache=True, fastmath=_FASTMATH, nogil=True)
 def fitness_one(s, model, normals, use_normals, intr, cfw, weights, taus, pts, offsets, mode,
-                u, v, usable, img_nn, row, mod_nn, mod_d2, R, Rc):  # pragma: no cover - compiled
+                u, v, usable, row, col, R, Rc):  # pragma: no cover - compiled
     """Eq. (4) for one pose: ``sum_k W_k d^(k)``, with the fitness's own view term (``mode``: :mod:`evopose.kernels`)."""
     total = 0.0
     for k in range(intr.shape[0]):
@@ -137,8 +137,7 @@ def fitness_one(s, model, normals, use_normals, intr, cfw, weights, taus, pts, o
             continue
         project_pose(s, model, normals, use_normals, intr[k], cfw[k], u, v, usable, R, Rc)
         a, b = offsets[k], offsets[k + 1]
-        total += weights[k] * view_term_row(u, v, usable, pts[a:b, 0], pts[a:b, 1], taus[k], mode, img_nn, row,
-                                                 mod_nn, mod_d2)
+        total += weights[k] * view_term_row(u, v, usable, pts[a:b, 0], pts[a:b, 1], taus[k], mode, row, col)
     return total
 
 
@@ -280,9 +279,9 @@ def refine_population(poses, fitness, lo, hi, periodic, free, model, normals, us
                 continue
             if not np.isfinite(f_cur):
                 f_cur = fitness_one(s, model, normals, use_normals, intr, cfw, weights, taus, pts, offsets,
-                                    mode, u, v, usable, img_nn, row, mod_nn, mod_d2, R, Rc)
+                                    mode, u, v, usable, row, mod_d2, R, Rc)
             f_try = fitness_one(s_try, model, normals, use_normals, intr, cfw, weights, taus, pts, offsets,
-                                mode, u, v, usable, img_nn, row, mod_nn, mod_d2, R, Rc)
+                                mode, u, v, usable, row, mod_d2, R, Rc)
             if f_try <= f_cur:
                 for d in range(6):
                     s[d] = s_try[d]
@@ -292,7 +291,7 @@ def refine_population(poses, fitness, lo, hi, periodic, free, model, normals, us
                 lam = min(lam * 10.0, 1e4)
         if not np.isfinite(f_cur):
             f_cur = fitness_one(s, model, normals, use_normals, intr, cfw, weights, taus, pts, offsets,
-                                mode, u, v, usable, img_nn, row, mod_nn, mod_d2, R, Rc)
+                                mode, u, v, usable, row, mod_d2, R, Rc)
         if f_cur <= f_start:  # never worse than the input
             for d in range(6):
                 poses[n, d] = s[d]

@@ -17,7 +17,7 @@ from evopose.fitness import (
     step_weights,
     view_term,
 )
-from evopose.kernels import NO_MATCH_D2, chamfer_matches, chamfer_sums
+from evopose.kernels import MUTUAL, NO_MATCH_D2, chamfer_matches, chamfer_sums, view_terms
 from evopose.pose import rotation_from_euler
 from evopose.problem import Bounds, Model, PoseProblem, View
 
@@ -68,6 +68,29 @@ def test_chamfer_sums_matches_brute_force(seed, robust):
     assert mod_sum[0] == 0.0 and n_usable[0] == 0
     # truncation matters in this data (else the robust/paper distinction would be untested)
     assert np.any(np.sqrt(img_min[1:]) > tau) and np.any(np.sqrt(img_min[1:]) < tau)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_mutual_term_matches_brute_force(seed):
+    """The "mutual" view term: RMS over image points and usable marks of the distance to the mutual nearest
+    partner within tau, tau for a point without one."""
+    u, v, usable, px, py = kernel_data(seed)
+    tau = 40.0
+    got = view_terms(u, v, usable, px, py, tau, MUTUAL)
+    d2 = reference_d2(u, v, usable, px, py)                    # (N, M, P)
+    for n in range(len(u)):
+        used = np.nonzero(usable[n])[0]
+        total, pairs = 0.0, 0
+        for m in used:
+            p = int(np.argmin(d2[n, m]))
+            if d2[n, m, p] < tau * tau and int(np.argmin(d2[n, :, p])) == m:
+                total += 2 * d2[n, m, p]
+                pairs += 1
+        total += tau * tau * (len(px) + len(used) - 2 * pairs)
+        assert got[n] == pytest.approx(np.sqrt(total / (len(px) + len(used))), rel=1e-12), n
+    assert got[0] == pytest.approx(tau)                        # nothing usable: every image point pays tau
+    # the data has mutual pairs, pairs beyond tau and non-mutual nearest neighbours
+    assert np.any(got[1:] < tau)
 
 
 def test_chamfer_sums_exact_matches_give_zero():
