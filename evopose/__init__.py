@@ -10,10 +10,11 @@ from .problem import Bounds, Model, PoseProblem, View
 from .refine import refine
 from .search import Ask, EvoPose, EvoPoseState, Told
 from .solver import Solution, pose_mismatch, solve, track
+from .uncertainty import Confidence, ConfidenceRules, assess
 
 __all__ = [
-    "Ask", "Bounds", "Camera", "Evaluator", "EvoPose", "EvoPoseState", "LocalSearch", "LocalState", "Match", "Model",
-    "PARAM_NAMES", "PoseObjective", "PoseProblem", "SearchOptions", "Solution", "Told", "View", "evolve",
-    "matrix_from_pose", "pose_from_matrix", "pose_mismatch", "quaternion_from_euler", "refine", "rotation_from_euler",
-    "solve", "step_weights", "track",
+    "Ask", "Bounds", "Camera", "Confidence", "ConfidenceRules", "Evaluator", "EvoPose", "EvoPoseState", "LocalSearch",
+    "LocalState", "Match", "Model", "PARAM_NAMES", "PoseObjective", "PoseProblem", "SearchOptions", "Solution", "Told",
+    "View", "assess", "evolve", "matrix_from_pose", "pose_from_matrix", "pose_mismatch", "quaternion_from_euler",
+    "refine", "rotation_from_euler", "solve", "step_weights", "track",
 ]

@@ -163,9 +163,10 @@ def _rivals(state, objective: PoseObjective, options: SearchOptions) -> np.ndarr
 
 
 def pose_mismatch(problem: PoseProblem, pose: np.ndarray, options: SearchOptions | None = None) -> float:
-    """:attr:`evopose.fitness.Match.mismatch` of ``pose`` (6,) under the robust fitness: 0 perfect, 1 no match."""
+    """:attr:`evopose.fitness.Match.mismatch` of ``pose`` (6,) under the options' bounded fitness ("mutual" when
+    they name the paper's unbounded eq. 1): 0 perfect, 1 no match."""
     options = options or SearchOptions()
-    objective = PoseObjective(problem, "robust", options.tau)
+    objective = PoseObjective(problem, "mutual" if options.fitness == "paper" else options.fitness, options.tau)
     return float(objective.mismatch(objective(np.atleast_2d(pose))[0]))
 
 
