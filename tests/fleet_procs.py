@@ -114,3 +114,14 @@ class Fleet:
     def close(self) -> None:
         for proc in self.procs:
             proc.kill()
+
+
+def good_from_first(summary: dict) -> tuple[int, bool]:
+    """From an agent's summary (its last published poses, ``[frame, x, y, z, roll, pitch, yaw, good]``): how many
+    frames came before the first good one, and whether every frame after it was good (a pose once confident is
+    not lost: the real-time search may take a few frames, then the vehicle holds the target)."""
+    flags = [bool(p[7]) for p in summary["poses"]]
+    if True not in flags:
+        return len(flags), False
+    first = flags.index(True)
+    return first, all(flags[first:])
