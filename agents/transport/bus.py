@@ -53,6 +53,8 @@ log = logging.getLogger("evopose.bus")
 
 #: Time given to queued outgoing messages to leave at close, s.
 FLUSH_S = 0.2
+#: The budget key shared by every sender without a presence token (not a team-mate that announced itself).
+UNKNOWN_SENDER = "@unknown"
 #: Longest time close() spends handing already received messages to the worker, s.
 DRAIN_S = 2.0
 
@@ -285,7 +287,10 @@ class FleetBus:
             if size > limit:
                 self._reject(topic, "oversized", f"{key}: payload of {size} bytes exceeds the {limit}-byte limit")
                 return
-            if not self._budget.admit(topic, key, time.monotonic()):  # a flood: dropped before any decoding
+            parts = key.split("/")
+            # senders without a presence token share one small budget: a flood under new names each time is one flood
+            sender = key if len(parts) > 2 and parts[2] in self._alive else UNKNOWN_SENDER
+            if not self._budget.admit(topic, sender, time.monotonic()):  # a flood: dropped before any decoding
                 self._reject(topic, "rate-limited", f"{key}: over {self._budget.rate(topic):g} messages/s")
                 return
             if not self._inbox.put(("sample", topic, key, sample.payload.to_bytes(), time.time_ns()), ring=ring):
