@@ -31,7 +31,6 @@ nothing matches; squared for the mutual kind, a share of squared distances) and 
 from __future__ import annotations
 
 import copy
-import dataclasses
 from dataclasses import dataclass, field
 from functools import cached_property
 from typing import Literal
