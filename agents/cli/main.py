@@ -22,8 +22,8 @@ from agents.cli import scenario as scenario_commands
 from agents.cli import world as world_commands
 from agents.cli.options import json_line
 
-#: The fitness kinds of evopose.fitness.FitnessKind: robust (truncated, scale-aware) or the paper's eq. (1).
-FITNESS_KINDS = ("robust", "paper")
+#: The fitness kinds of evopose.fitness.FitnessKind: mutual (the default), robust, or the paper's eq. (1).
+FITNESS_KINDS = ("mutual", "robust", "paper")
 
 #: Exit code of a malformed input or a bad command-line argument.
 USAGE_ERROR = 2
@@ -51,7 +51,8 @@ def solve_command(
     as_json: Annotated[bool, typer.Option("--json", help="Print one JSON object instead of a table.")] = False,
     seed: Annotated[int | None, typer.Option(min=0, help="Random seed; overrides the file's seed.")] = None,
     time_budget: Annotated[float | None, typer.Option(min=0, help="Wall-time budget in seconds.")] = None,
-    fitness: Annotated[str | None, typer.Option(help="Fitness: robust or the paper's eq. (1) (paper).")] = None,
+    fitness: Annotated[str | None, typer.Option(help="Fitness: mutual (default), robust, or the paper's eq. (1) "
+                                                     "(paper).")] = None,
     image: Annotated[Path | None, typer.Option(help="Solve from this image instead of a problem file "
                                                     "(needs --model and --camera).")] = None,
     model: Annotated[str | None, typer.Option(help="Target-model file (or shipped name) for --image.")] = None,
