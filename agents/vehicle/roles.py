@@ -37,6 +37,8 @@ from agents.vehicle.team_views import TeamViews, attitude_knowledge, build_views
 Emit = Callable[[dict], None]
 #: Share of a frame's period a search from scratch may take in the frame loop (the rest: render, extract, share).
 SEARCH_SHARE_OF_FRAME = 0.5
+#: Share of the time the improver thread may run generations (it shares the interpreter with the frame loop).
+IMPROVER_DUTY = 0.5
 #: Hints kept while waiting for the next frame or generation (the newest).
 HINTS_KEPT = 64
 
@@ -341,6 +343,7 @@ class CameraVehicle(Vehicle):
         hint_mode = self.config.share == "hint"
         next_s = time.monotonic()
         while not stop.is_set() and not self._done.is_set():
+            started = time.monotonic()
             with self._estimator_lock:
                 estimate = self.estimator.generation(self.take_hints() if hint_mode else None, budget_s=period)
             # a search's best so far, or an unsure pose, is no hint
@@ -348,7 +351,9 @@ class CameraVehicle(Vehicle):
                 self.send_hint(estimate.pose)
             now = time.monotonic()
             next_s = max(next_s + period, now - period)
-            self._done.wait(max(0.0, next_s - now) if estimate is not None else 0.01)
+            # at most IMPROVER_DUTY of the time: the frame loop (rendering, extraction) keeps the camera rate
+            rest = (now - started) * (1.0 - IMPROVER_DUTY) / IMPROVER_DUTY
+            self._done.wait(max(next_s - now, rest) if estimate is not None else 0.01)
 
 
 class GroundStation(CameraVehicle):
