@@ -20,9 +20,13 @@ from agents.transport.presence import ensure_name_free
 from agents.transport.session import SessionOptions, open_session
 from agents.vehicle.config import CAMERA_ROLES, AgentConfig
 from agents.vehicle.memory import pin_mmap_threshold
-from agents.vehicle.roles import ROLE_CLASSES
+from agents.vehicle.roles import CameraVehicle, GroundStation, Vehicle
+from agents.vehicle.target_roles import Airship, Target
 
 Emit = Callable[[dict], None]
+#: The class of each role.
+ROLE_CLASSES: dict[str, type[Vehicle]] = {"uav": CameraVehicle, "ground-station": GroundStation,
+                                          "airship": Airship, "target": Target}
 
 
 def load_world(config: AgentConfig) -> Scenario:
