@@ -26,6 +26,21 @@ NO_MATCH_D2 = 1e30
 PAPER, ROBUST, MUTUAL = 0, 1, 2
 
 
+@nb.njit(cache=True, fastmath=_FASTMATH, nogil=True, inline="always")
+def _nearest(um, vm, px, py, row):  # pragma: no cover - compiled
+    """The squared distance from the model point ``(um, vm)`` to its nearest image point ``(px, py)``; ``row``
+    (>= P,) keeps, per image point, its nearest squared distance to the model points seen so far (one pass
+    serves both matching directions of eq. 1)."""
+    best = NO_MATCH_D2
+    for p in range(px.shape[0]):
+        dx = px[p] - um
+        dy = py[p] - vm
+        d2 = dx * dx + dy * dy
+        best = min(best, d2)
+        row[p] = min(row[p], d2)
+    return best
+
+
 @nb.njit(cache=True, fastmath=_FASTMATH, nogil=True)
 def chamfer_row(u, v, usable, px, py, tau, robust, row):  # pragma: no cover - compiled
     """Both matching directions of one pose in one view.
@@ -58,15 +73,7 @@ def chamfer_row(u, v, usable, px, py, tau, robust, row):  # pragma: no cover - c
     for m in range(u.shape[0]):
         if not usable[m]:
             continue
-        um = u[m]
-        vm = v[m]
-        best = NO_MATCH_D2
-        for p in range(P):
-            dx = px[p] - um
-            dy = py[p] - vm
-            d2 = dx * dx + dy * dy
-            best = min(best, d2)
-            row[p] = min(row[p], d2)
+        best = _nearest(u[m], v[m], px, py, row)
         cnt += 1
         s_mod += np.sqrt(min(best, tau2))
     s_img = 0.0
@@ -103,16 +110,7 @@ def mutual_row(u, v, usable, px, py, tau, row, col):  # pragma: no cover - compi
         col[m] = NO_MATCH_D2
         if not usable[m]:
             continue
-        um = u[m]
-        vm = v[m]
-        best = NO_MATCH_D2
-        for p in range(P):
-            dx = px[p] - um
-            dy = py[p] - vm
-            d2 = dx * dx + dy * dy
-            row[p] = min(row[p], d2)
-            best = min(best, d2)
-        col[m] = best
+        col[m] = _nearest(u[m], v[m], px, py, row)
     tau2 = tau * tau
     s = 0.0
     n_usable = 0
