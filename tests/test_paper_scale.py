@@ -101,3 +101,20 @@ def test_two_agents_at_paper_scale_publish_the_same_pose():
     result = json.loads(out.stdout.strip().splitlines()[-1])
     agreement = frame_agreement(result["runs"], "H1", "H2")
     assert agreement["frames"] >= 15 and agreement["fraction"] >= 0.9, agreement
+
+
+def test_a_hint_that_fits_about_as_well_wins_only_with_the_margin():
+    """The rule itself: a team-mate's pose whose mismatch on the own views is a little higher than the own best's
+    is taken with the hint margin (> 0) and left with margin 0 (feature sets: the fittest wins)."""
+    scenario = load_scenario("exp2-paper-scale")
+    frame = SimulatedCamera(scenario, "H2").acquire(0, 0)
+    views, _ = build_views([own_view("H2", 0, frame.camera, frame.points)])
+    estimator = CooperativeEstimator(scenario.model.evopose_model(), scenario.bounds(), seed=3)
+    assert estimator.estimate(views, frame=0).good
+    problem = estimator.problem(views)
+    own = estimator.current_best
+    nearby = own + np.array([0.02, 0.0, 0.0, 0.0, 0.0, 0.0])  # a slightly worse fit (mismatch 0.166 -> 0.181)
+    assert np.array_equal(estimator._start(problem, nearby[None], 0.0), own)
+    np.testing.assert_allclose(estimator._start(problem, nearby[None], 0.1), nearby, atol=1e-12)
+    far = own + np.array([2.0, 2.0, 0.0, 0.0, 0.0, 1.0])  # fits much worse: never taken
+    assert np.array_equal(estimator._start(problem, far[None], 0.1), own)

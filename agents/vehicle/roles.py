@@ -12,6 +12,7 @@
 from __future__ import annotations
 
 import threading
+from abc import ABC, abstractmethod
 import time
 from collections.abc import Callable
 
@@ -56,7 +57,7 @@ class HintSchedule:
         return True
 
 
-class Vehicle:
+class Vehicle(ABC):
     """The frame loop every role shares: one ``frame(n)`` per tick of the fleet's clock, a summary at the end."""
 
     role = "vehicle"
@@ -74,8 +75,9 @@ class Vehicle:
     def prepare(self) -> None:
         """One-off work before frame 0."""
 
+    @abstractmethod
     def frame(self, n: int) -> None:
-        raise NotImplementedError
+        """Everything the role does at frame ``n`` of the fleet's clock (each role defines it)."""
 
     def run(self, stop: threading.Event) -> dict:
         # wait for the team-mates while warming up: they are present from the moment their bus opens, before
