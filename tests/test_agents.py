@@ -90,7 +90,9 @@ def test_feature_sharing_keeps_the_camera_rate_and_both_publish_the_same_pose(te
         assert traffic["sent"]["features"] == 20 and traffic["received"]["features"] >= 15
         assert traffic["bytes_sent"]["features"] // traffic["sent"]["features"] in FEATURE_SIZE
     h1, h2 = team.frames("H1"), team.frames("H2")
-    both = [n for n in h1 if n in h2 and h1[n]["views"] == h2[n]["views"] == ["H1", "H2"]]
+    # the same inputs: both views, of the same instant, on both (a late team-mate's previous view is not)
+    both = [n for n in h1 if n in h2 and h1[n]["views"] == h2[n]["views"] == ["H1", "H2"]
+            and h1[n]["views_of_this_instant"] and h2[n]["views_of_this_instant"]]
     assert len(both) >= 15
     for n in both:
         d = pose_of(h1[n]) - pose_of(h2[n])

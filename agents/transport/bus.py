@@ -142,7 +142,9 @@ class FleetBus:
         self._callbacks_done: list[threading.Event] = []
         self._rejections = RateLimitedLog()
         self._closed = threading.Event()
-        self._token = session.liveliness().declare_token(alive_key(fleet, vehicle)) if announce else None
+        self._token: zenoh.LivelinessToken | None = None
+        if announce:
+            self.announce()
         self._presence = session.liveliness().declare_subscriber(alive_selector(fleet), self._on_presence,
                                                                  history=True)
         self._worker = threading.Thread(target=self._work, name=f"fleetbus-{vehicle}", daemon=True)
@@ -160,6 +162,13 @@ class FleetBus:
             raise
 
     # -- presence ---------------------------------------------------------------------------
+
+    def announce(self) -> None:
+        """Declare this vehicle's liveliness token: team-mates see it present from now on. An agent opens its
+        bus with ``announce=False``, declares its subscriptions, then announces, so that a team-mate that
+        starts on seeing it present loses none of its first messages."""
+        if self._token is None:
+            self._token = self.session.liveliness().declare_token(alive_key(self.fleet, self.vehicle))
 
     def teammates(self) -> frozenset[str]:
         """Vehicles of the fleet whose liveliness token is present now (not this one)."""

@@ -65,11 +65,12 @@ def run_agent(options: SessionOptions, config: AgentConfig, stop: threading.Even
     role = resolve_role(scenario, config.vehicle, config.role)
     if role in CAMERA_ROLES:
         scenario.bounds()  # a camera vehicle needs the operating area: fail before joining the fleet
+    ROLE_CLASSES[role].warm_up(config, scenario)
     session = open_session(options)
     try:
         ensure_name_free(session, config.fleet, config.vehicle)  # a second agent of this name refuses to start
         bus = FleetBus(session, config.fleet, config.vehicle, max_age_s=config.max_age_s, stats_period_s=1.0,
-                       on_join=lambda v: emit({"event": "join", "vehicle": v}),
+                       announce=False, on_join=lambda v: emit({"event": "join", "vehicle": v}),
                        on_leave=lambda v: emit({"event": "leave", "vehicle": v}), owns_session=True)
     except BaseException:
         session.close()
@@ -77,4 +78,5 @@ def run_agent(options: SessionOptions, config: AgentConfig, stop: threading.Even
     with bus:
         vehicle = ROLE_CLASSES[role](config, bus, scenario, emit)
         vehicle.subscribe()
+        bus.announce()  # present only once warm and listening: a team-mate may start on seeing it
         return vehicle.run(stop)

@@ -72,27 +72,20 @@ class Vehicle(ABC):
     def subscribe(self) -> None:
         """Declare the subscriptions of the role (before the first frame)."""
 
-    def prepare(self) -> None:
-        """One-off work before frame 0."""
+    @classmethod
+    def warm_up(cls, config: AgentConfig, scenario: Scenario) -> None:
+        """One-off work before joining the fleet (compilation, caches), so that a team-mate that sees this
+        vehicle present can start its frames at once: a present vehicle is a ready one."""
 
     @abstractmethod
     def frame(self, n: int) -> None:
         """Everything the role does at frame ``n`` of the fleet's clock (each role defines it)."""
 
     def run(self, stop: threading.Event) -> dict:
-        # wait for the team-mates while warming up: they are present from the moment their bus opens, before
-        # their own warm-up, and a quick one may have come and gone by the time ours is over
         mates = [v for v in self.config.wait_for if v != self.config.vehicle]
-        met: dict[str, bool] = {}
-        waiter = threading.Thread(target=lambda: met.update(ok=self.bus.wait_for_teammates(
-            mates, self.config.wait_timeout_s)), name="wait-for-team", daemon=True) if mates else None
-        if waiter is not None:
-            waiter.start()
-        self.prepare()
-        if waiter is not None:
-            waiter.join()
+        if mates:  # warmed up before joining (warm_up): present team-mates are ready ones
+            ok = self.bus.wait_for_teammates(mates, self.config.wait_timeout_s)
             alive = sorted(self.bus.teammates())
-            ok = met.get("ok", False) or set(mates) <= set(alive)  # all there at some moment, or now
             self.emit({"event": "teammates", "vehicle": self.config.vehicle, "ready": ok, "alive": alive})
             if not ok:  # a team that never met is an error, not a run alone (docs/security.md)
                 missing = sorted(set(mates) - set(alive))
@@ -167,12 +160,14 @@ class CameraVehicle(Vehicle):
         elif share_mode == "hint":
             bus.subscribe(Topic.HINT, self._on_hint)
 
-    def prepare(self) -> None:
-        """Render once and solve once before frame 0, so that frame 0 is not slowed by caches and compilation."""
-        frame = self.camera.acquire(0, self.clock.stamp_ns(0))
-        views, _ = build_views([own_view(self.config.vehicle, 0, frame.camera, frame.points)])
+    @classmethod
+    def warm_up(cls, config: AgentConfig, scenario: Scenario) -> None:
+        """Render once and solve once before joining, so that frame 0 is not slowed by caches and compilation
+        (both are per process: the renderer's caches and the compiled kernels)."""
+        frame = SimulatedCamera(scenario, config.vehicle).acquire(0, 0)
+        views, _ = build_views([own_view(config.vehicle, 0, frame.camera, frame.points)])
         if views:
-            CooperativeEstimator(self.estimator.model, self.estimator.bounds,
+            CooperativeEstimator(scenario.model.evopose_model(), scenario.bounds(),
                                  SearchOptions(max_generations=1, min_starts=1)).estimate(views)
         release_free_memory()  # what the one-off work (ground texture, compilation) freed
 

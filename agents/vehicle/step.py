@@ -148,7 +148,10 @@ def step(estimator: CooperativeEstimator, inputs: FrameInputs, *, vehicle: str, 
     if share_mode == "hint" and good:
         outbox.append(Outgoing("hint", own.stamp_ns, {"pose": pose}))
     event = {"event": "frame", "vehicle": vehicle, "frame": inputs.index, "stamp_ns": own.stamp_ns,
-             "points": len(own.points), "views": list(used), "knowledge": [k.name for k in inputs.knowledge],
+             "points": len(own.points), "views": list(used),
+             # a team-mate's view of an earlier instant (it was late) differs from the one its owner used
+             "views_of_this_instant": all(m.stamp_ns == own.stamp_ns for m in inputs.mates if m.vehicle in used),
+             "knowledge": [k.name for k in inputs.knowledge],
              "pose": pose_dict(pose), "fitness": float(sol.fitness), "mismatch": estimate.mismatch,
              "good": good, "converged": estimate.good, "solved": estimate.solved, "searching": estimator.searching,
              "from_hint": bool(sol.from_hint), "seconds": seconds}
