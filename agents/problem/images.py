@@ -57,24 +57,29 @@ def detect_marks(image: np.ndarray, colours: dict | list[str] | None = None) -> 
 
 
 def frustum_bounds(camera: Camera, model: Model, points: np.ndarray) -> Bounds:
-    """A search box for a target seen by one camera: inside its view, at the depth its apparent size gives.
+    """A search box for a target seen by one camera: around where its marks are, at the depth their size gives.
 
-    The depth is ``f * model size / spread of the image points``, searched from half to twice that;
+    The target's apparent size is measured robustly, so that clutter does not shrink the depth: the median
+    distance of the image points (shape (N, 2), pixels) to their median, against the median distance of the
+    model's points to their centroid (metres); depth = f * model size / image size, searched from half to twice
+    that (foreshortening of a tilted target, a quarter of the points being clutter). Laterally the box holds
+    the rays through the marks' robust centre, widened by three times their robust size and the model's radius;
     angles span a full turn. The box is in the world frame (the camera's extrinsic applied).
     """
-    spread = float(np.max(np.ptp(points, axis=0))) if len(points) > 1 else 0.0
-    size = 2 * model.radius
+    points = np.asarray(points, float).reshape(-1, 2)
+    centre = np.median(points, axis=0) if len(points) else np.array([camera.cx, camera.cy])
+    image_size = float(np.median(np.linalg.norm(points - centre, axis=1))) if len(points) > 1 else 0.0
+    marks = np.asarray(model.points, float)
+    model_size = float(np.median(np.linalg.norm(marks - marks.mean(axis=0), axis=1)))
     f = 0.5 * (camera.fx + camera.fy)
-    depth = f * size / max(spread, 1.0)
-    z_lo, z_hi = 0.5 * depth, 2.0 * depth
-    corners = []
-    for z in (z_lo, z_hi):
-        for u in (0.0, camera.width):
-            for v in (0.0, camera.height):
-                corners.append([(u - camera.cx) / camera.fx * z, (v - camera.cy) / camera.fy * z, z])
-    corners = np.array(corners)
-    world = corners @ camera.world_from_camera[:3, :3].T + camera.world_from_camera[:3, 3]
-    lo, hi = world.min(axis=0) - size, world.max(axis=0) + size
+    depth = f * max(model_size, 1e-3) / max(image_size, 0.5)
+    half_px = 3.0 * max(image_size, 1.0)
+    u_lo, u_hi = max(centre[0] - half_px, 0.0), min(centre[0] + half_px, float(camera.width))
+    v_lo, v_hi = max(centre[1] - half_px, 0.0), min(centre[1] + half_px, float(camera.height))
+    corners = [[(u - camera.cx) / camera.fx * z, (v - camera.cy) / camera.fy * z, z]
+               for z in (0.5 * depth, 2.0 * depth) for u in (u_lo, u_hi) for v in (v_lo, v_hi)]
+    world = np.array(corners) @ camera.world_from_camera[:3, :3].T + camera.world_from_camera[:3, 3]
+    lo, hi = world.min(axis=0) - model.radius, world.max(axis=0) + model.radius
     return Bounds.from_dict({n: (float(lo[i]), float(hi[i])) for i, n in enumerate("xyz")})
 
 
