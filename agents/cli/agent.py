@@ -11,7 +11,7 @@ from rich.table import Table
 
 from agents.cli.options import ConfigFile, Connect, Listen, Mode, Multicast, emit_json, session_options
 from agents.cli.signals import stop_on_signals
-from agents.vehicle.config import ENCODINGS, ROLES, SHARES, AgentConfig
+from agents.vehicle.config import ENCODINGS, FEATURES, ROLES, SHARES, AgentConfig
 
 
 def summary_table(summary: dict) -> Table:
@@ -76,6 +76,17 @@ def register(app: typer.Typer) -> None:
                                                              "this from the operating area, m.")] = 1000.0,
         max_clock_offset: Annotated[float, typer.Option(help="Refuse data stamped further ahead than this, s "
                                                              "(team-mates' clocks must agree to within it).")] = 0.5,
+        source: Annotated[str | None, typer.Option(
+            help="Real images instead of the renderer: a video file, an image sequence (printf pattern like "
+                 "left%02d.jpg, a glob, or a directory) or a V4L2 device (/dev/videoN or N). A file source is played "
+                 "one frame per tick and ends the run; a device gives its newest frame.")] = None,
+        camera_info: Annotated[str | None, typer.Option(
+            help="ROS camera_info YAML of --source's camera (default: the scenario vehicle's intrinsics).")] = None,
+        camera_pose: Annotated[str | None, typer.Option(
+            help="YAML/JSON file with --source's static world_from_camera x, y, z, roll, pitch, yaw (m, rad; "
+                 "default: the scenario vehicle's pose).")] = None,
+        features: Annotated[str, typer.Option(help=f"Feature points: {', '.join(FEATURES)} (colour marks, or a "
+                                                   "chessboard's inner corners).")] = "marks",
         as_json: Annotated[bool, typer.Option("--json", help="One JSON object per event on stdout.")] = False,
         connect: Connect = None, listen: Listen = None, mode: Mode = None, config: ConfigFile = None,
         multicast: Multicast = False,
@@ -88,7 +99,8 @@ def register(app: typer.Typer) -> None:
             epoch_ns=epoch_ns, seed=seed, world_seed=world_seed, max_age_s=max_age, sync_wait_s=sync_wait,
             hint_rate_hz=hint_rate, image_encoding=image_encoding, use_attitude=imu, attitude_sigmas=imu_sigmas,
             wait_for=tuple(v.strip() for v in wait_for.split(",") if v.strip()), wait_timeout_s=wait_timeout,
-            time_budget_s=time_budget, operating_radius_m=operating_radius, max_clock_offset_s=max_clock_offset)
+            time_budget_s=time_budget, operating_radius_m=operating_radius, max_clock_offset_s=max_clock_offset,
+            source=source, camera_info=camera_info, camera_pose=camera_pose, features=features)
         console = Console(stderr=True)
 
         def emit(record: dict) -> None:
@@ -98,10 +110,13 @@ def register(app: typer.Typer) -> None:
                 console.print(f"{record['event']}: {record.get('vehicle')}")
             elif record["event"] == "no-estimate":
                 console.print(f"frame {record['frame']}: {record['reason']} ({record['points']})")
+            elif record["event"] == "end-of-source":
+                console.print(f"end of --source after {record['frames']} frames")
             elif record["event"] == "frame":
-                e = record["error"]
-                console.print(f"frame {record['frame']}: views {','.join(record['views'])} "
-                              f"error {e['position'] * 100:.1f} cm {max(e['roll'], e['pitch'], e['yaw']):.2f}° "
+                e, p = record.get("error"), record["pose"]  # no error without ground truth (a real source)
+                measured = (f"error {e['position'] * 100:.1f} cm {max(e['roll'], e['pitch'], e['yaw']):.2f}°"
+                            if e is not None else f"pose x {p['x']:.3f} y {p['y']:.3f} z {p['z']:.3f} m")
+                console.print(f"frame {record['frame']}: views {','.join(record['views'])} {measured} "
                               f"{'good' if record['good'] else 'not converged'} {record['seconds'] * 1e3:.0f} ms")
 
         with stop_on_signals() as stop:

@@ -56,8 +56,10 @@ def solve_command(
     image: Annotated[Path | None, typer.Option(help="Solve from this image instead of a problem file "
                                                     "(needs --model and --camera).")] = None,
     model: Annotated[str | None, typer.Option(help="Target-model file (or shipped name) for --image.")] = None,
-    camera: Annotated[Path | None, typer.Option(help="Camera file (the problem file's camera fields) "
-                                                     "for --image.")] = None,
+    camera: Annotated[Path | None, typer.Option(help="Camera file for --image: the problem file's camera fields "
+                                                     "or a ROS camera_info YAML.")] = None,
+    features: Annotated[str, typer.Option(help="Points --image gives: marks (the model's colour marks) or "
+                                               "corners (a chessboard's inner corners).")] = "marks",
     overlay: Annotated[Path | None, typer.Option(help="Write a PNG of the first view with its points and "
                                                       "the model projected at the estimate.")] = None,
 ) -> None:
@@ -70,7 +72,7 @@ def solve_command(
         if problem is not None or model is None or camera is None:
             raise typer.BadParameter("--image needs --model and --camera, and no PROBLEM", param_hint="--image")
         result = solve_image(image, model, camera, seed=seed, time_budget=time_budget, fitness=fitness,
-                             overlay=overlay)
+                             overlay=overlay, features=features)
     elif problem is None:
         raise typer.BadParameter("Missing argument 'PROBLEM' (or --image with --model and --camera).",
                                  param_hint="PROBLEM")

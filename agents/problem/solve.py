@@ -10,7 +10,9 @@ import numpy as np
 from evopose import PoseProblem, SearchOptions, View, solve
 from evopose.fitness import FitnessKind
 
-from agents.problem.problem_file import CameraSpec, ProblemFileError, ProblemInputs, read_problem, solution_to_dict
+from agents.problem.camera_info import read_camera_file
+from agents.problem.extract import FEATURE_KINDS, point_extractor
+from agents.problem.problem_file import ProblemFileError, ProblemInputs, read_problem, solution_to_dict
 
 
 def solve_file(path: str | Path, *, seed: int | None = None, time_budget: float | None = None,
@@ -31,29 +33,30 @@ def solve_file(path: str | Path, *, seed: int | None = None, time_budget: float 
 
 def solve_image(image: str | Path, model: str | Path, camera: str | Path, *, seed: int | None = None,
                 time_budget: float | None = None, fitness: FitnessKind | None = None,
-                overlay: str | Path | None = None) -> dict:
-    """Solve from one image: extract the marks of ``model`` (a model file), search inside ``camera``'s view.
+                overlay: str | Path | None = None, features: str = "marks") -> dict:
+    """Solve from one image: extract the points of ``model`` (a model file), search inside ``camera``'s view.
 
     ``camera`` is a YAML/JSON file with the problem file's camera fields (intrinsics, optional distortion
-    and ``world_from_camera``). The search box is the camera's view at the depth the marks' spread gives.
+    and ``world_from_camera``) or a ROS ``camera_info`` YAML (:mod:`agents.problem.camera_info`). ``features``:
+    the model's colour ``marks`` or a chessboard's inner ``corners`` (:mod:`agents.problem.extract`). The search
+    box is the camera's view at the depth the points' spread gives.
     """
     from scenarios.errors import WorldError
     from scenarios.target import load_model
 
-    from scenarios.documents import read_mapping, validate
+    from agents.problem.images import frustum_bounds, read_image
 
-    from agents.problem.images import detect_marks, frustum_bounds, read_image
-
-    spec = validate(CameraSpec, read_mapping(camera, ProblemFileError), camera, ProblemFileError)
-    cam = spec.to_camera()
+    cam = read_camera_file(camera)
     target = load_model(model)
     picture = read_image(image)
     if picture.shape[:2] != (cam.height, cam.width):
         raise WorldError(f"{image}: image is {picture.shape[1]}x{picture.shape[0]}, "
                          f"the camera is {cam.width}x{cam.height}")
-    points = detect_marks(picture, target.palette).points
+    if features not in FEATURE_KINDS:
+        raise ProblemFileError(f"--features must be one of {', '.join(FEATURE_KINDS)}, got {features!r}")
+    points = point_extractor(features, target.palette)(picture)
     if len(points) < 3:
-        raise WorldError(f"{image}: {len(points)} marks found; at least 3 are needed")
+        raise WorldError(f"{image}: {len(points)} {features} found; at least 3 are needed")
     evo_model = target.evopose_model()
     problem = PoseProblem(evo_model, (View(cam, points),), frustum_bounds(cam, evo_model, points))
     inputs = ProblemInputs(problem, SearchOptions(), None, [picture], target)

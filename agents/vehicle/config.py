@@ -15,6 +15,8 @@ ROLES = ("uav", "ground-station", "airship", "target")
 SHARES = ("none", "raw", "features", "hint")
 ENCODINGS = ("raw", "jpeg", "png")
 CAMERA_ROLES = ("uav", "ground-station")
+#: Feature points a camera vehicle extracts (``--features``; agents.problem.extract.FEATURE_KINDS).
+FEATURES = ("marks", "corners")
 #: Share modes in which a vehicle keeps improving its own estimate between frames (generations on the last
 #: views). Not with raw images or features: there every vehicle must compute the same pose from the same data.
 IDLE_GENERATIONS = ("none", "hint")
@@ -47,6 +49,11 @@ class AgentConfig:
     time_budget_s: float | None = None
     operating_radius_m: float = 1000.0
     max_clock_offset_s: float = 0.5
+    #: a real image source (video file, image sequence, V4L2 device) instead of the renderer; see vehicle.sources
+    source: str | None = None
+    camera_info: str | Path | None = None
+    camera_pose: str | Path | None = None
+    features: str = "marks"
 
     def check(self) -> None:
         """Raise :class:`FleetError` naming the first bad field."""
@@ -59,6 +66,12 @@ class AgentConfig:
             raise FleetError(f"--role must be one of {', '.join(ROLES)}, got {self.role!r}")
         if self.share not in SHARES:
             raise FleetError(f"--share must be one of {', '.join(SHARES)}, got {self.share!r}")
+        if self.features not in FEATURES:
+            raise FleetError(f"--features must be one of {', '.join(FEATURES)}, got {self.features!r}")
+        if self.source is None and (self.camera_info is not None or self.camera_pose is not None):
+            raise FleetError("--camera-info and --camera-pose describe a real camera: they need --source")
+        if self.source is not None and not str(self.source).strip():
+            raise FleetError("--source must not be empty")
         if self.image_encoding not in ENCODINGS:
             raise FleetError(f"--image-encoding must be one of {', '.join(ENCODINGS)}, got {self.image_encoding!r}")
         for name, option in (("fps", "--fps"), ("hint_rate_hz", "--hint-rate"), ("max_age_s", "--max-age"),

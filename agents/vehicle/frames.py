@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -77,10 +78,11 @@ class Frame:
         With its ``world_from_camera`` at acquisition.
     points : array (N, 2)
         Extracted feature points (mark centres), pixels.
-    truth : array (6,)
-        ``world_from_target`` ground truth, for evaluation only.
+    truth : array (6,) or None
+        ``world_from_target`` ground truth, for evaluation only; None from a real source (no ground truth).
     render_s : float
-        Seconds the simulation took to render the image (what a real camera would not cost).
+        Seconds the simulation took to render the image (what a real camera would not cost); for a real
+        source the seconds its read took.
     """
 
     index: int
@@ -89,17 +91,21 @@ class Frame:
     image: np.ndarray
     camera: Camera
     points: np.ndarray
-    truth: np.ndarray
+    truth: np.ndarray | None
     render_s: float = 0.0
 
 
 class SimulatedCamera:
-    """A vehicle's camera in a scenario: renders the frame, extracts the target's colour marks."""
+    """A vehicle's camera in a scenario: renders the frame, extracts the target's colour marks (or the points
+    ``extract`` gives: ``image (H, W, 3) -> (N, 2)``)."""
 
-    def __init__(self, scenario: Scenario, vehicle: str) -> None:
+    def __init__(self, scenario: Scenario, vehicle: str,
+                 extract: Callable[[np.ndarray], np.ndarray] | None = None) -> None:
         self.scenario = scenario
         self.vehicle = scenario.vehicle(vehicle).name
         self.ranges = colour_ranges(scenario.model.palette)
+        if extract is not None:
+            self.extract = extract
 
     def scene_frame(self, index: int) -> int:
         return index % self.scenario.frames
@@ -115,3 +121,6 @@ class SimulatedCamera:
     def extract(self, image: np.ndarray) -> np.ndarray:
         """The target's colour marks in a BGR image (own or a team-mate's raw frame), shape (N, 2)."""
         return detect_colour_marks(image, self.ranges).points
+
+    def close(self) -> None:
+        """Nothing to release (a real source closes its device or file)."""

@@ -27,10 +27,11 @@ from scenarios.world import Scenario
 from agents.errors import TeamNotMetError
 from agents.transport.bus import FleetBus, Received
 from agents.vehicle.config import IDLE_GENERATIONS, AgentConfig
-from agents.vehicle.frames import NS, FrameClock, SimulatedCamera
+from agents.vehicle.frames import NS, FrameClock
 from agents.vehicle.memory import release_free_memory
 from agents.vehicle.plausibility import Plausibility
 from agents.vehicle.records import RunRecord
+from agents.vehicle.sources import SourceEnded, SourceError, open_camera
 from agents.vehicle.step import FrameInputs, Outgoing, share, step
 from agents.vehicle.team_views import TeamViews, attitude_knowledge, build_views, mate_view, own_view, wait_until
 
@@ -105,7 +106,11 @@ class Vehicle(ABC):
             n = nxt
             if not self._started_ns:
                 self._started_ns = self.clock.stamp_ns(n)
-            self.frame(n)
+            try:
+                self.frame(n)
+            except SourceEnded:  # a video file or image sequence has no more frames: a clean end, not an error
+                self.emit({"event": "end-of-source", "vehicle": self.config.vehicle, "frames": self.record.frames})
+                break
             self.record.frames += 1
         return self.summary()
 
@@ -133,7 +138,7 @@ class CameraVehicle(Vehicle):
         super().__init__(config, bus, scenario, emit)
         self.sync_wait_s = self.period_s / 2 if config.sync_wait_s is None else config.sync_wait_s
         self.team = TeamViews()
-        self.camera = SimulatedCamera(scenario, config.vehicle)
+        self.camera = open_camera(config, scenario)  # the renderer, or a real source (--source)
         self.plausible = Plausibility(scenario.bounds(), config.operating_radius_m, config.max_clock_offset_s)
         self.estimator = CooperativeEstimator(scenario.model.evopose_model(), scenario.bounds(),
                                               SearchOptions(time_budget=config.time_budget_s), seed=config.seed)
@@ -164,7 +169,13 @@ class CameraVehicle(Vehicle):
     def warm_up(cls, config: AgentConfig, scenario: Scenario) -> None:
         """Render once and solve once before joining, so that frame 0 is not slowed by caches and compilation
         (both are per process: the renderer's caches and the compiled kernels)."""
-        frame = SimulatedCamera(scenario, config.vehicle).acquire(0, 0)
+        camera = open_camera(config, scenario)  # a bad --source or camera file fails here, before joining
+        try:
+            frame = camera.acquire(0, 0)
+        except SourceEnded:
+            raise SourceError(f"--source {config.source}: no frames") from None
+        finally:
+            camera.close()
         views, _ = build_views([own_view(config.vehicle, 0, frame.camera, frame.points)])
         if views:
             CooperativeEstimator(scenario.model.evopose_model(), scenario.bounds(),
@@ -183,6 +194,7 @@ class CameraVehicle(Vehicle):
             self._done.set()
             if improver is not None and improver.is_alive():
                 improver.join(2.0)
+            self.camera.close()
 
     # -- inputs ---------------------------------------------------------------------------------
 
@@ -294,6 +306,7 @@ class CameraVehicle(Vehicle):
                 self.send_hint(out.fields["pose"])
             else:
                 self.publish(out)
+        result.event["scene_frame"] = frame.scene_frame  # the scenario's frame, or the source's frame number
         self.account(result)
         self.emit(result.event)
 

@@ -1,0 +1,45 @@
+"""Which image points a target gives EvoPose: its colour marks, or a chessboard's inner corners.
+
+``--features marks`` (the default of ``evopose agent`` and ``evopose solve --image``) finds the model's colour
+marks (:func:`evopose.features.detect_colour_marks`, the paper's Section IV); ``--features corners`` finds
+Shi-Tomasi corners (:func:`evopose.features.detect_corners`) and keeps the X-junctions
+(:func:`evopose.features.x_junctions`), the inner corners of a chessboard: a board's outline and the corners
+of boxes are L-corners and would let a grid shifted by one square fit as well as the true one. Either way the
+points are unordered and unlabelled: EvoPose needs no correspondences (eq. 1).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+
+from evopose.features import colour_ranges, detect_colour_marks, detect_corners, x_junctions
+
+#: The kinds of feature points (``--features``).
+FEATURE_KINDS = ("marks", "corners")
+#: Shi-Tomasi settings of ``corners``: at most this many corners, quality relative to the strongest, spacing in
+#: pixels (a 640 x 480 photo of a 9 x 6 board 0.3-0.4 m away: squares of 30-60 px).
+MAX_CORNERS, CORNER_QUALITY, CORNER_SPACING_PX = 150, 0.05, 8.0
+
+Extractor = Callable[[np.ndarray], np.ndarray]
+
+
+def chessboard_corners(image: np.ndarray) -> np.ndarray:
+    """The X-junction corners of a BGR or grey uint8 image, shape (K, 2), pixels."""
+    found = detect_corners(image, max_corners=MAX_CORNERS, quality=CORNER_QUALITY, min_distance=CORNER_SPACING_PX)
+    return found[x_junctions(image, found)]
+
+
+def point_extractor(kind: str, palette: dict[str, tuple[int, int, int]]) -> Extractor:
+    """``image (H, W, 3) uint8 -> points (N, 2)`` for ``kind`` (one of :data:`FEATURE_KINDS`); ``palette`` is the
+    model's mark colours (name -> BGR), used by ``marks``."""
+    if kind == "corners":
+        return chessboard_corners
+    if kind != "marks":
+        raise ValueError(f"features must be one of {', '.join(FEATURE_KINDS)}, got {kind!r}")
+    ranges = colour_ranges(palette)
+    return lambda image: detect_colour_marks(image, ranges).points
+
+
+__all__ = ["FEATURE_KINDS", "chessboard_corners", "point_extractor"]

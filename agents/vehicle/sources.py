@@ -1,0 +1,259 @@
+"""Real image sources for a camera vehicle: a video file, an image sequence or a V4L2 device (``--source``).
+
+A :class:`SourceCamera` has the :class:`~agents.vehicle.frames.SimulatedCamera` interface
+(``acquire(index, stamp_ns) -> Frame``, ``extract(image)``), so a vehicle runs exactly the same per-frame loop on
+real images. Frames carry no ground truth (``Frame.truth`` is None). Pacing: each tick of the fleet clock takes
+the source's *next* frame (a file or a sequence is played frame by frame however late the loop is; when it ends,
+:class:`SourceEnded` stops the vehicle cleanly); a live device gives its *newest* frame (a reader thread keeps
+only the latest). What ``--source`` may be:
+
+- a video file (``cv2.VideoCapture``, FFmpeg);
+- an image sequence: a printf pattern (``left%02d.jpg``, read by ``cv2.VideoCapture``), a glob (``'img/*.png'``)
+  or a directory (its images in name order, read by ``cv2.imread``);
+- a V4L2 device: ``/dev/videoN`` or its index ``N``.
+
+The camera of frame ``k``: intrinsics from ``--camera-info`` (ROS camera_info), else the scenario vehicle's;
+``world_from_camera`` from ``--camera-pose``, else the scenario vehicle's at scenario frame ``k mod frames``
+(what the renderer would use for the same frame). Every bad input is one :class:`SourceError` line.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import glob
+import os
+import sys
+import threading
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from evopose import Camera
+from evopose.pose import matrix_from_pose
+from scenarios.errors import WorldError
+from scenarios.world import Scenario
+
+from agents.errors import FleetError
+from agents.problem.camera_info import read_camera_info, read_camera_pose
+from agents.problem.extract import Extractor, point_extractor
+from agents.problem.images import read_image
+from agents.vehicle.config import AgentConfig
+from agents.vehicle.frames import Frame, SimulatedCamera
+
+#: Files a directory source plays (by suffix, lower case).
+IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".ppm", ".pgm", ".webp")
+#: How long a live device may take to deliver its first frame, s.
+FIRST_FRAME_TIMEOUT_S = 5.0
+
+
+class SourceError(FleetError):
+    """A ``--source`` (or its camera files) that cannot be used; one line naming it."""
+
+
+class SourceEnded(Exception):
+    """A file source has no more frames: the vehicle stops and reports its summary."""
+
+
+_quiet_lock = threading.Lock()
+
+
+@contextlib.contextmanager
+def quiet_native_stderr() -> Iterator[None]:
+    """Silence what OpenCV and FFmpeg print from C on file descriptor 2 (``[ WARN:0@..] can't open camera``,
+    ``moov atom not found``) while a capture opens or reads: the agent's own error is one line."""
+    with _quiet_lock:
+        sys.stderr.flush()
+        saved = os.dup(2)
+        try:
+            with open(os.devnull, "wb") as null:
+                os.dup2(null.fileno(), 2)
+            yield
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+
+
+class CaptureReader:
+    """Frames of a video file or a printf-pattern image sequence, in order, through ``cv2.VideoCapture``."""
+
+    def __init__(self, capture: cv2.VideoCapture, name: str) -> None:
+        self.capture, self.name = capture, name
+
+    def read(self) -> np.ndarray:
+        """The next frame, (H, W, 3) uint8 BGR; :class:`SourceEnded` after the last one."""
+        with quiet_native_stderr():
+            ok, image = self.capture.read()
+        if not ok or image is None:
+            raise SourceEnded(self.name)
+        return image
+
+    def close(self) -> None:
+        self.capture.release()
+
+
+class FileListReader:
+    """Frames of an image sequence given as files (a glob or a directory), in order, through ``cv2.imread``."""
+
+    def __init__(self, paths: list[Path], name: str) -> None:
+        self.paths, self.name, self.next = paths, name, 0
+
+    def read(self) -> np.ndarray:
+        if self.next >= len(self.paths):
+            raise SourceEnded(self.name)
+        path, self.next = self.paths[self.next], self.next + 1
+        try:
+            return read_image(path)
+        except WorldError as err:
+            raise SourceError(f"--source {self.name}: {err}") from None
+
+    def close(self) -> None:
+        pass
+
+
+class LatestFrameReader:
+    """A live camera: a thread reads it continuously and keeps only the newest frame, which :meth:`read` returns
+    (a slow frame loop never works through a backlog). Ends when the device stops delivering."""
+
+    def __init__(self, capture: cv2.VideoCapture, name: str, first_timeout_s: float = FIRST_FRAME_TIMEOUT_S) -> None:
+        self.capture, self.name, self.first_timeout_s = capture, name, first_timeout_s
+        self._latest: np.ndarray | None = None
+        self._count = 0  # frames read from the device so far
+        self._ended = False
+        self._fresh = threading.Condition()
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name=f"source {name}", daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        while not self._stop.is_set():
+            ok, image = self.capture.read()
+            with self._fresh:
+                if not ok or image is None:
+                    self._ended = True
+                else:
+                    self._latest, self._count = image, self._count + 1
+                self._fresh.notify_all()
+            if self._ended:
+                return
+
+    @property
+    def frames_read(self) -> int:
+        """How many frames the device delivered (the frame loop sees only the newest of them)."""
+        return self._count
+
+    def read(self) -> np.ndarray:
+        """The newest frame (waiting for the first one); :class:`SourceEnded` once the device stopped."""
+        with self._fresh:
+            if not self._fresh.wait_for(lambda: self._latest is not None or self._ended, self.first_timeout_s):
+                raise SourceError(f"--source {self.name}: no frame within {self.first_timeout_s:g} s")
+            if self._ended:
+                raise SourceEnded(self.name)
+            return self._latest
+
+    def close(self) -> None:
+        self._stop.set()
+        self._thread.join(2.0)
+        self.capture.release()
+
+
+def _device(source: str) -> int | str | None:
+    """The device of ``source``: an index (``"0"``), a ``/dev/video*`` path, or None if it is not a device."""
+    if source.isdigit():
+        return int(source)
+    return source if source.startswith("/dev/video") else None
+
+
+def open_reader(source: str) -> CaptureReader | FileListReader | LatestFrameReader:
+    """A reader of ``source`` (see the module's docstring); :class:`SourceError` when it cannot be opened."""
+    device = _device(source)
+    if device is not None:
+        if isinstance(device, str) and not os.path.exists(device):
+            raise SourceError(f"--source {source}: no such device")
+        with quiet_native_stderr():
+            capture = cv2.VideoCapture(device, cv2.CAP_V4L2)
+        if not capture.isOpened():
+            raise SourceError(f"--source {source}: the V4L2 device does not open (busy, not a camera, or no access)")
+        return LatestFrameReader(capture, source)
+    path = Path(source)
+    if path.is_dir():
+        files = sorted(p for p in path.iterdir() if p.is_file() and p.suffix.lower() in IMAGE_SUFFIXES)
+        if not files:
+            raise SourceError(f"--source {source}: the directory holds no images ({', '.join(IMAGE_SUFFIXES)})")
+        return FileListReader(files, source)
+    if glob.has_magic(source):
+        files = sorted(Path(p) for p in glob.glob(source) if Path(p).is_file())
+        if not files:
+            raise SourceError(f"--source {source}: the pattern matches no files")
+        return FileListReader(files, source)
+    if "%" in source:  # a printf pattern: an image sequence read by OpenCV
+        with quiet_native_stderr():
+            capture = cv2.VideoCapture(source)
+        if not capture.isOpened():
+            raise SourceError(f"--source {source}: no image sequence matches the pattern")
+        return CaptureReader(capture, source)
+    if not path.exists():
+        raise SourceError(f"--source {source}: no such file, directory or device")
+    if not path.is_file():
+        raise SourceError(f"--source {source}: not a regular file")
+    with quiet_native_stderr():
+        capture = cv2.VideoCapture(source)
+    if not capture.isOpened():
+        raise SourceError(f"--source {source}: not a video OpenCV can read")
+    return CaptureReader(capture, source)
+
+
+class SourceCamera:
+    """A vehicle's real camera: frames from a reader, the camera from files or the scenario, features extracted."""
+
+    def __init__(self, reader, scenario: Scenario, vehicle: str, extract: Extractor, *,
+                 intrinsics: Camera | None = None, world_from_camera: np.ndarray | None = None,
+                 intrinsics_from: str | None = None) -> None:
+        self.reader, self.scenario, self.extract = reader, scenario, extract
+        self.vehicle = scenario.vehicle(vehicle).name
+        self.intrinsics, self.world_from_camera = intrinsics, world_from_camera
+        self.intrinsics_from = intrinsics_from or f"scenario {scenario.name!r} vehicle {self.vehicle}"
+        self.frames = 0  # frames taken from the source
+
+    def camera(self, k: int) -> Camera:
+        """The camera of the source's frame ``k``."""
+        scene = self.scenario.camera(self.vehicle, k % self.scenario.frames)
+        k_cam = self.intrinsics or scene
+        pose = scene.world_from_camera if self.world_from_camera is None else self.world_from_camera
+        return Camera(k_cam.fx, k_cam.fy, k_cam.cx, k_cam.cy, k_cam.width, k_cam.height, k_cam.distortion, pose)
+
+    def acquire(self, index: int, stamp_ns: int) -> Frame:
+        """The source's next frame as fleet frame ``index`` (``Frame.scene_frame``: its number in the source)."""
+        t0 = time.perf_counter()
+        image = self.reader.read()
+        read_s = time.perf_counter() - t0
+        k, self.frames = self.frames, self.frames + 1
+        if image.ndim == 2:
+            image = cv2.cvtColor(image, cv2.COLOR_GRAY2BGR)
+        camera = self.camera(k)
+        if image.shape[:2] != (camera.height, camera.width):
+            raise SourceError(f"--source {self.reader.name}: frame {k} is {image.shape[1]}x{image.shape[0]}, "
+                              f"the camera ({self.intrinsics_from}) is {camera.width}x{camera.height}")
+        return Frame(index, k, stamp_ns, image, camera, self.extract(image), None, read_s)
+
+    def close(self) -> None:
+        self.reader.close()
+
+
+def open_camera(config: AgentConfig, scenario: Scenario) -> SimulatedCamera | SourceCamera:
+    """The vehicle's camera: the renderer, or ``config.source`` with its camera files (read now, so that a bad
+    one is an error before the vehicle joins its fleet)."""
+    extract = point_extractor(config.features, scenario.model.palette)
+    if config.source is None:
+        return SimulatedCamera(scenario, config.vehicle, extract)
+    intrinsics = None if config.camera_info is None else read_camera_info(config.camera_info)
+    pose = None if config.camera_pose is None else matrix_from_pose(read_camera_pose(config.camera_pose))
+    reader = open_reader(str(config.source))
+    return SourceCamera(reader, scenario, config.vehicle, extract, intrinsics=intrinsics, world_from_camera=pose,
+                        intrinsics_from=None if config.camera_info is None else f"--camera-info {config.camera_info}")
+
+
+__all__ = ["CaptureReader", "FileListReader", "LatestFrameReader", "SourceCamera", "SourceEnded", "SourceError",
+           "open_camera", "open_reader", "quiet_native_stderr"]
