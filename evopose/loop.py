@@ -4,8 +4,8 @@
 search of :func:`evopose.solve`) or :class:`evopose.local.LocalSearch` (the warm starts of
 :func:`evopose.track` and :meth:`evopose.cooperative.CooperativeEstimator.generation`). How candidates
 are evaluated is an :class:`Evaluator`: the coarse screening of fresh starts, the Lamarckian
-refinement (:func:`evopose.refine.refine`) and the fitness, eq. (4), with the paper's step rule for
-its weights. The optimiser never sees the objective, only fitness values and a match judgement.
+refinement (:func:`evopose.refine.refine`) and the fitness, eq. (4), with its weights' rule (the paper's
+step rule, or :mod:`evopose.weights`). The optimiser never sees the objective, only fitness values and a match judgement.
 """
 
 from __future__ import annotations
@@ -22,6 +22,7 @@ from .options import SearchOptions
 from .problem import PoseProblem
 from .refine import Schedule, annealing, refine
 from .search import Ask, Judge, Told
+from .weights import ViewWeighting, rule_weights, settled
 
 #: Truncation distance of the coarse fitness used to screen random starts, in units of tau.
 SCREEN_TAU_SCALE = 4.0
@@ -84,7 +85,9 @@ class Evaluator:
     exploit : tuple of schedules
         Refinement of the other candidates (children, hints, given poses).
     view_reject : float or None
-        Threshold of eq. (4)'s step rule (:meth:`PoseObjective.step_rule_weights`); None keeps the weights.
+        Threshold of eq. (4)'s step rule (:meth:`PoseObjective.step_rule_weights`); None: no step rule.
+    view_weighting : "equal" | "step" | "adaptive"
+        How eq. (4)'s weights follow the best pose (:func:`evopose.weights.rule_weights`); "equal" keeps them.
     """
 
     objective: PoseObjective
@@ -92,6 +95,7 @@ class Evaluator:
     explore: tuple[Schedule, ...] = ()
     exploit: tuple[Schedule, ...] = ()
     view_reject: float | None = None
+    view_weighting: ViewWeighting = "step"
 
     @classmethod
     def for_search(cls, problem: PoseProblem, options: SearchOptions) -> "Evaluator":
@@ -104,7 +108,7 @@ class Evaluator:
         if options.refine_steps:
             explore = (annealing(options.refine_steps),)
             exploit = (annealing(max(options.refine_steps // 2, 1), start=LOCAL_ANNEALING_START),)
-        return cls(objective, coarse, explore, exploit, options.view_reject)
+        return cls(objective, coarse, explore, exploit, options.view_reject, options.view_weights)
 
     @property
     def evaluations(self) -> int:
@@ -126,12 +130,19 @@ class Evaluator:
         return poses, fitness
 
     def reweighted(self, best_pose: np.ndarray) -> "Evaluator | None":
-        """The evaluator with eq. (4)'s step-rule weights at ``best_pose``, or None if they do not change."""
-        if self.view_reject is None or self.objective.n_views < 2:
+        """The evaluator with eq. (4)'s weights by its rule at ``best_pose``, or None if they do not change."""
+        if self.objective.n_views < 2 or self.view_weighting == "equal":
             return None
-        weights = self.objective.step_rule_weights(best_pose, self.view_reject)
-        if np.array_equal(weights, self.objective.weights):
-            return None
+        if self.view_weighting == "step":
+            if self.view_reject is None:
+                return None
+            weights = self.objective.step_rule_weights(best_pose, self.view_reject)
+            if np.array_equal(weights, self.objective.weights):
+                return None
+        else:
+            weights = rule_weights(self.objective, best_pose, self.view_weighting, self.view_reject)
+            if settled(self.objective.weights, weights):
+                return None
         return replace(self, objective=self.objective.with_weights(weights))
 
 

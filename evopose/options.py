@@ -8,6 +8,7 @@ import numpy as np
 
 from .fitness import FitnessKind, Match
 from .uncertainty import ConfidenceRules
+from .weights import VIEW_WEIGHTINGS, ViewWeighting
 
 
 @dataclass(frozen=True)
@@ -65,6 +66,11 @@ class SearchOptions:
         The default suits "mutual": at the paper's scale a right view reaches 0.73 of tau (2 px noise, 30 %
         clutter), a view of clutter alone 0.69-0.83, at the telephoto scale 0.67 and 0.88 or more
         ("robust" used 0.6).
+    view_weights : "equal" | "step" | "adaptive"
+        How eq. (4)'s weights follow the views during a search (:mod:`evopose.weights`): never ("equal", the
+        views' own ``W_k``), the paper's step rule at ``view_reject`` ("step"), or the step rule and a bounded
+        graded reliability per view from its own evidence (residual, marks matched one to one against its image
+        points, the information of its matches) ("adaptive").
     same_position : float
         Two poses are in the same basin when their positions differ by less than this
         fraction of the target distance...
@@ -94,6 +100,7 @@ class SearchOptions:
     patience: int = 6
     min_generations: int = 1
     view_reject: float | None = 0.8
+    view_weights: ViewWeighting = "step"
     same_position: float = 0.02
     same_rotation: float = np.deg2rad(3.0)
     confidence: ConfidenceRules = ConfidenceRules()
@@ -107,6 +114,8 @@ class SearchOptions:
             raise ValueError(f"immigrants must be a fraction in [0, 1], got {self.immigrants}")
         if self.refine_steps < 0 or self.max_generations < 1:
             raise ValueError("refine_steps must be >= 0 and max_generations >= 1")
+        if self.view_weights not in VIEW_WEIGHTINGS:
+            raise ValueError(f"view_weights must be one of {', '.join(VIEW_WEIGHTINGS)}, got {self.view_weights!r}")
 
     def is_good(self, match: Match) -> bool:
         """Mismatch or unmatched share within ``good_mismatch`` (always True when the mismatch is unknown:

@@ -7,7 +7,9 @@ OpenCV drawing, no per-pixel Python loops:
    (painter's algorithm), projected through the camera's plumb_bob distortion;
 3. the marks as discs on the body (their outline projected, so perspective shapes them), only where
    the mark's centre faces the camera and no face hides it; faces that hide part of a mark are drawn again over it;
-4. distractor blobs in the mark colours (false positives), then blur, a lighting gain and sensor noise.
+4. distractor blobs in the mark colours (false positives), then blur, a lighting gain and sensor noise;
+5. for a degraded camera (:mod:`scenarios.degrade`): an occluding band over part of the target, more distractors,
+   heavier blur.
 
 Ground truth: the target pose, the camera pose and, for every mark whose centre is visible, its model
 index and its projected centre in pixels (``fully_visible`` tells whether its whole disc is).
@@ -25,6 +27,7 @@ import numpy as np
 from evopose import Camera
 from evopose.pose import matrix_from_pose, pose_from_matrix
 
+from .degrade import STREAM_DEGRADED, composed_blur, draw_band, inside_band, occluder_band, target_box
 from .mesh import Mesh, box_mesh, first_hits, hits
 from .sensors import stream_rng
 from .world import GroundSpec, RenderSpec, Scenario, Vehicle
@@ -330,12 +333,30 @@ def render_frame(scenario: Scenario, frame: int, vehicle: str | None = None, *, 
         hiders = set(faces.triangle_face[crossed].tolist())
         faces.draw(image, [f for f in faces.order if f in hiders])
 
+    degraded = None if clean else veh.camera.degraded
+    if degraded is not None and degraded.occluded_fraction > 0:
+        box = target_box(camera, model.body.transformed(world_from_target).vertices)
+        if box is not None:
+            band = occluder_band(box, degraded.occluded_fraction)
+            draw_band(image, band)
+            behind = inside_band(uv_c[shown], band)
+            whole = whole[~behind] & ~inside_band(uv_o[shown[~behind]], band).any(axis=1)
+            shown = shown[~behind]
+
     distractor_uv, distractor_colour = np.zeros((0, 2)), []
     if not clean:
         distractor_uv, distractor_colour = _draw_distractors(image, rng, render, model.palette, uv_c[shown],
                                                              ground_shade)
-        if render.blur_sigma > 0:
-            image = cv2.GaussianBlur(image, (0, 0), render.blur_sigma)
+        blur = render.blur_sigma
+        if degraded is not None:
+            extra = render.model_copy(update={"distractors": render.distractors.model_copy(
+                update={"count": degraded.distractors, "near_target": 1.0})})
+            more_uv, more_colour = _draw_distractors(image, stream_rng(scenario.seed, STREAM_DEGRADED, veh.index, frame),
+                                                     extra, model.palette, uv_c[shown], ground_shade)
+            distractor_uv, distractor_colour = np.concatenate([distractor_uv, more_uv]), distractor_colour + more_colour
+            blur = composed_blur(blur, degraded.blur_sigma)
+        if blur > 0:
+            image = cv2.GaussianBlur(image, (0, 0), blur)
         if gain != 1.0 or render.noise_sigma > 0:
             noisy = image.astype(np.float32) * np.float32(gain)
             if render.noise_sigma > 0:

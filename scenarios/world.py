@@ -22,6 +22,7 @@ vehicles:
       intrinsics: {fx: 8000, fy: 8000, cx: 640, cy: 480, width: 1280, height: 960, distortion: [...]}
       mount: {x: 0, y: 0, z: -0.2, roll: -1.5708, pitch: 0, yaw: -1.5708}  # vehicle_from_camera
       look_at: [0, 0, 0.1]    # optional gimbal: the camera points at this world point (or: target)
+      degraded: {blur_sigma: 3, occluded_fraction: 0.4, distractors: 6}   # optional: a bad camera
 render: {noise_sigma: 2, blur_sigma: 0.7, distractors: {count: 4}, occluders: [...]}
 search: {x: [-3, 3], y: [-3, 3], z: [-0.2, 0.5]}   # the operating area, for solving
 ```
@@ -130,10 +131,19 @@ class IntrinsicsSpec(Strict):
     distortion: Annotated[list[float], Field(min_length=5, max_length=5)] = [0.0] * 5
 
 
+class DegradedCameraSpec(Strict):
+    """A degraded camera (:mod:`scenarios.degrade`): heavy blur, an occluder over part of the target, distractors."""
+
+    blur_sigma: Annotated[float, Field(ge=0, le=50)] = 0.0
+    occluded_fraction: Annotated[float, Field(ge=0, le=1)] = 0.0
+    distractors: Annotated[int, Field(ge=0, le=200)] = 0
+
+
 class CameraRigSpec(Strict):
     intrinsics: IntrinsicsSpec
     mount: PoseSpec = PoseSpec(**FORWARD_MOUNT)
     look_at: Vec3 | Literal["target"] | None = None
+    degraded: DegradedCameraSpec | None = None
 
 
 class TargetSpec(Strict):
