@@ -5,6 +5,7 @@ the same messages (same senders, sequence numbers and poses; stamps moved by one
 from __future__ import annotations
 
 import signal
+import sys
 
 import msgpack
 import numpy as np
@@ -13,10 +14,11 @@ import zenoh
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 
+from agents.bridges.names import topic_name
 from agents.bridges.recording import restamp
 from protocol.codec import decode_sample, encode
 from protocol.messages import PoseEstimate
-from tests.fleet_procs import Fleet, free_port
+from tests.fleet_procs import Fleet, Proc, free_port
 
 N = 20
 
@@ -115,3 +117,34 @@ def test_record_then_replay_into_a_fresh_agent(fleet, tmp_path):
         again = replayed[seq]
         assert again.model_dump(exclude={"stamp_ns"}) == estimate.model_dump(exclude={"stamp_ns"})
         assert again.stamp_ns - estimate.stamp_ns == ready["shift_ns"]
+
+
+def test_scenario_run_records_every_run(tmp_path):
+    """`evopose scenario run NAME --record DIR`: each run's traffic in DIR/<fleet>.mcap, every pose the agents
+    published (checked against their own summaries), as raw channels and as ROS 2 messages."""
+    frames = 8
+    runner = Proc([sys.executable, "-m", "agents.cli", "scenario", "run", "exp2a-features", "--frames", str(frames),
+                   "--listen", f"tcp/127.0.0.1:{free_port()}", "--record", str(tmp_path / "runs"), "--json"])
+    try:
+        result = runner.next_record(120, lambda r: "runs" in r)
+        assert runner.wait(20) == 0
+    finally:
+        runner.kill()
+    [run] = result["runs"]
+    path = tmp_path / "runs" / f"{run['fleet']}.mcap"
+    assert run["recording"] == str(path) and path.is_file()
+    with open(path, "rb") as stream:
+        reader = make_reader(stream, decoder_factories=[DecoderFactory()])
+        for vehicle in ("H1", "H2"):
+            poses = {}
+            for _, channel, message in reader.iter_messages(topics=[f"evopose/{run['fleet']}/{vehicle}/pose"]):
+                estimate = decode_sample(channel.topic, message.data)[1]
+                poses[estimate.stamp_ns] = estimate.pose
+            published = run["agents"][vehicle]["poses"]  # [frame, x, y, z, roll, pitch, yaw, good] per frame
+            assert len(poses) == len(published) == frames
+            recorded = sorted(poses.items())
+            for row, (_, pose) in zip(published, recorded):
+                assert np.allclose(row[1:7], pose, atol=1e-9)
+        ros_topics = {c.topic for c in reader.get_summary().channels.values()}
+        expected = {"/tf", *(topic_name(run["fleet"], v, "target_pose") for v in ("H1", "H2"))}
+        assert expected <= ros_topics, ros_topics

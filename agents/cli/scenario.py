@@ -108,6 +108,9 @@ def run_command(
     ros2: Annotated[bool, typer.Option("--ros2", help="Also mirror each run onto ROS 2 topics (evopose ros2, "
                                                       "docs/ros2.md).")] = False,
     ros2_domain: Annotated[int, typer.Option(min=0, max=232, help="ROS_DOMAIN_ID of --ros2.")] = 0,
+    record: Annotated[Path | None, typer.Option("--record", metavar="DIR", help="Record each run's traffic into "
+                                                "DIR/<fleet>.mcap (evopose record: ROS 2 channels and the raw "
+                                                "ones, for evopose replay).")] = None,
 ) -> None:
     """Start every agent of the scenario as its own process, run, stop them all, print the results."""
     if credentials is not None and not secure:
@@ -115,6 +118,11 @@ def run_command(
     if ros2 and secure:
         raise typer.BadParameter("the ROS 2 mirror has no fleet certificate; run evopose ros2 with one instead",
                                  param_hint="--ros2")
+    if record is not None and secure:
+        raise typer.BadParameter("the recorder has no fleet certificate; run evopose record with one instead",
+                                 param_hint="--record")
+    if record is not None and record.exists() and not record.is_dir():
+        raise typer.BadParameter(f"{record} exists and is not a directory", param_hint="--record")
     mirror_domain = ros2_domain if ros2 else None
     from scenarios.fleet import load_fleet_scenario
 
@@ -127,7 +135,7 @@ def run_command(
         if as_json:
             records = run_scenario(scenario, runs=runs, frames=frames, seed=seed, endpoint=listen,
                                    variants=variant, stop=stop, fps=fps, secure=secure, credentials=credentials,
-                                   ros2_domain=mirror_domain)
+                                   ros2_domain=mirror_domain, record=record)
         else:
             with console.status(f"{scenario.name}: starting") as status:
                 def progress(p: dict) -> None:
@@ -140,7 +148,8 @@ def run_command(
 
                 records = run_scenario(scenario, runs=runs, frames=frames, seed=seed, endpoint=listen,
                                        variants=variant, stop=stop, on_run=finished, on_progress=progress,
-                                       fps=fps, secure=secure, credentials=credentials, ros2_domain=mirror_domain)
+                                       fps=fps, secure=secure, credentials=credentials, ros2_domain=mirror_domain,
+                                       record=record)
     result_rows = rows(records)
     if as_json:
         emit_json({"scenario": scenario.name, "interrupted": stop.is_set(), "rows": result_rows, "runs": records})

@@ -147,15 +147,29 @@ def start_ros2_mirror(fleet: str, domain: int, endpoint: str, use_router: bool, 
     return mirror
 
 
+def start_recorder(fleet: str, out: Path, endpoint: str, use_router: bool, env: dict) -> subprocess.Popen:
+    """``evopose record`` of the fleet into ``out`` (MCAP: ROS 2 channels and the raw ones), once subscribed;
+    stopped (SIGTERM: the file is finished) with the agents."""
+    network = ["--mode", "client", "--connect", endpoint] if use_router else ["--connect", endpoint]
+    out.parent.mkdir(parents=True, exist_ok=True)
+    recorder = subprocess.Popen([sys.executable, "-m", "agents.cli", "record", "--fleet", fleet, "--out", str(out),
+                                 "--json", *network], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                                env=env)
+    if not recorder.stdout.readline():  # its "ready" line
+        raise ScenarioRunError(f"the recorder did not start: {recorder.stderr.read().strip()[-300:]}")
+    return recorder
+
+
 def run_variant(scenario: FleetScenario, variant: VariantSpec, run: int, *, frames: int, seed: int,
                 endpoint: str, stop: threading.Event, on_progress: Callable[[dict], None] | None = None,
                 fps: float | None = None, secure: bool = False, credentials: Path | None = None,
-                ros2_domain: int | None = None) -> dict:
+                ros2_domain: int | None = None, record: Path | None = None) -> dict:
     """One run of one variant: start its agents (and router), wait for their summaries, stop everything.
 
     ``secure``: TLS, mTLS and the router's ACL, with this run's credentials in ``credentials/<fleet>`` (kept)
     or in a temporary directory (removed). ``ros2_domain``: also run ``evopose ros2`` (docs/ros2.md) on the
-    fleet, publishing its ROS 2 mirror in that domain.
+    fleet, publishing its ROS 2 mirror in that domain. ``record``: a directory; the run's traffic is recorded
+    into ``record/<fleet>.mcap`` (``evopose record``: replayable, and readable by ROS 2 tools).
     """
     fps = fps or scenario.fps
     started = time.monotonic()
@@ -182,6 +196,8 @@ def run_variant(scenario: FleetScenario, variant: VariantSpec, run: int, *, fram
                 raise ScenarioRunError(f"the router did not start: {router.stderr.read().strip()[-300:]}")
         if ros2_domain is not None:  # before the agents, so that it mirrors their first frames
             children.append(start_ros2_mirror(fleet, ros2_domain, endpoint, use_router, env))
+        if record is not None:  # before the agents too: their first frames are in the file
+            children.append(start_recorder(fleet, Path(record) / f"{fleet}.mcap", endpoint, use_router, env))
         epoch_ns = time.time_ns() + int(START_MARGIN_S * 1e9)
         for i, agent in enumerate(variant.agents):
             if secure:  # the vehicle's file: a TLS client with its certificate
@@ -225,6 +241,7 @@ def run_variant(scenario: FleetScenario, variant: VariantSpec, run: int, *, fram
         raise ScenarioRunError(f"run {run} of {scenario.name}/{variant.name}: {details}")
     return {"scenario": scenario.name, "world": scenario.world.name, "variant": variant.name, "run": run,
             "fleet": fleet, "slow": slow, "secure": secure,
+            "recording": str(Path(record) / f"{fleet}.mcap") if record is not None else None,
             "interrupted": stop.is_set(), "seconds": time.monotonic() - started,
             "agents": {p.vehicle: p.summary for p in procs}}
 
@@ -233,7 +250,8 @@ def run_scenario(scenario: FleetScenario, *, runs: int = 1, frames: int | None =
                  endpoint: str = DEFAULT_ENDPOINT, variants: list[str] | None = None, stop: threading.Event,
                  fps: float | None = None, keep_going: bool = False, secure: bool = False,
                  credentials: Path | None = None, on_run: Callable[[dict], None] | None = None,
-                 on_progress: Callable[[dict], None] | None = None, ros2_domain: int | None = None) -> list[dict]:
+                 on_progress: Callable[[dict], None] | None = None, ros2_domain: int | None = None,
+                 record: Path | None = None) -> list[dict]:
     """Every run of every (chosen) variant; returns one record per run (see :func:`run_variant`).
 
     A run that fails raises :class:`ScenarioRunError`; with ``keep_going`` it is recorded instead, as
@@ -248,7 +266,8 @@ def run_scenario(scenario: FleetScenario, *, runs: int = 1, frames: int | None =
             try:
                 record = run_variant(scenario, variant, run, frames=frames or scenario.frames, seed=seed,
                                      endpoint=endpoint, stop=stop, on_progress=on_progress, fps=fps,
-                                     secure=secure, credentials=credentials, ros2_domain=ros2_domain)
+                                     secure=secure, credentials=credentials, ros2_domain=ros2_domain,
+                                     record=record)
             except ScenarioRunError as err:
                 if not keep_going:
                     raise
