@@ -11,6 +11,7 @@ from __future__ import annotations
 import queue
 import threading
 import time
+from collections import deque
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 
@@ -18,6 +19,11 @@ import zenoh
 
 from agents.bridges import ros_msgs
 from agents.bridges.rmw_zenoh import ADMIN_SPACE, Attachment, Entity, EntityKind, decode_attachment, parse_token
+
+#: Reasons of undecodable tokens and samples kept (the count is kept whole).
+ERRORS_KEPT = 100
+#: Tokens and samples waiting for the worker.
+EVENTS_QUEUED = 4096
 
 
 @dataclass(frozen=True)
@@ -36,26 +42,31 @@ class RosSample:
 class Ros2Listener:
     """Follow the graph of ``domain`` and receive the ``topics`` asked for (all when None).
 
-    ``on_message`` (optional) is called in the worker thread; :meth:`samples` returns what arrived so far.
+    ``on_message`` (optional) is called in the worker thread; :meth:`samples` returns the newest
+    ``keep_samples`` that arrived (0 with a handler that keeps what it needs).
     Samples whose attachment or CDR does not decode are counted in ``errors`` (with the reason).
     """
 
     def __init__(self, session: zenoh.Session, *, domain: int = 0, topics: Iterable[str] | None = None,
-                 on_message: Callable[[RosSample], None] | None = None) -> None:
+                 on_message: Callable[[RosSample], None] | None = None, keep_samples: int = 10_000) -> None:
         self.session, self.domain = session, int(domain)
         self.wanted = None if topics is None else set(topics)
-        self.errors: list[str] = []
+        #: the newest reasons of tokens and samples that did not decode (bounded: a hostile publisher may flood)
+        self.errors: deque[str] = deque(maxlen=ERRORS_KEPT)
+        self.error_count = 0
         self._on_message = on_message
         self._lock = threading.Condition()
         self._graph: dict[str, Entity] = {}
-        self._samples: list[RosSample] = []
+        self._samples: deque[RosSample] = deque(maxlen=keep_samples)  # the newest, for samples()
         self._subscribers: dict[str, tuple[zenoh.Subscriber, Entity]] = {}
-        self._events: queue.Queue = queue.Queue()
+        # tokens and samples for the worker: bounded, what does not fit is dropped and counted (``dropped``)
+        self._events: queue.Queue = queue.Queue(maxsize=EVENTS_QUEUED)
+        self.dropped = 0
         self._closed = threading.Event()
         self._worker = threading.Thread(target=self._work, name="ros2-listener", daemon=True)
         self._worker.start()
         self._tokens = session.liveliness().declare_subscriber(
-            f"{ADMIN_SPACE}/{self.domain}/**", lambda sample: self._events.put(("token", sample.kind,
+            f"{ADMIN_SPACE}/{self.domain}/**", lambda sample: self._enqueue(("token", sample.kind,
                                                                                 str(sample.key_expr))),
             history=True)
 
@@ -90,6 +101,12 @@ class Ros2Listener:
 
     # -- the worker ---------------------------------------------------------------------------------
 
+    def _enqueue(self, event: tuple) -> None:  # Zenoh's thread: never blocks
+        try:
+            self._events.put_nowait(event)
+        except queue.Full:
+            self.dropped += 1
+
     def _work(self) -> None:
         while True:
             event = self._events.get()
@@ -102,7 +119,8 @@ class Ros2Listener:
                     self._on_data(*event[1:])
             except Exception as err:  # noqa: BLE001 - a bad token or sample is recorded, never fatal
                 with self._lock:
-                    self.errors.append(f"{event[0]}: {type(err).__name__}: {err}")
+                    self.errors.append(f"{event[0]}: {type(err).__name__}: {str(err)[:200]}")
+                    self.error_count += 1
             with self._lock:
                 self._lock.notify_all()
 
@@ -118,7 +136,7 @@ class Ros2Listener:
             data_key = entity.data_key
             if data_key not in self._subscribers and not self._closed.is_set():
                 subscriber = self.session.declare_subscriber(
-                    data_key, lambda sample: self._events.put(("data", str(sample.key_expr), sample.payload.to_bytes(),
+                    data_key, lambda sample: self._enqueue(("data", str(sample.key_expr), sample.payload.to_bytes(),
                                                                 None if sample.attachment is None
                                                                 else sample.attachment.to_bytes(), time.time_ns())))
                 self._subscribers[data_key] = (subscriber, entity)

@@ -13,8 +13,9 @@ import logging
 import threading
 import time
 from collections import Counter
-from dataclasses import replace
 from collections.abc import Callable
+from contextlib import ExitStack
+from dataclasses import replace
 
 from protocol.codec import decode_sample
 from protocol.errors import ProtocolError
@@ -30,6 +31,8 @@ log = logging.getLogger(__name__)
 
 #: The mirror node's name (its namespace is the fleet's ROS name).
 NODE_NAME = "evopose_mirror"
+#: The fleet vehicle whose hints come from ROS (``--hints-from``).
+HINT_VEHICLE = "ros"
 #: How an observer retries an endpoint that does not answer yet (Zenoh's default backs off to several seconds, so
 #: one started before the fleet could miss a short run): every 0.1 s, growing to 0.5 s.
 OBSERVER_RETRY = {"period_init_ms": 100, "period_max_ms": 500, "period_increase_factor": 1.5}
@@ -75,27 +78,44 @@ class Mirror:
 
 def run_mirror(options: SessionOptions, stop: threading.Event, fleet: str, *, domain: int = 0,
                node_name: str = NODE_NAME, legacy_attachment: bool = False, duration: float | None = None,
+               hints_from: str | None = None, hint_vehicle: str = HINT_VEHICLE,
                emit: Callable[[dict], None] | None = None) -> dict:
     """Mirror ``fleet`` until ``stop`` (or ``duration`` s); emits ``ready``, then ``publisher`` per new topic.
 
-    Returns the summary: messages published per ROS topic, fleet samples rejected per reason, dropped.
+    ``hints_from``: also take ``geometry_msgs/msg/PoseStamped`` from that ROS topic and send each as a hint of the
+    fleet vehicle ``hint_vehicle`` (:mod:`agents.bridges.ros_hints`; the name must be free in the fleet).
+    Returns the summary: messages published per ROS topic, fleet samples rejected per reason, dropped, and with
+    ``hints_from`` the hints forwarded and refused.
     """
     from protocol.keys import check_name
+
+    from agents.bridges.listener import Ros2Listener
+    from agents.bridges.ros_hints import HintForwarder
+    from agents.transport.bus import FleetBus
+    from agents.transport.presence import ensure_name_free
 
     check_name(fleet, "fleet")
     emit = emit or (lambda record: None)
     started = time.monotonic()
-    with open_session(observer_options(options)) as session:
+    hints = None
+    with open_session(observer_options(options)) as session, ExitStack() as stack:
         node = Ros2Node(session, Node(node_name, f"/{names.ros_name(fleet)}"), domain=domain,
                         legacy_attachment=legacy_attachment)
+        stack.callback(node.close)
         mirror = Mirror(node, emit)
-        try:
-            with FleetTap(session, fleet, mirror.handle) as tap:
-                emit({"event": "ready", "fleet": fleet, "domain": domain, "zid": node.zid, "node": node.token_key})
-                while not stop.wait(0.1):
-                    if duration is not None and time.monotonic() - started >= duration:
-                        break
-        finally:
-            node.close()
+        tap = stack.enter_context(FleetTap(session, fleet, mirror.handle))
+        if hints_from is not None:
+            check_name(hint_vehicle, "hint vehicle")
+            ensure_name_free(session, fleet, hint_vehicle)
+            hints = HintForwarder(stack.enter_context(FleetBus(session, fleet, hint_vehicle, max_age_s=None)))
+            listener = stack.enter_context(Ros2Listener(session, domain=domain, topics=[hints_from],
+                                                        on_message=hints, keep_samples=0))
+        emit({"event": "ready", "fleet": fleet, "domain": domain, "zid": node.zid, "node": node.token_key,
+              **({"hints_from": hints_from, "hint_vehicle": hint_vehicle} if hints is not None else {})})
+        while not stop.wait(0.1):
+            if duration is not None and time.monotonic() - started >= duration:
+                break
     return {"event": "stopped", "published": dict(mirror.published), "rejected": dict(mirror.rejected),
-            "dropped": tap.dropped, "seconds": time.monotonic() - started}
+            "dropped": tap.dropped, "seconds": time.monotonic() - started,
+            **({"hints": {**hints.counts(), "undecodable": listener.error_count,
+                            "dropped": listener.dropped}} if hints is not None else {})}

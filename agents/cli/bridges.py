@@ -45,15 +45,24 @@ def register(app: typer.Typer) -> None:
                      legacy_attachment: Annotated[bool, typer.Option(
                          "--legacy-attachment", help="Attach the keyed layout of rmw_zenoh_cpp 0.2.0-0.2.3 (Jazzy "
                                                      "before April 2025) instead of today's.")] = False,
+                     hints_from: Annotated[str | None, typer.Option(
+                         "--hints-from", metavar="TOPIC", help="Also send each geometry_msgs/msg/PoseStamped of this "
+                                                               "ROS topic (the target's pose in map) to the fleet as a "
+                                                               "hint.")] = None,
+                     hint_vehicle: Annotated[str, typer.Option(help="The fleet vehicle name those hints come "
+                                                                    "from.")] = "ros",
                      duration: Duration = None, as_json: Json = False, connect: Connect = None, listen: Listen = None,
                      mode: Mode = None, config: ConfigFile = None, multicast: Multicast = False) -> None:
         """Mirror the fleet onto ROS 2 topics in the rmw_zenoh format: poses, /tf, camera info (docs/ros2.md)."""
         from agents.bridges.mirror import run_mirror
 
+        if hints_from is not None and not (hints_from.startswith("/") and len(hints_from) > 1):
+            raise typer.BadParameter(f"{hints_from!r} is not an absolute ROS topic (/name)", param_hint="--hints-from")
         emit = _printer(as_json)
         with stop_on_signals() as stop:
             summary = run_mirror(session_options(mode, connect, listen, config, multicast), stop, fleet,
-                                 domain=domain, legacy_attachment=legacy_attachment, duration=duration, emit=emit)
+                                 domain=domain, legacy_attachment=legacy_attachment, duration=duration,
+                                 hints_from=hints_from, hint_vehicle=hint_vehicle, emit=emit)
         emit_json(summary) if as_json else Console(stderr=True).print(summary)
 
     @app.command("record")
