@@ -20,7 +20,7 @@ from pathlib import Path
 
 from scenarios.fleet import load_fleet_scenario
 
-from agents.experiments import DEFAULT_ENDPOINT
+from agents.experiments import DEFAULT_ENDPOINT, figures
 from agents.experiments.results import agreement, frame_agreement, rows
 from agents.experiments.runner import run_scenario
 
@@ -77,30 +77,6 @@ def _find(result_rows: list[dict], scenario: str, vehicle: str, world: str | Non
 
 def _find_variant(result_rows: list[dict], variant: str, vehicle: str) -> dict | None:
     return next((r for r in result_rows if r["variant"] == variant and r["vehicle"] == vehicle), None)
-
-
-def figure_6(result_rows: list[dict], path: Path, world: str) -> Path:
-    """Fitness of the best individual over generations of the first search: H1, H2 and H1 + H2 (paper Fig. 6)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(6, 3.6), dpi=120)
-    for label, row in (("H1 alone", _find(result_rows, "exp2-solo", "H1", world)),
-                       ("H2 alone", _find(result_rows, "exp2-solo", "H2", world)),
-                       ("H1 + H2 (eq. 4, W = 0.5)", _find(result_rows, "exp2a-features", "H1", world))):
-        if row and row["history"]:
-            ax.plot(range(1, len(row["history"]) + 1), row["history"], marker="o", ms=3, label=label)
-    ax.set_xlabel("generation")
-    ax.set_ylabel("fitness of the best (px)")
-    ax.set_title(f"Fitness of the best individual, strategy (a), {world}")
-    ax.grid(alpha=0.3)
-    ax.legend()
-    fig.tight_layout()
-    fig.savefig(path)
-    plt.close(fig)
-    return path
 
 
 def findings(result_rows: list[dict], agree_a: dict, agree_b: dict, world: str,
@@ -272,9 +248,24 @@ def write_report(out: Path, *, runs: int, frames: int | None, seed: int, endpoin
               "", "## Tracking a driving Pioneer (eq. 2): 0.5 m/s, turning at 0.2 rad/s", "",
               *_tracking_lines(result_rows), "", "## Fig. 6: fitness of the best individual", ""]
     for world, _, title in WORLDS:
-        fig = figure_6(result_rows, out / f"fig6_{world}.png", world)
+        fig = figures.figure_6({"H1 alone": _find(result_rows, "exp2-solo", "H1", world),
+                                "H2 alone": _find(result_rows, "exp2-solo", "H2", world),
+                                "H1 + H2 (eq. 4)": _find(result_rows, "exp2a-features", "H1", world)},
+                               out / f"fig6_{world}.png", world)
         lines += [f"![Fig. 6, {title}]({fig.name})", ""]
-    lines += ["First search of run 0: fitness (eq. 4, robust, pixels) of the best individual per generation.", ""]
+    lines += ["First search of run 0: fitness (eq. 4, pixels) of the best individual per generation.", "",
+              "## Error over time, per helicopter", ""]
+    for world, driving, title in WORLDS:
+        for shown in (world, driving):
+            fig = figures.error_over_time(records, out / f"error_{shown}.png", shown)
+            lines += [f"![Position error per frame, {shown}]({fig.name})", ""]
+    lines += ["Run 0 of each strategy: the distance between each published pose and the truth at its frame (log "
+              "scale); hollow markers: frames not marked good.", "", "## The driving Pioneer from above", ""]
+    for _, driving, title in WORLDS:
+        fig = figures.tracks_from_above(records, out / f"tracks_{driving}.png", driving)
+        lines += [f"![Tracks from above, {title}]({fig.name})", ""]
+    fig = figures.bandwidth(result_rows, out / "bandwidth.png", [w for w, _, _ in WORLDS])
+    lines += ["## Bandwidth per share mode, as a figure", "", f"![Bytes/s per share mode]({fig.name})", ""]
     for world, _, title in WORLDS:
         a = [r for r in records if r["scenario"] == "exp2a-features" and r.get("world") == world]
         b = [r for r in records if r["scenario"] == "exp2b-hints" and r.get("world") == world]

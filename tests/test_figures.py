@@ -1,0 +1,61 @@
+"""The report's figures: the error series against the world's truth (by hand), and each figure drawn from run
+records shaped like `evopose scenario run`'s."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+
+from agents.experiments import figures
+from scenarios.world import load_scenario
+
+WORLD = "exp2-paper-scale-driving"
+
+
+def published(frames: range, offset=(0.0, 0.0, 0.0), yaw_offset: float = 0.0, good: bool = True) -> list[list]:
+    scenario = load_scenario(WORLD)
+    rows = []
+    for n in frames:
+        truth = scenario.target_pose(n % scenario.frames).copy()
+        truth[:3] += offset
+        truth[5] += yaw_offset
+        rows.append([n, *truth, good])
+    return rows
+
+
+def test_error_series_is_the_distance_to_the_truth_at_each_frame():
+    frames = range(37, 57)  # the fleet clock's frames past the world's last: its frame n mod frames
+    exact = figures.error_series({"poses": published(frames)}, WORLD)
+    assert list(exact[0]) == list(range(20)) and np.allclose(exact[1], 0) and np.allclose(exact[2], 0)
+    off = figures.error_series({"poses": published(frames, (0.3, -0.4, 0.0), 2 * np.pi - np.radians(1.5),
+                                                   good=False)}, WORLD)
+    assert np.allclose(off[1], 0.5) and np.allclose(off[2], 1.5) and not off[3].any()
+    assert all(len(a) == 0 for a in figures.error_series({"poses": []}, WORLD))
+
+
+def test_every_figure_is_drawn_from_run_records(tmp_path):
+    def record(scenario: str, world: str, run: int = 0) -> dict:
+        agents = {v: {"poses": published(range(100, 130), (0.01 * (run + 1), 0, 0))} for v in ("H1", "H2")}
+        return {"scenario": scenario, "world": world, "variant": "H1+H2", "run": run, "agents": agents}
+
+    records = [record(s, WORLD, r) for s in ("exp2-solo", "exp2a-features", "exp2b-hints") for r in (0, 1)]
+    rows = [{"scenario": s, "vehicle": "H1", "world": WORLD, "history": [3.0, 2.0, 1.0],
+             "traffic": {t: {"bytes_per_s": b}}}
+            for s, t, b in (("exp2-raw", "image", 9.2e6), ("exp2a-features", "features", 4000.0),
+                            ("exp2b-hints", "hint", 4800.0))]
+    paths = [figures.error_over_time(records, tmp_path / "error.png", WORLD),
+             figures.tracks_from_above(records, tmp_path / "tracks.png", WORLD),
+             figures.bandwidth(rows, tmp_path / "bandwidth.png", [WORLD]),
+             figures.figure_6({"H1 + H2": rows[1]}, tmp_path / "fig6.png", WORLD)]
+    for path in paths:
+        image = cv2.imread(str(path))
+        assert image is not None and image.shape[0] > 300 and image.std() > 10, path
+
+
+@pytest.mark.parametrize("missing", ["exp2a-features", "exp2b-hints"])
+def test_a_mode_that_did_not_run_is_left_out(tmp_path, missing):
+    records = [{"scenario": s, "world": WORLD, "variant": "v", "run": 0, "agents": {"H1": {"poses": published(
+        range(5))}}} for s in ("exp2a-features", "exp2b-hints") if s != missing]
+    assert cv2.imread(str(figures.tracks_from_above(records, tmp_path / "t.png", WORLD))) is not None
+    assert cv2.imread(str(figures.error_over_time(records, tmp_path / "e.png", WORLD))) is not None
