@@ -36,6 +36,7 @@ bench: $(STAMP)
 	$(PY) -m benchmarks.bench_fleet
 	$(PY) -m benchmarks.bench_latency
 	NUMBA_NUM_THREADS=1 $(PY) -m benchmarks.bench_confidence
+	NUMBA_NUM_THREADS=1 $(PY) -m benchmarks.bench_weights
 	NUMBA_NUM_THREADS=1 $(PY) -m benchmarks.bench_image_only
 	$(PY) -m benchmarks.report
 

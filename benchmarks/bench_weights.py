@@ -9,6 +9,11 @@ H2, extracts the marks with the model's palette (what the agents do), and solves
 search seed per frame. The degraded world differs from the healthy one only in H2's camera
 (:mod:`scenarios.degrade`: heavy blur, a band over 35 % of the robot, 6 more distractors); H1's frames are the same.
 
+A third group is harder than the two worlds (whose robot stands still): the synthetic paper-scale problems of
+``bench_confidence`` (the Pioneer anywhere in a 3 m square with any heading, seen by exp2-paper-scale's H1 and H2,
+0.5-2 px noise, 0-30 % clutter, 10 % missing marks; ``--seed``), healthy, and with H2's view degraded alike
+(:func:`degrade_view`: 35 % of its marks gone, 1.5 px more noise, 6 more false points near the robot).
+
 Per rule and condition: position and rotation errors (medians, and the share within 5 deg and 5 % of the distance:
 "accurate"), the right-basin rate (at least half of the visible true marks identified one to one,
 :func:`benchmarks.problems.in_right_basin`), the share called confident and the precision of confident (right
@@ -28,9 +33,12 @@ import numpy as np
 
 from .report import md_table, provenance, write_section
 
-#: scale -> (healthy world, world with H2 degraded)
+#: scale -> (healthy world, world with H2 degraded); "synthetic" names seeded problems, not worlds
 WORLDS = {"paper scale (Pioneer ~25 px)": ("exp2-paper-scale", "exp2-paper-scale-degraded"),
-          "telephoto (Pioneer ~180 px)": ("exp2", "exp2-degraded")}
+          "telephoto (Pioneer ~180 px)": ("exp2", "exp2-degraded"),
+          "synthetic paper scale (random poses, noise, clutter)": ("synthetic", "synthetic-degraded")}
+#: Seeds of the synthetic problems (``bench_confidence``'s "paper H1+H2" group; 7 is its reporting seed).
+SYNTHETIC_SEED = 7
 RULES = ("equal", "step", "adaptive")
 CAMERAS = ("H1", "H2")
 DEFAULT_OUT = Path(__file__).resolve().parent / "results" / "weights.md"
@@ -70,6 +78,44 @@ def frame_problem(world: str, frame: int):
                             {"world": world, "points": [len(v.points) for v in views]})
 
 
+def degrade_view(sp, k: int, rng: np.random.Generator):
+    """``sp`` with view ``k`` degraded: 35 % of its true marks removed, 1.5 px more noise on the rest, 6 false points
+    near the target (the synthetic counterpart of :mod:`scenarios.degrade`)."""
+    from evopose import View
+
+    from .problems import SyntheticProblem
+
+    model_idx, pts = sp.correspondences[k]
+    view = sp.problem.views[k]
+    is_true = np.array([np.min(np.linalg.norm(pts - p, axis=1)) < 1e-9 if len(pts) else False for p in view.points])
+    gone = rng.random(len(pts)) < 0.35
+    kept = pts[~gone] + rng.normal(0, 1.5, (int(np.count_nonzero(~gone)), 2))
+    lo, hi = pts.min(axis=0) - 15, pts.max(axis=0) + 15
+    points = np.concatenate([kept, view.points[~is_true], rng.uniform(lo, hi, (6, 2))])
+    views = list(sp.problem.views)
+    views[k] = View(view.camera, points, view.weight)
+    correspondences = list(sp.correspondences)
+    correspondences[k] = (model_idx[~gone], kept)
+    return SyntheticProblem(sp.kind, sp.problem.with_views(views), sp.true_pose, correspondences, sp.symmetries,
+                            sp.distance, sp.noise, sp.clutter, sp.missing, {**sp.meta, "points": [len(v.points) for v in views]})
+
+
+@lru_cache(maxsize=64)
+def synthetic_problem(name: str, index: int):
+    """Problem ``index`` of ``bench_confidence``'s "paper H1+H2" group (weights 1/2), degraded in H2 when asked."""
+    from evopose import View
+
+    from .bench_confidence import make
+
+    sp = make("paper H1+H2", SYNTHETIC_SEED, index)
+    views = [View(v.camera, v.points, 1.0 / len(sp.problem.views)) for v in sp.problem.views]
+    sp.problem = sp.problem.with_views(views)
+    sp.meta = {**sp.meta, "points": [len(v.points) for v in views]}
+    if name == "synthetic-degraded":
+        return degrade_view(sp, 1, np.random.default_rng([SYNTHETIC_SEED, 13, index]))
+    return sp
+
+
 def one(task: tuple[str, str, int, str]) -> dict:
     """Solve one frame of one world with one rule; what the benchmark needs of it."""
     from evopose import SearchOptions, solve
@@ -77,7 +123,7 @@ def one(task: tuple[str, str, int, str]) -> dict:
     from .problems import in_right_basin, is_success, pose_errors
 
     scale, world, frame, rule = task
-    sp = frame_problem(world, frame)
+    sp = synthetic_problem(world, frame) if world.startswith("synthetic") else frame_problem(world, frame)
     t0 = time.process_time()
     sol = solve(sp.problem, SearchOptions(view_weights=rule), seed=frame)
     seconds = time.process_time() - t0
@@ -90,10 +136,10 @@ def one(task: tuple[str, str, int, str]) -> dict:
             "points": sp.meta["points"]}
 
 
-def tasks(frames: int) -> list[tuple[str, str, int, str]]:
+def tasks(frames: int, synthetic: int) -> list[tuple[str, str, int, str]]:
     picks = sorted(set(np.linspace(0, 49, frames).round().astype(int).tolist()))
-    return [(scale, world, f, rule) for scale, pair in WORLDS.items() for world in pair for f in picks
-            for rule in RULES]
+    return [(scale, world, f, rule) for scale, pair in WORLDS.items() for world in pair
+            for f in (range(synthetic) if world.startswith("synthetic") else picks) for rule in RULES]
 
 
 def _pct(num: int, den: int) -> str:
@@ -121,7 +167,7 @@ def rows_of(records: list[dict]) -> list[list]:
     return rows
 
 
-HEADER = ["scale", "cameras", "weights", "frames", "median pos. err (cm)", "median rot. err (deg)",
+HEADER = ["scale", "cameras", "weights", "frames (problems)", "median pos. err (cm)", "median rot. err (deg)",
           "accurate", "right basin", "confident", "precision of confident", "W_H2 / W_H1 median (range)",
           "median CPU ms"]
 
@@ -153,11 +199,12 @@ def markdown(records: list[dict], command: str, minutes: float, jobs: int) -> st
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--frames", type=int, default=16, help="seeded frames per world (spread over its 50)")
+    parser.add_argument("--synthetic", type=int, default=30, help="synthetic problems per condition")
     parser.add_argument("--jobs", type=int, default=1)
     parser.add_argument("--out", type=Path, default=DEFAULT_OUT)
-    parser.add_argument("--only", choices=["paper", "telephoto"], default=None, help="one scale only (a quick look)")
+    parser.add_argument("--only", choices=["paper", "telephoto", "synthetic"], default=None, help="one scale only (a quick look)")
     args = parser.parse_args(argv)
-    todo = tasks(args.frames)
+    todo = tasks(args.frames, args.synthetic)
     if args.only:
         todo = [t for t in todo if t[0].startswith(args.only)]
     command = "NUMBA_NUM_THREADS=1 python -m benchmarks.bench_weights " + " ".join(argv if argv is not None

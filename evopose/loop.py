@@ -140,7 +140,8 @@ class Evaluator:
             if np.array_equal(weights, self.objective.weights):
                 return None
         else:
-            weights = rule_weights(self.objective, best_pose, self.view_weighting, self.view_reject)
+            # during the search only the step stage (R = 1): the graded weights polish the end (evopose.weights)
+            weights = rule_weights(self.objective, best_pose, self.view_weighting, self.view_reject, max_ratio=1.0)
             if settled(self.objective.weights, weights):
                 return None
         return replace(self, objective=self.objective.with_weights(weights))

@@ -21,6 +21,7 @@ from .problem import PoseProblem, View
 from .refine import TRACK_HARD_SCHEDULE, TRACK_SCHEDULE, annealing, refine
 from .search import EvoPose
 from .uncertainty import Confidence, assess, track_confidence
+from .weights import rule_weights
 
 #: Final polish of the best pose: hard nearest-neighbour steps (accepted only when the fitness drops).
 POLISH_SCHEDULE = annealing(1, hard=6, start=1.0)
@@ -133,6 +134,9 @@ def solution_of(problem: PoseProblem, options: SearchOptions, run: Run, seconds:
     t0 = time.perf_counter()
     state, objective = run.state, run.evaluator.objective
     pose, fitness = state.best_pose, state.best_fitness
+    if options.view_weights == "adaptive" and objective.n_views > 1:  # the graded weights of eq. (4) polish the pose
+        objective = objective.with_weights(rule_weights(objective, pose, "adaptive", options.view_reject))
+        fitness = float(objective(pose[None])[0])
     if options.refine_steps:
         polished, fit = refine(objective, pose[None], np.array([fitness]), POLISH_SCHEDULE)
         pose, fitness = polished[0], float(fit[0])

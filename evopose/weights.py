@@ -46,6 +46,14 @@ Reliability ``q_k = a_k g_k``. The rule keeps the paper's step as its first stag
    is not rescored every generation (a rescore restarts its consensus count) and a view near a level's edge
    does not flip back and forth.
 
+When. In a search (:func:`evopose.solve`) the first stage runs every generation from the second on, like the
+paper's step rule, and the graded weights are applied once, at the end, to the best pose: the final polish
+refines it under them (:func:`evopose.solver.solution_of`). Graded weights during the search were measured worse
+(``benchmarks/bench_weights.py``, synthetic paper-scale problems with H2 degraded: right basin 60 % against 67 %
+with equal weights): judged at a best pose that may still be in a wrong basin, a degraded view is weighed down
+exactly when its marks are what rules that basin out. Which basin is a question for all the evidence; how
+precisely the pose sits in it, for the reliable evidence.
+
 Sum: ``sum_k W_k <= sum_k B_k`` (equal to it when the views are equally reliable); only ratios matter to the
 search and to :attr:`evopose.fitness.Match.mismatch`. With ``R = 1`` the rule is the step rule exactly (the
 degenerate case; ``present_marks = inf`` makes the first stage the paper's exactly), and equally reliable views
@@ -221,7 +229,7 @@ def adaptive_weights(evidence: ViewEvidence, base: np.ndarray, threshold: float 
 
 
 def rule_weights(objective: PoseObjective, pose: np.ndarray, weighting: ViewWeighting,
-                 threshold: float | None) -> np.ndarray:
+                 threshold: float | None, max_ratio: float = MAX_RATIO) -> np.ndarray:
     """The weights of rule ``weighting`` for ``objective``'s views at ``pose`` (6,), shape (V,).
 
     ``threshold`` is the step rule's (a fraction of each view's tau for the bounded kinds, pixels for the paper's;
@@ -235,7 +243,7 @@ def rule_weights(objective: PoseObjective, pose: np.ndarray, weighting: ViewWeig
             return np.array(objective.base_weights)
         return objective.step_rule_weights(pose, threshold)
     if weighting == "adaptive":
-        return adaptive_weights(view_evidence(objective, pose), objective.base_weights, threshold)
+        return adaptive_weights(view_evidence(objective, pose), objective.base_weights, threshold, max_ratio)
     raise ValueError(f"view weighting must be one of {', '.join(VIEW_WEIGHTINGS)}, got {weighting!r}")
 
 
