@@ -14,7 +14,11 @@ TLS and the deny-by-default ACL, and every agent is a TLS client with its own ce
 An outside meter needs the ``meter`` observer's configuration from that directory.
 
 Every child is stopped, whatever happens: a crashed agent ends the run (the others get SIGTERM), Ctrl-C
-stops them all, and anything still alive after a grace period is killed.
+stops them all, and anything still alive after a grace period is killed. The router is watched like the
+agents: if it dies, one line on stderr says so and it is started again on the same endpoint (its agents,
+Zenoh clients, reconnect by themselves: docs/scaling.md, "Faults"); the run's record lists each death under
+``router_restarts``. A router that dies more than :data:`ROUTER_RESTARTS` times, or does not come back, ends
+the run with an error.
 """
 
 from __future__ import annotations
@@ -44,6 +48,8 @@ START_MARGIN_S = 6.0
 GRACE_S = 10.0
 #: How long an agent waits for its team-mates before it gives up with an error (``--wait-timeout``).
 WAIT_FOR_TEAM_S = 30.0
+#: Times a run's router is started again after it died before the run is given up.
+ROUTER_RESTARTS = 3
 #: The member of a secure fleet that may only watch (``evopose meter --config <credentials>/meter.json5``).
 OBSERVER = "meter"
 
@@ -160,6 +166,14 @@ def start_recorder(fleet: str, out: Path, endpoint: str, use_router: bool, env: 
     return recorder
 
 
+def start_router(cmd: list[str], env: dict) -> subprocess.Popen:
+    """``evopose router`` (``cmd``), once it listens (its first JSON line)."""
+    router = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    if not router.stdout.readline():
+        raise ScenarioRunError(f"the router did not start: {router.stderr.read().strip()[-300:]}")
+    return router
+
+
 def run_variant(scenario: FleetScenario, variant: VariantSpec, run: int, *, frames: int, seed: int,
                 endpoint: str, stop: threading.Event, on_progress: Callable[[dict], None] | None = None,
                 fps: float | None = None, secure: bool = False, credentials: Path | None = None,
@@ -175,7 +189,7 @@ def run_variant(scenario: FleetScenario, variant: VariantSpec, run: int, *, fram
     started = time.monotonic()
     fleet = f"{scenario.name}-{variant.name}-{run}".replace("+", "-")[:64]
     vehicles = [a.vehicle for a in variant.agents]
-    router, slow = None, False
+    router, slow, router_restarts = None, False, []
     children: list[subprocess.Popen] = []
     procs: list[AgentProcess] = []
     env = {**os.environ, "PYTHONUNBUFFERED": "1"}
@@ -189,11 +203,9 @@ def run_variant(scenario: FleetScenario, variant: VariantSpec, run: int, *, fram
             make_credentials(keys_dir, fleet, vehicles, endpoint, env)
         if use_router:
             config = ["--config", str(keys_dir / "router.json5")] if secure else []
-            router = subprocess.Popen([sys.executable, "-m", "agents.cli", "router", *config, "--listen", endpoint,
-                                       "--json"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+            router_cmd = [sys.executable, "-m", "agents.cli", "router", *config, "--listen", endpoint, "--json"]
+            router = start_router(router_cmd, env)
             children.append(router)
-            if not router.stdout.readline():
-                raise ScenarioRunError(f"the router did not start: {router.stderr.read().strip()[-300:]}")
         if ros2_domain is not None:  # before the agents, so that it mirrors their first frames
             children.append(start_ros2_mirror(fleet, ros2_domain, endpoint, use_router, env))
         if record is not None:  # before the agents too: their first frames are in the file
@@ -221,6 +233,9 @@ def run_variant(scenario: FleetScenario, variant: VariantSpec, run: int, *, fram
             crashed = [p for p in procs if p.popen.poll() not in (None, 0)]
             if crashed:
                 break
+            if router is not None and router.poll() is not None and not stop.is_set():
+                router = _restart_router(router, router_cmd, env, router_restarts, started, run, endpoint)
+                children.append(router)
             if time.monotonic() > deadline:  # slow: stop the agents, keep what they measured (their summaries)
                 slow = True
                 break
@@ -240,10 +255,24 @@ def run_variant(scenario: FleetScenario, variant: VariantSpec, run: int, *, fram
                             + (f" ({p.stderr.strip().splitlines()[-1]})" if p.stderr.strip() else "") for p in crashed)
         raise ScenarioRunError(f"run {run} of {scenario.name}/{variant.name}: {details}")
     return {"scenario": scenario.name, "world": scenario.world.name, "variant": variant.name, "run": run,
-            "fleet": fleet, "slow": slow, "secure": secure,
+            "fleet": fleet, "slow": slow, "secure": secure, "router_restarts": router_restarts,
             "recording": str(Path(record) / f"{fleet}.mcap") if record is not None else None,
             "interrupted": stop.is_set(), "seconds": time.monotonic() - started,
             "agents": {p.vehicle: p.summary for p in procs}}
+
+
+def _restart_router(dead: subprocess.Popen, cmd: list[str], env: dict, restarts: list[dict], started: float,
+                    run: int, endpoint: str) -> subprocess.Popen:
+    """Say that the run's router died (one line on stderr), note it in ``restarts`` and start it again."""
+    at = time.monotonic() - started
+    restarts.append({"after_s": round(at, 3), "exit_code": dead.returncode})
+    if len(restarts) > ROUTER_RESTARTS:
+        raise ScenarioRunError(f"run {run}: the router on {endpoint} died {len(restarts)} times (exit code "
+                               f"{dead.returncode} at {at:.1f} s); giving up")
+    sys.stderr.write(f"run {run}: the router on {endpoint} died (exit code {dead.returncode}) at {at:.1f} s; "
+                     f"restarting it ({len(restarts)} of {ROUTER_RESTARTS})\n")
+    sys.stderr.flush()
+    return start_router(cmd, env)
 
 
 def run_scenario(scenario: FleetScenario, *, runs: int = 1, frames: int | None = None, seed: int = 0,

@@ -14,6 +14,15 @@ Safe defaults (docs/security.md), where Zenoh's own are wide open:
   every interface. A peer that must be reachable from other hosts says so: ``--listen tcp/0.0.0.0:0``.
 - TLS file names in a configuration file that are relative (as ``evopose fleet credentials`` writes
   them) are resolved against the file's directory, not the working directory.
+
+Reconnection (docs/scaling.md, "Faults"): Zenoh 1.x re-opens a session that closed on a ``connect``
+endpoint (a router killed and restarted, a link lost for longer than the lease) by itself, in client,
+peer and router mode, retrying for ever; its declarations (subscribers, liveliness tokens) are declared
+again on the new session. Zenoh's retry period doubles from 1 s up to 4 s, so a router back after 5 s
+was found up to 4 s later; :data:`CONNECT_RETRY` (unless the file sets ``connect/retry``) retries every
+0.25-1 s, so agents are back within about a second of their router. ``connect/timeout_ms`` and
+``exit_on_failure`` concern the first connection only (a client still fails at once when its router is
+not there at start: Zenoh's default, kept).
 """
 
 from __future__ import annotations
@@ -36,6 +45,8 @@ PEER_LISTEN = "tcp/127.0.0.1:0"
 #: File-path keys of ``transport/link/tls`` resolved against the configuration file's directory.
 TLS_FILE_KEYS = ("root_ca_certificate", "listen_private_key", "listen_certificate", "connect_private_key",
                  "connect_certificate")
+#: How often a lost ``connect`` endpoint is tried again, ms: Zenoh's default is 1000 doubling up to 4000.
+CONNECT_RETRY = {"period_init_ms": 250, "period_max_ms": 1000, "period_increase_factor": 2}
 _ENDPOINT = re.compile(r"[a-z][a-z0-9\-]*/\S+")
 
 
@@ -121,6 +132,8 @@ def make_config(options: SessionOptions) -> zenoh.Config:
     if not options.listen:
         _listen_on_loopback_by_default(config)
     _insert(config, "scouting/multicast/enabled", bool(options.multicast), "multicast")
+    if _get(config, "connect/retry") is None:  # the file did not choose
+        _insert(config, "connect/retry", CONNECT_RETRY, "connect/retry")
     for key, value in options.extra.items():
         _insert(config, key, value, key)
     return config
