@@ -173,7 +173,8 @@ HEADER = ["scale", "cameras", "weights", "frames (problems)", "median pos. err (
 
 
 def markdown(records: list[dict], command: str, minutes: float, jobs: int) -> str:
-    frames = len({(r["world"], r["frame"]) for r in records}) // max(len({r["world"] for r in records}), 1)
+    frames = len({r["frame"] for r in records if not r["world"].startswith("synthetic")})
+    problems = len({r["frame"] for r in records if r["world"].startswith("synthetic")})
     points = {}
     for r in records:
         points.setdefault(r["world"], []).append(r["points"])
@@ -181,15 +182,17 @@ def markdown(records: list[dict], command: str, minutes: float, jobs: int) -> st
                      for w, ps in points.items())
     lines = [f"Command: `{command}` ({provenance()}; {minutes:.1f} min, {jobs} process(es); CPU times per solve on a "
              "shared machine).", "",
-             f"{frames} seeded frames per world (the same frames and search seeds for every rule); H1 and H2 each "
+             f"{frames} seeded frames per world and {problems} synthetic problems per condition (the same frames, "
+             "problems and search seeds for every rule); H1 and H2 each "
              "give eq. (4) one view of weight 1/2. The degraded worlds differ from the healthy ones only in H2's "
              "camera: heavy blur, a band over 35 % of the robot, 6 more distractor blobs (`scenarios/degrade.py`). "
              f"Image points per frame (mean): {seen}.", "",
              "Rules (`SearchOptions.view_weights`, `evopose/weights.py`): `equal` keeps W = 1/2 each; `step` is the "
-             "paper's step rule (a view whose term exceeds 0.8 tau gets 0); `adaptive` is the step rule, then each "
-             "view's weight scaled by its reliability (share of its image points matched one to one x its matched "
-             "marks' Gauss-Newton information over the camera's nominal one) relative to the most reliable view, "
-             "bounded to [1/4, 1]. Accurate = rotation < 5 deg and position < 5 % of the distance; right basin = at "
+             "paper's step rule (a view whose term exceeds 0.8 tau gets 0); `adaptive`: during the search the step "
+             "rule only for views matching < 5 marks one to one, then at the best pose each view's weight scaled by "
+             "its reliability (share of its image points matched one to one x its matched marks' Gauss-Newton "
+             "information over the camera's nominal one) relative to the most reliable view, bounded to [1/4, 1], "
+             "and the final polish refines the pose under those weights. Accurate = rotation < 5 deg and position < 5 % of the distance; right basin = at "
              "least half of the visible true marks identified one to one; precision of confident = right basin "
              "among the confident.", ""]
     lines += md_table(HEADER, rows_of(records))
