@@ -1,9 +1,7 @@
 """Two Linux network namespaces as two "hosts" joined by a veth pair, for fault tests with real processes.
 
 :class:`Hosts` makes namespaces ``A`` (10.231.0.1) and ``B`` (10.231.0.2) and drops packets between them with
-iptables (``statistic --mode random``: this kernel has no netem), optionally with Linux's thin-stream TCP
-setting (``tcp_thin_linear_timeouts``: lost segments of a sparse stream are retransmitted every RTO without
-exponential backoff for the first six tries) in both namespaces; :meth:`Hosts.close` kills what was started
+iptables (``statistic --mode random``: this kernel has no netem); :meth:`Hosts.close` kills what was started
 in them and deletes them (their iptables rules and the veth pair go with them). :class:`FleetOnHosts` runs
 one ``evopose router`` per host (B's router connects to A's) and agents that join their host's router as
 Zenoh clients. :class:`TimedProc` is a :class:`tests.fleet_procs.Proc` whose JSON records carry their arrival
@@ -62,7 +60,7 @@ class TimedProc(Proc):
 class Hosts:
     """Namespaces ``A`` and ``B`` joined by a veth pair; see the module docstring."""
 
-    def __init__(self, *, thin_streams: bool = False) -> None:
+    def __init__(self) -> None:
         tag = f"{os.getpid() % 100000}"
         self.names = {"A": f"evopose-{tag}-a", "B": f"evopose-{tag}-b"}
         self.veth = {"A": f"evo{tag}a", "B": f"evo{tag}b"}
@@ -77,8 +75,6 @@ class Hosts:
                 _run("ip", "-n", name, "addr", "add", f"{ADDRESSES[host]}/24", "dev", self.veth[host])
                 _run("ip", "-n", name, "link", "set", self.veth[host], "up")
                 _run("ip", "-n", name, "link", "set", "lo", "up")
-                if thin_streams:  # no exponential backoff of the first retransmissions (docs/scaling.md, "Faults")
-                    _run("ip", "netns", "exec", name, "sysctl", "-qw", "net.ipv4.tcp_thin_linear_timeouts=1")
         except BaseException:
             self.close()
             raise
