@@ -72,10 +72,10 @@ def image_regions(points: np.ndarray, n: int, n_model: int, rng: np.random.Gener
     if n_local and len(points) > n_model:
         tree = cKDTree(points)
         k_max = min(len(points), max(n_model, 2))
-        _, neighbours = tree.query(points, k=k_max)
         seeds = rng.integers(0, len(points), n_local)
         ks = rng.integers(max(int(0.4 * n_model), 2), k_max + 1, n_local)
-        cluster = points[neighbours[seeds]]  # (n_local, k_max, 2), nearest first
+        _, neighbours = tree.query(points[seeds], k=k_max)  # only the seeds' (all points' cost O(P k) memory)
+        cluster = points[neighbours]  # (n_local, k_max, 2), nearest first
         member = np.arange(k_max)[None, :] < ks[:, None]
         cu = _masked_median(cluster[..., 0], member, ks)
         cv = _masked_median(cluster[..., 1], member, ks)

@@ -30,6 +30,8 @@ SCREEN_TAU_SCALE = 4.0
 LOCAL_ANNEALING_START = 0.5
 #: Generation after which the step-function weight rule of eq. (4) is first applied.
 STEP_RULE_FROM_GENERATION = 2
+#: Candidates evaluated (or refined) between two looks at the clock when a generation has a deadline.
+CHUNK = 16
 
 
 class AskTell(Protocol):
@@ -46,14 +48,40 @@ class AskTell(Protocol):
                 elapsed: float = 0.0) -> tuple[Any, Told]: ...
 
 
-def screen(coarse: PoseObjective, asked: Ask) -> Ask:
-    """Keep the ``asked.fresh_keep`` best fresh starts by the coarse fitness; other candidates pass."""
+def _in_chunks(n: int, deadline: float | None, work: Callable[[slice], None]) -> int:
+    """``work`` on rows ``[0, n)``: all at once without a deadline, else in chunks until the ``time.perf_counter()``
+    deadline passes (the first row always runs); how many rows were worked on. Chunks start at one row and grow
+    to what the time left allows at the measured cost per row (at most :data:`CHUNK`), so the deadline is
+    overrun by about one row's work."""
+    if deadline is None:
+        work(slice(0, n))
+        return n
+    done, size = 0, 1
+    while done < n and (done == 0 or time.perf_counter() < deadline):
+        started = time.perf_counter()
+        stop = min(done + size, n)
+        work(slice(done, stop))
+        now = time.perf_counter()
+        per_row = (now - started) / (stop - done)
+        done = stop
+        size = int(min(max((deadline - now) / max(per_row, 1e-9), 1), CHUNK))
+    return done
+
+
+def screen(coarse: PoseObjective, asked: Ask, deadline: float | None = None) -> Ask:
+    """Keep the ``asked.fresh_keep`` best fresh starts by the coarse fitness; other candidates pass. At the
+    ``deadline`` the fresh starts not yet screened are left out."""
     fresh = asked.fresh
     if np.count_nonzero(fresh) <= asked.fresh_keep:
         return asked
     idx = np.nonzero(fresh)[0]
-    f = coarse(asked.candidates[idx])
-    chosen = idx[np.argsort(f, kind="stable")[:asked.fresh_keep]]
+    f = np.full(len(idx), np.inf)
+
+    def coarse_rows(rows: slice) -> None:
+        f[rows] = coarse(asked.candidates[idx[rows]])
+
+    screened = _in_chunks(len(idx), deadline, coarse_rows)
+    chosen = idx[np.argsort(f[:screened], kind="stable")[:asked.fresh_keep]]
     mask = ~fresh
     mask[chosen] = True
     return asked.subset(mask)
@@ -115,19 +143,43 @@ class Evaluator:
         """Projections of the model so far, screening included (the objectives share one counter)."""
         return self.objective.evaluations
 
-    def screen(self, asked: Ask) -> Ask:
-        return asked if self.coarse is None else screen(self.coarse, asked)
+    def screen(self, asked: Ask, deadline: float | None = None) -> Ask:
+        return asked if self.coarse is None else screen(self.coarse, asked, deadline)
 
     def __call__(self, asked: Ask) -> tuple[np.ndarray, np.ndarray]:
         """Eq. (4) of the candidates, then their refinement: poses (K, 6) and fitness (K,)."""
+        _, poses, fitness = self.until(asked, None)
+        return poses, fitness
+
+    def until(self, asked: Ask, deadline: float | None) -> tuple[Ask, np.ndarray, np.ndarray]:
+        """:meth:`__call__` within a ``time.perf_counter()`` deadline (a time budget holds inside a generation):
+        candidates are evaluated, then refined, a chunk at a time while time is left; those not evaluated by the
+        deadline are left out of the returned ``asked``, those not refined keep their evaluated pose and fitness.
+        Without a deadline, or when time suffices, the result is exactly :meth:`__call__`'s (each candidate is
+        evaluated and refined on its own)."""
         poses = np.array(asked.candidates, float)
-        fitness = self.objective(poses)
+        fitness = np.full(len(poses), np.inf)
+
+        def evaluate(rows: slice) -> None:
+            fitness[rows] = self.objective(poses[rows])
+
+        evaluated = _in_chunks(len(poses), deadline, evaluate)
+        if evaluated < len(poses):
+            asked, poses, fitness = asked.subset(np.arange(evaluated)), poses[:evaluated], fitness[:evaluated]
         fresh = asked.fresh
         # fresh starts explore (the whole annealing); children and hints exploit (its narrow end)
         for rows, schedules in ((fresh, self.explore), (~fresh, self.exploit)):
-            if schedules and np.any(rows):
-                poses[rows], fitness[rows] = _best_of(self.objective, poses[rows], fitness[rows], schedules)
-        return poses, fitness
+            if not (schedules and np.any(rows)):
+                continue
+            idx = np.nonzero(rows)[0]
+
+            def refine_rows(chunk: slice, idx=idx, schedules=schedules) -> None:
+                at = idx[chunk]
+                poses[at], fitness[at] = _best_of(self.objective, poses[at], fitness[at], schedules)
+
+            if deadline is None or time.perf_counter() < deadline:
+                _in_chunks(len(idx), deadline, refine_rows)
+        return asked, poses, fitness
 
     def reweighted(self, best_pose: np.ndarray) -> "Evaluator | None":
         """The evaluator with eq. (4)'s weights by its rule at ``best_pose``, or None if they do not change."""
@@ -189,14 +241,18 @@ def evolve(optimiser: AskTell, state: Any, evaluator: Evaluator, *,
         generations, which two vehicles with the same inputs run alike whatever their clocks.
     """
     t0 = time.perf_counter() - elapsed_before
+    # inside a generation, evaluation stops at the search's time budget (a slice's ``deadline`` is a pause between
+    # whole generations: the resumed search is the same as an unpaused one)
+    budget = getattr(getattr(optimiser, "options", None), "time_budget", None)
+    inside = None if budget is None else t0 + budget
     while True:
         if hint_source is not None:
             new = hint_source()
             if new is not None and np.size(new):
                 state = optimiser.inject(state, new)
         state, asked = optimiser.ask(state)
-        asked = evaluator.screen(asked)
-        poses, fitness = evaluator(asked)
+        asked = evaluator.screen(asked, inside)
+        asked, poses, fitness = evaluator.until(asked, inside)
         state, told = optimiser.tell(state, asked, poses, fitness, judge=evaluator.objective.match,
                                      evaluations=evaluator.evaluations, elapsed=time.perf_counter() - t0)
         if told.generation >= STEP_RULE_FROM_GENERATION:

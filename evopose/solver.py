@@ -29,6 +29,8 @@ POLISH_SCHEDULE = annealing(1, hard=6, start=1.0)
 GOOD_REASONS = ("good_fitness", "consensus", "stalled")
 #: Other basins of the final population that are polished and compared with the best (:func:`evopose.uncertainty.assess`).
 RIVALS = 8
+#: Share of ``time_budget`` the verdict may take after the search (polishing the rivals); past it, not confident.
+VERDICT_GRACE = 0.1
 
 
 @dataclass
@@ -137,7 +139,9 @@ def solution_of(problem: PoseProblem, options: SearchOptions, run: Run, seconds:
     if options.view_weights == "adaptive" and objective.n_views > 1:  # the graded weights of eq. (4) polish the pose
         objective = objective.with_weights(rule_weights(objective, pose, "adaptive", options.view_reject))
         fitness = float(objective(pose[None])[0])
-    if options.refine_steps:
+    deadline = None if options.time_budget is None else t0 + (VERDICT_GRACE + 1) * options.time_budget - seconds
+    in_time = deadline is None or time.perf_counter() < deadline
+    if options.refine_steps and in_time:  # past the budget's grace the best is returned as found (not confident)
         polished, fit = refine(objective, pose[None], np.array([fitness]), POLISH_SCHEDULE)
         pose, fitness = polished[0], float(fit[0])
     mismatch = objective.mismatch(fitness)
@@ -145,8 +149,12 @@ def solution_of(problem: PoseProblem, options: SearchOptions, run: Run, seconds:
     terms = objective.view_terms(pose[None])[0]
     # matches judged on every view with its own weight: a view the step rule dropped still counts against a pose
     # (a wrong basin that fits one view and gave up the other must not look sure)
-    confidence = assess(objective, pose, _rivals(state, objective, options), options.confidence,
+    rivals, checked = _rivals(state, objective, options, deadline)
+    checked = checked and in_time
+    confidence = assess(objective, pose, rivals, options.confidence,
                         judge=objective.with_weights(objective.base_weights))
+    if not checked and confidence.confident:  # the other basins were not polished in time: not sure
+        confidence = replace(confidence, confident=False, reason="out of time")
     return Solution(
         pose=pose, fitness=fitness, view_terms=terms, view_weights=objective.weights.copy(),
         generations=state.generation, evaluations=objective.evaluations, seconds=seconds + time.perf_counter() - t0,
@@ -157,13 +165,22 @@ def solution_of(problem: PoseProblem, options: SearchOptions, run: Run, seconds:
         covariance=confidence.covariance.matrix, confident=confidence.confident, confidence=confidence)
 
 
-def _rivals(state, objective: PoseObjective, options: SearchOptions) -> np.ndarray:
-    """The best ``RIVALS`` other basins of the final population, polished like the best, shape (K, 6)."""
+def _rivals(state, objective: PoseObjective, options: SearchOptions,
+            deadline: float | None = None) -> tuple[np.ndarray, bool]:
+    """The best ``RIVALS`` other basins of the final population, polished like the best, shape (K, 6), and
+    whether every one was polished before the ``time.perf_counter()`` deadline (one at a time when there is one;
+    each on its own, so the result does not depend on it)."""
     order = np.argsort(state.fitness, kind="stable")[1:RIVALS + 1]
-    poses, fitness = state.population[order], state.fitness[order]
-    if len(poses) and options.refine_steps:
-        poses, _ = refine(objective, poses, fitness, POLISH_SCHEDULE)
-    return poses
+    poses, fitness = state.population[order].copy(), state.fitness[order]
+    if not (len(poses) and options.refine_steps):
+        return poses, True
+    if deadline is None:
+        return refine(objective, poses, fitness, POLISH_SCHEDULE)[0], True
+    for i in range(len(poses)):
+        if time.perf_counter() >= deadline:
+            return poses, False
+        poses[i:i + 1], _ = refine(objective, poses[i:i + 1], fitness[i:i + 1], POLISH_SCHEDULE)
+    return poses, True
 
 
 def pose_mismatch(problem: PoseProblem, pose: np.ndarray, options: SearchOptions | None = None) -> float:

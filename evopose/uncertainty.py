@@ -24,6 +24,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from .covariance import (CovarianceEstimate, Matches, covariance, in_box_second_moment, mutual_matches,
                          projection_jacobian, untruncated_variance)
@@ -213,9 +214,12 @@ def same_image(objective: PoseObjective, a: np.ndarray, b: np.ndarray, tolerance
         ua, ub = proj.uv[0][proj.usable[0]], proj.uv[1][proj.usable[1]]
         if len(ua) != len(ub):
             return False
-        if len(ua):
-            d = np.linalg.norm(ua[:, None, :] - ub[None, :, :], axis=2)
-            if max(d.min(axis=0).max(), d.min(axis=1).max()) > tolerance:
+        if len(ua):  # each mark within tolerance of the other pose's nearest (k-d trees: no K x K matrix)
+            a_to_b, _ = cKDTree(ub).query(ua, distance_upper_bound=tolerance * (1 + 1e-9))
+            if not np.all(np.isfinite(a_to_b)):
+                return False
+            b_to_a, _ = cKDTree(ua).query(ub, distance_upper_bound=tolerance * (1 + 1e-9))
+            if not np.all(np.isfinite(b_to_a)):
                 return False
     return True
 
