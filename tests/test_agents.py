@@ -199,6 +199,7 @@ def test_garbage_and_oversized_payloads_on_every_key_do_not_stop_an_agent(teams)
     (["--vehicle", "H1", "--scenario", "missing.yaml"], "missing.yaml: cannot read"),
     (["--vehicle", "H1", "--fps", "-3"], "must be a number > 0"),
     (["--vehicle", "H1", "--imu-sigmas", "0"], "--imu-sigmas must be a number > 0, got 0.0"),
+    (["--vehicle", "H1", "--view-weights", "loudest"], "--view-weights must be one of equal, step, adaptive"),
 ])
 def test_bad_agent_arguments_get_one_line_and_exit_code_2(args, message, capsys):
     assert main(["agent", "--fleet", "t", *args, "--no-multicast"]) == 2

@@ -11,7 +11,7 @@ from rich.table import Table
 
 from agents.cli.options import ConfigFile, Connect, Listen, Mode, Multicast, emit_json, session_options
 from agents.cli.signals import stop_on_signals
-from agents.vehicle.config import ENCODINGS, FEATURES, ROLES, SHARES, AgentConfig
+from agents.vehicle.config import ENCODINGS, FEATURES, ROLES, SHARES, VIEW_WEIGHTS, AgentConfig
 
 
 def summary_table(summary: dict) -> Table:
@@ -72,6 +72,9 @@ def register(app: typer.Typer) -> None:
         wait_for: Annotated[str, typer.Option(help="Comma-separated team-mates to wait for before frame 0.")] = "",
         wait_timeout: Annotated[float, typer.Option(min=0, help="How long to wait for them, s.")] = 10.0,
         time_budget: Annotated[float | None, typer.Option(min=0, help="Seconds per search from scratch.")] = None,
+        view_weights: Annotated[str, typer.Option(help=f"Eq. (4)'s view weights in searches: "
+                                                       f"{', '.join(VIEW_WEIGHTS)} (BENCHMARKS.md, weights).")]
+        = "step",
         operating_radius: Annotated[float, typer.Option(help="Refuse team-mates' cameras and poses farther than "
                                                              "this from the operating area, m.")] = 1000.0,
         max_clock_offset: Annotated[float, typer.Option(help="Refuse data stamped further ahead than this, s "
@@ -100,7 +103,8 @@ def register(app: typer.Typer) -> None:
             hint_rate_hz=hint_rate, image_encoding=image_encoding, use_attitude=imu, attitude_sigmas=imu_sigmas,
             wait_for=tuple(v.strip() for v in wait_for.split(",") if v.strip()), wait_timeout_s=wait_timeout,
             time_budget_s=time_budget, operating_radius_m=operating_radius, max_clock_offset_s=max_clock_offset,
-            source=source, camera_info=camera_info, camera_pose=camera_pose, features=features)
+            source=source, camera_info=camera_info, camera_pose=camera_pose, features=features,
+            view_weights=view_weights)
         console = Console(stderr=True)
 
         def emit(record: dict) -> None:

@@ -14,6 +14,8 @@ from agents.errors import FleetError
 ROLES = ("uav", "ground-station", "airship", "target")
 SHARES = ("none", "raw", "features", "hint")
 ENCODINGS = ("raw", "jpeg", "png")
+#: Eq. (4)'s view weights (evopose.weights): fixed, the paper's step rule, or from each view's evidence.
+VIEW_WEIGHTS = ("equal", "step", "adaptive")
 CAMERA_ROLES = ("uav", "ground-station")
 #: Feature points a camera vehicle extracts (``--features``; agents.problem.extract.FEATURE_KINDS).
 FEATURES = ("marks", "corners")
@@ -54,6 +56,7 @@ class AgentConfig:
     camera_info: str | Path | None = None
     camera_pose: str | Path | None = None
     features: str = "marks"
+    view_weights: str = "step"
 
     def check(self) -> None:
         """Raise :class:`FleetError` naming the first bad field."""
@@ -66,6 +69,8 @@ class AgentConfig:
             raise FleetError(f"--role must be one of {', '.join(ROLES)}, got {self.role!r}")
         if self.share not in SHARES:
             raise FleetError(f"--share must be one of {', '.join(SHARES)}, got {self.share!r}")
+        if self.view_weights not in VIEW_WEIGHTS:
+            raise FleetError(f"--view-weights must be one of {', '.join(VIEW_WEIGHTS)}, got {self.view_weights!r}")
         if self.features not in FEATURES:
             raise FleetError(f"--features must be one of {', '.join(FEATURES)}, got {self.features!r}")
         if self.source is None and (self.camera_info is not None or self.camera_pose is not None):

@@ -141,7 +141,8 @@ class CameraVehicle(Vehicle):
         self.camera = open_camera(config, scenario)  # the renderer, or a real source (--source)
         self.plausible = Plausibility(scenario.bounds(), config.operating_radius_m, config.max_clock_offset_s)
         self.estimator = CooperativeEstimator(scenario.model.evopose_model(), scenario.bounds(),
-                                              SearchOptions(time_budget=config.time_budget_s), seed=config.seed)
+                                              SearchOptions(time_budget=config.time_budget_s,
+                                                            view_weights=config.view_weights), seed=config.seed)
         self._hints: list[np.ndarray] = []
         self._latest_hint: np.ndarray | None = None
         self._sharing_mates: set[str] = set()  # team-mates that ever sent views
