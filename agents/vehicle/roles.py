@@ -258,7 +258,7 @@ class CameraVehicle(Vehicle):
         alive = self.bus.teammates()
         self.team.keep_only(alive)
         expected = self.team.sharing(alive, stamp_ns, max_age + self.period_s)
-        self._report_staleness(alive, expected)
+        self._report_staleness(alive, expected, stamp_ns)
         deadline = time.monotonic() + self.sync_wait_s
         wait_until(lambda: set(self.team.at(stamp_ns, expected)) >= expected, deadline, poll)
         found = self.team.at(stamp_ns, expected)
@@ -266,13 +266,16 @@ class CameraVehicle(Vehicle):
         found.update(self.team.newest(expected - set(found), stamp_ns, max_age))
         return list(found.values())
 
-    def _report_staleness(self, alive: frozenset[str], fresh: set[str]) -> None:
-        """A live team-mate whose data went stale (frozen, or a cut link: nothing newer than ``--max-age``) is no
-        longer waited for; say so once, and again when its data are fresh again."""
+    def _report_staleness(self, alive: frozenset[str], fresh: set[str], stamp_ns: int) -> None:
+        """A live team-mate whose data went stale (frozen, or a cut link: nothing newer than ``--max-age`` and the
+        frame in progress) is no longer waited for; say so once, with the age of its newest data at this frame,
+        and again when its data are fresh again."""
         stale = set(alive) & self._sharing_mates - fresh
         for mate in sorted(stale - self._stale):
             self.record.stale_events += 1
-            self.emit({"event": "stale", "vehicle": mate, "by": self.config.vehicle})
+            newest = self.team.newest_stamp_ns(mate)
+            self.emit({"event": "stale", "vehicle": mate, "by": self.config.vehicle,
+                       "age_s": None if newest is None else (stamp_ns - newest) / 1e9})
         for mate in sorted(self._stale & fresh):
             self.emit({"event": "fresh", "vehicle": mate, "by": self.config.vehicle})
         self._stale = stale

@@ -149,6 +149,11 @@ class TeamViews:
                     break
         return found
 
+    def newest_stamp_ns(self, mate: str) -> int | None:
+        """The stamp of ``mate``'s newest view kept (None when none is)."""
+        views = self._by_mate.get(mate)
+        return views[-1].stamp_ns if views else None
+
     def newest(self, mates: Iterable[str], now_ns: int, max_age_s: float) -> dict[str, MateView]:
         """The newest fresh view of each of ``mates``."""
         out = {}
