@@ -124,14 +124,19 @@ def test_scenario_run_records_every_run(tmp_path):
     published (checked against their own summaries), as raw channels and as ROS 2 messages."""
     frames = 8
     runner = Proc([sys.executable, "-m", "agents.cli", "scenario", "run", "exp2a-features", "--frames", str(frames),
-                   "--listen", f"tcp/127.0.0.1:{free_port()}", "--record", str(tmp_path / "runs"), "--json"])
+                   "--runs", "2", "--listen", f"tcp/127.0.0.1:{free_port()}", "--record", str(tmp_path / "runs"),
+                   "--json"])
     try:
         result = runner.next_record(120, lambda r: "runs" in r)
         assert runner.wait(20) == 0
     finally:
         runner.kill()
-    [run] = result["runs"]
-    path = tmp_path / "runs" / f"{run['fleet']}.mcap"
+    assert len(result["runs"]) == 2 and len({run["fleet"] for run in result["runs"]}) == 2
+    for run in result["runs"]:
+        check_recording(run, tmp_path / "runs" / f"{run['fleet']}.mcap", frames)
+
+
+def check_recording(run: dict, path, frames: int) -> None:
     assert run["recording"] == str(path) and path.is_file()
     with open(path, "rb") as stream:
         reader = make_reader(stream, decoder_factories=[DecoderFactory()])

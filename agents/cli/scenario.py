@@ -135,7 +135,7 @@ def run_command(
         if as_json:
             records = run_scenario(scenario, runs=runs, frames=frames, seed=seed, endpoint=listen,
                                    variants=variant, stop=stop, fps=fps, secure=secure, credentials=credentials,
-                                   ros2_domain=mirror_domain, record=record)
+                                   ros2_domain=mirror_domain, record_dir=record)
         else:
             with console.status(f"{scenario.name}: starting") as status:
                 def progress(p: dict) -> None:
@@ -149,7 +149,7 @@ def run_command(
                 records = run_scenario(scenario, runs=runs, frames=frames, seed=seed, endpoint=listen,
                                        variants=variant, stop=stop, on_run=finished, on_progress=progress,
                                        fps=fps, secure=secure, credentials=credentials, ros2_domain=mirror_domain,
-                                       record=record)
+                                       record_dir=record)
     result_rows = rows(records)
     if as_json:
         emit_json({"scenario": scenario.name, "interrupted": stop.is_set(), "rows": result_rows, "runs": records})

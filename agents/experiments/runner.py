@@ -177,13 +177,13 @@ def start_router(cmd: list[str], env: dict) -> subprocess.Popen:
 def run_variant(scenario: FleetScenario, variant: VariantSpec, run: int, *, frames: int, seed: int,
                 endpoint: str, stop: threading.Event, on_progress: Callable[[dict], None] | None = None,
                 fps: float | None = None, secure: bool = False, credentials: Path | None = None,
-                ros2_domain: int | None = None, record: Path | None = None) -> dict:
+                ros2_domain: int | None = None, record_dir: Path | None = None) -> dict:
     """One run of one variant: start its agents (and router), wait for their summaries, stop everything.
 
     ``secure``: TLS, mTLS and the router's ACL, with this run's credentials in ``credentials/<fleet>`` (kept)
     or in a temporary directory (removed). ``ros2_domain``: also run ``evopose ros2`` (docs/ros2.md) on the
-    fleet, publishing its ROS 2 mirror in that domain. ``record``: a directory; the run's traffic is recorded
-    into ``record/<fleet>.mcap`` (``evopose record``: replayable, and readable by ROS 2 tools).
+    fleet, publishing its ROS 2 mirror in that domain. ``record_dir``: the run's traffic is recorded into
+    ``record_dir/<fleet>.mcap`` (``evopose record``: replayable, and readable by ROS 2 tools).
     """
     fps = fps or scenario.fps
     started = time.monotonic()
@@ -208,8 +208,8 @@ def run_variant(scenario: FleetScenario, variant: VariantSpec, run: int, *, fram
             children.append(router)
         if ros2_domain is not None:  # before the agents, so that it mirrors their first frames
             children.append(start_ros2_mirror(fleet, ros2_domain, endpoint, use_router, env))
-        if record is not None:  # before the agents too: their first frames are in the file
-            children.append(start_recorder(fleet, Path(record) / f"{fleet}.mcap", endpoint, use_router, env))
+        if record_dir is not None:  # before the agents too: their first frames are in the file
+            children.append(start_recorder(fleet, Path(record_dir) / f"{fleet}.mcap", endpoint, use_router, env))
         epoch_ns = time.time_ns() + int(START_MARGIN_S * 1e9)
         for i, agent in enumerate(variant.agents):
             if secure:  # the vehicle's file: a TLS client with its certificate
@@ -256,7 +256,7 @@ def run_variant(scenario: FleetScenario, variant: VariantSpec, run: int, *, fram
         raise ScenarioRunError(f"run {run} of {scenario.name}/{variant.name}: {details}")
     return {"scenario": scenario.name, "world": scenario.world.name, "variant": variant.name, "run": run,
             "fleet": fleet, "slow": slow, "secure": secure, "router_restarts": router_restarts,
-            "recording": str(Path(record) / f"{fleet}.mcap") if record is not None else None,
+            "recording": str(Path(record_dir) / f"{fleet}.mcap") if record_dir is not None else None,
             "interrupted": stop.is_set(), "seconds": time.monotonic() - started,
             "agents": {p.vehicle: p.summary for p in procs}}
 
@@ -280,7 +280,7 @@ def run_scenario(scenario: FleetScenario, *, runs: int = 1, frames: int | None =
                  fps: float | None = None, keep_going: bool = False, secure: bool = False,
                  credentials: Path | None = None, on_run: Callable[[dict], None] | None = None,
                  on_progress: Callable[[dict], None] | None = None, ros2_domain: int | None = None,
-                 record: Path | None = None) -> list[dict]:
+                 record_dir: Path | None = None) -> list[dict]:
     """Every run of every (chosen) variant; returns one record per run (see :func:`run_variant`).
 
     A run that fails raises :class:`ScenarioRunError`; with ``keep_going`` it is recorded instead, as
@@ -296,7 +296,7 @@ def run_scenario(scenario: FleetScenario, *, runs: int = 1, frames: int | None =
                 record = run_variant(scenario, variant, run, frames=frames or scenario.frames, seed=seed,
                                      endpoint=endpoint, stop=stop, on_progress=on_progress, fps=fps,
                                      secure=secure, credentials=credentials, ros2_domain=ros2_domain,
-                                     record=record)
+                                     record_dir=record_dir)
             except ScenarioRunError as err:
                 if not keep_going:
                     raise
