@@ -259,6 +259,8 @@ class CameraVehicle(Vehicle):
         self.team.keep_only(alive)
         expected = self.team.sharing(alive, stamp_ns, max_age + self.period_s)
         self._report_staleness(alive, expected, stamp_ns)
+        if not self.record.frames:  # the first frame: the team waited for is expected before anything came from it
+            expected |= set(self.config.wait_for) & set(alive)
         deadline = time.monotonic() + self.sync_wait_s
         wait_until(lambda: set(self.team.at(stamp_ns, expected)) >= expected, deadline, poll)
         found = self.team.at(stamp_ns, expected)
