@@ -3,6 +3,7 @@ and their JSON-line output read with timeouts."""
 
 from __future__ import annotations
 
+import contextlib
 import json
 import queue
 import signal
@@ -11,6 +12,7 @@ import subprocess
 import sys
 import threading
 import time
+from collections.abc import Iterator
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -114,6 +116,29 @@ class Fleet:
     def close(self) -> None:
         for proc in self.procs:
             proc.kill()
+
+
+@contextlib.contextmanager
+def fleet_with_router(name: str) -> Iterator[Fleet]:
+    """A :class:`Fleet` named ``name`` whose router listens on a free loopback port; everything killed at the end."""
+    fleet = Fleet(free_port(), name)
+    try:
+        router = fleet.start("router", "--listen", fleet.endpoint, "--json", "--no-multicast", connect=False)
+        router.next_record(10, lambda r: r.get("event") == "ready")
+        yield fleet
+    finally:
+        fleet.close()
+
+
+def client_session(endpoint: str):
+    """A Zenoh session of the test itself: a client of the router at ``endpoint``, multicast scouting off."""
+    import zenoh
+
+    config = zenoh.Config()
+    config.insert_json5("mode", '"client"')
+    config.insert_json5("connect/endpoints", f'["{endpoint}"]')
+    config.insert_json5("scouting/multicast/enabled", "false")
+    return zenoh.open(config)
 
 
 def good_from_first(summary: dict) -> tuple[int, bool]:

@@ -18,27 +18,15 @@ from agents.bridges.names import topic_name
 from agents.bridges.recording import restamp
 from protocol.codec import decode_sample, encode
 from protocol.messages import PoseEstimate
-from tests.fleet_procs import Fleet, Proc, free_port
+from tests.fleet_procs import Proc, client_session, fleet_with_router, free_port
 
 N = 20
 
 
 @pytest.fixture
 def fleet():
-    port = free_port()
-    fleet = Fleet(port, "rec-test")
-    router = fleet.start("router", "--listen", fleet.endpoint, "--json", "--no-multicast", connect=False)
-    router.next_record(10, lambda r: r.get("event") == "ready")
-    yield fleet
-    fleet.close()
-
-
-def client_config(endpoint: str) -> zenoh.Config:
-    config = zenoh.Config()
-    config.insert_json5("mode", '"client"')
-    config.insert_json5("connect/endpoints", f'["{endpoint}"]')
-    config.insert_json5("scouting/multicast/enabled", "false")
-    return config
+    with fleet_with_router("rec-test") as fleet:
+        yield fleet
 
 
 def test_restamp_moves_only_the_stamp():
@@ -98,7 +86,7 @@ def test_record_then_replay_into_a_fresh_agent(fleet, tmp_path):
         estimate = decode_sample(str(sample.key_expr), sample.payload.to_bytes())[1]
         replayed[estimate.seq] = estimate
 
-    with zenoh.open(client_config(fleet.endpoint)) as session, \
+    with client_session(fleet.endpoint) as session, \
             session.declare_subscriber(f"evopose/{fleet.fleet}/**", lambda s: on_pose(s) if str(
                 s.key_expr).endswith("/pose") else None):
         replay = fleet.start("replay", str(out), "--json", "--wait", "20")

@@ -11,7 +11,6 @@ from __future__ import annotations
 import math
 import struct
 import sys
-import time
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -28,7 +27,7 @@ from agents.bridges.rmw_zenoh import (DEFAULT_QOS, TF_QOS, Attachment, EntityKin
 from agents.bridges.translate import estimate_messages
 from protocol.codec import decode_sample
 from protocol.messages import PoseEstimate
-from tests.fleet_procs import Fleet, free_port
+from tests.fleet_procs import Fleet, client_session, fleet_with_router, free_port
 
 GOLDEN = Path(__file__).resolve().parent / "golden" / "ros2_pose.cdr"
 STAMP_NS = 1_700_000_000_123_456_789
@@ -185,20 +184,8 @@ def test_camera_rig_recomposes_the_camera_pose():
 
 @pytest.fixture
 def fleet():
-    port = free_port()
-    fleet = Fleet(port, "ros2-test")
-    router = fleet.start("router", "--listen", fleet.endpoint, "--json", "--no-multicast", connect=False)
-    router.next_record(10, lambda r: r.get("event") == "ready")
-    yield fleet
-    fleet.close()
-
-
-def client_session(endpoint: str) -> zenoh.Session:
-    config = zenoh.Config()
-    config.insert_json5("mode", '"client"')
-    config.insert_json5("connect/endpoints", f'["{endpoint}"]')
-    config.insert_json5("scouting/multicast/enabled", "false")
-    return zenoh.open(config)
+    with fleet_with_router("ros2-test") as fleet:
+        yield fleet
 
 
 def test_a_real_fleet_is_received_by_an_rmw_zenoh_subscriber(fleet):

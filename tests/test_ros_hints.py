@@ -10,14 +10,13 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
-import zenoh
 
 from agents.bridges import ros_msgs
 from agents.bridges.rmw_zenoh import DEFAULT_QOS, Node
 from agents.bridges.ros2_node import Ros2Node
 from agents.bridges.ros_hints import RefusedPose, pose_from_pose_stamped, rpy_from_quaternion
 from protocol.hint import decode_hint
-from tests.fleet_procs import Fleet, free_port
+from tests.fleet_procs import client_session, fleet_with_router
 
 TOPIC = "/lab/target_hint"
 
@@ -53,19 +52,8 @@ def test_a_pose_that_is_not_the_targets_in_map_is_refused(frame, position, quate
 
 @pytest.fixture
 def fleet():
-    fleet = Fleet(free_port(), "hint-test")
-    router = fleet.start("router", "--listen", fleet.endpoint, "--json", "--no-multicast", connect=False)
-    router.next_record(10, lambda r: r.get("event") == "ready")
-    yield fleet
-    fleet.close()
-
-
-def client_session(endpoint: str) -> zenoh.Session:
-    config = zenoh.Config()
-    config.insert_json5("mode", '"client"')
-    config.insert_json5("connect/endpoints", f'["{endpoint}"]')
-    config.insert_json5("scouting/multicast/enabled", "false")
-    return zenoh.open(config)
+    with fleet_with_router("hint-test") as fleet:
+        yield fleet
 
 
 def test_a_ros_node_hints_the_fleet_through_a_pose_stamped_topic(fleet):
