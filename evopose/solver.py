@@ -12,11 +12,13 @@ from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from .fitness import Match, PoseObjective
 from .local import LocalSearch
 from .loop import Evaluator, Run, evolve
 from .options import SearchOptions
+from .pose import matrix_from_pose
 from .problem import PoseProblem, View
 from .refine import TRACK_HARD_SCHEDULE, TRACK_SCHEDULE, annealing, refine
 from .search import EvoPose
@@ -29,6 +31,10 @@ POLISH_SCHEDULE = annealing(1, hard=6, start=1.0)
 GOOD_REASONS = ("good_fitness", "consensus", "stalled")
 #: Other basins of the final population that are polished and compared with the best (:func:`evopose.uncertainty.assess`).
 RIVALS = 8
+#: Repeated displacement directions of the model tried as rivals (:func:`shifted_rivals`; each with both signs).
+SHIFT_DIRECTIONS = 2
+#: Share of the model's marks whose nearest neighbour lies along one displacement for it to count as repeated.
+REPEATED_SHARE = 0.2
 #: Share of ``time_budget`` the verdict may take after the search (polishing the rivals); past it, not confident.
 VERDICT_GRACE = 0.1
 
@@ -150,6 +156,8 @@ def solution_of(problem: PoseProblem, options: SearchOptions, run: Run, seconds:
     # matches judged on every view with its own weight: a view the step rule dropped still counts against a pose
     # (a wrong basin that fits one view and gave up the other must not look sure)
     rivals, checked = _rivals(state, objective, options, deadline)
+    if checked and options.refine_steps:  # repeated structure: the best moved by the model's own spacing
+        rivals = np.concatenate([rivals, shifted_rivals(objective, pose)])
     checked = checked and in_time
     confidence = assess(objective, pose, rivals, options.confidence,
                         judge=objective.with_weights(objective.base_weights))
@@ -163,6 +171,45 @@ def solution_of(problem: PoseProblem, options: SearchOptions, run: Run, seconds:
         stop_reason=run.told.stop_reason or "unfinished",
         history=list(state.history), from_hint=state.best_from_hint, problem=problem, options=options,
         covariance=confidence.covariance.matrix, confident=confidence.confident, confidence=confidence)
+
+
+def repeated_displacements(points: np.ndarray, count: int = SHIFT_DIRECTIONS) -> np.ndarray:
+    """The model's most repeated nearest-neighbour displacements, shape (<= 2 * count, 3), in the target frame
+    and with both signs: a grid's rows and columns. ``points`` (M, 3)."""
+    points = np.asarray(points, float)
+    if len(points) < 3:
+        return np.zeros((0, 3))
+    _, nearest = cKDTree(points).query(points, k=2)
+    steps = points[nearest[:, 1]] - points
+    steps = np.where(_sign(steps)[:, None] < 0, -steps, steps)  # d and -d are one direction
+    scale = max(float(np.median(np.linalg.norm(steps, axis=1))), 1e-12)
+    _, first, counts = np.unique(np.round(steps / (0.05 * scale)).astype(np.int64), axis=0, return_index=True,
+                                    return_counts=True)
+    order = np.argsort(-counts, kind="stable")[:count]
+    order = order[counts[order] >= max(3, REPEATED_SHARE * len(points))]  # a structure: a good share of the marks
+    chosen = steps[first[order]]
+    return np.concatenate([chosen, -chosen])
+
+
+def _sign(v: np.ndarray) -> np.ndarray:
+    """Sign of each row's first non-zero component (0 for a zero row)."""
+    nz = np.abs(v) > 1e-12
+    first = np.argmax(nz, axis=1)
+    return np.sign(v[np.arange(len(v)), first]) * nz.any(axis=1)
+
+
+def shifted_rivals(objective: PoseObjective, pose: np.ndarray) -> np.ndarray:
+    """The best ``pose`` (6,) moved by each of :func:`repeated_displacements` of the model (rotated into the world)
+    and polished, shape (K, 6): where repeated structure (a chessboard's squares seen without its edge) would let a
+    shifted pose fit as well, the search's own population need not hold that basin, and the verdict must see it."""
+    shifts = repeated_displacements(objective.problem.model.points)
+    if not len(shifts):
+        return np.zeros((0, 6))
+    rotation = matrix_from_pose(np.asarray(pose, float))[:3, :3]
+    moved = np.tile(np.asarray(pose, float), (len(shifts), 1))
+    moved[:, :3] += shifts @ rotation.T
+    polished, _ = refine(objective, moved, None, POLISH_SCHEDULE)
+    return polished
 
 
 def _rivals(state, objective: PoseObjective, options: SearchOptions,
