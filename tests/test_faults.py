@@ -133,10 +133,12 @@ def test_the_scenario_runner_reports_a_dead_router_and_restarts_it(tmp_path, cap
     for vehicle, mate in (("H1", "H2"), ("H2", "H1")):
         summary = record["agents"][vehicle]
         assert summary is not None and summary["frames"] == summary["estimates"] == 60, summary
-        # the router's death cut them apart; they met again through the new router and shared their views again
-        # (at most killed + 3 frames were run before the kill: the progress is the slower agent's, 0.25 s old)
-        assert summary["teammates"] == [mate], summary["teammates"]
-        assert summary["multi_view_frames"] >= killed[0] + 3 + 10, (summary["multi_view_frames"], killed)
+        # the router's death cut them apart; they met again through the new router and shared their views again:
+        # at least 10 frames with both views after the kill (at most killed + 3 frames were run before it: the
+        # progress is the slower agent's, 0.25 s old). Not `teammates` of the summary: the one that finishes
+        # last may already have seen the other leave.
+        assert summary["multi_view_frames"] >= killed[0] + 3 + 10, (vehicle, mate, summary["multi_view_frames"],
+                                                                    killed)
     print(f"router killed after {killed[0]} frames, restarted: {record['router_restarts']}; frames with both views "
           f"{ {v: record['agents'][v]['multi_view_frames'] for v in BOTH} } of 60")
 
