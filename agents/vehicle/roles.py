@@ -40,6 +40,8 @@ Emit = Callable[[dict], None]
 SEARCH_SHARE_OF_FRAME = 0.5
 #: Share of the time the improver thread may run generations (it shares the interpreter with the frame loop).
 IMPROVER_DUTY = 0.5
+#: Frames estimated before joining (a search, then tracking), so that no frame compiles a kernel.
+WARM_UP_FRAMES = 3
 #: Hints kept while waiting for the next frame or generation (the newest).
 HINTS_KEPT = 64
 
@@ -178,9 +180,13 @@ class CameraVehicle(Vehicle):
         finally:
             camera.close()
         views, _ = build_views([own_view(config.vehicle, 0, frame.camera, frame.points)])
-        if views:
-            CooperativeEstimator(scenario.model.evopose_model(), scenario.bounds(),
-                                 SearchOptions(max_generations=1, min_starts=1)).estimate(views)
+        if views:  # every path a frame may take compiles here: a search, tracking (eq. 2), a team-mate's best
+            estimator = CooperativeEstimator(scenario.model.evopose_model(), scenario.bounds(),
+                                             SearchOptions(max_generations=1, min_starts=1))
+            for k in range(WARM_UP_FRAMES):
+                best = estimator.current_best
+                estimator.estimate(views, frame=k, candidates=None if best is None else np.array([best]))
+            estimator.generation(budget_s=0.0)
         release_free_memory()  # what the one-off work (ground texture, compilation) freed
 
     def run(self, stop: threading.Event) -> dict:
