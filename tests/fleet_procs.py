@@ -141,6 +141,19 @@ def client_session(endpoint: str):
     return zenoh.open(config)
 
 
+def peer_session(endpoint: str):
+    """A Zenoh session of the test itself: a peer that connects to ``endpoint`` and listens nowhere (an outsider on
+    the fleet's network: a forger, a flooder), multicast scouting off."""
+    import zenoh
+
+    config = zenoh.Config()
+    config.insert_json5("mode", '"peer"')
+    config.insert_json5("connect/endpoints", f'["{endpoint}"]')
+    config.insert_json5("listen/endpoints", "[]")
+    config.insert_json5("scouting/multicast/enabled", "false")
+    return zenoh.open(config)
+
+
 def good_from_first(summary: dict) -> tuple[int, bool]:
     """From an agent's summary (its last published poses, ``[frame, x, y, z, roll, pitch, yaw, good]``): how many
     frames came before the first good one, and whether every frame after it was good (a pose once confident is

@@ -51,6 +51,20 @@ def message(bus: FleetBus, topic: Topic, *, seq: int, age_s: float = 0.0, **spec
     return sample_message(PublishSpec(topic, **spec), header, np.random.default_rng(seq))
 
 
+class StuckHandler:
+    """A message handler that blocks the receiver's worker in its first call until :attr:`release` is set (a receiver
+    slower than its sender); :attr:`entered` is set once it blocks, :attr:`seqs` holds the sequence numbers handled."""
+
+    def __init__(self) -> None:
+        self.entered, self.release = threading.Event(), threading.Event()
+        self.seqs: list[int] = []
+
+    def __call__(self, rx) -> None:
+        self.seqs.append(getattr(rx.message, "seq", None))  # hints carry none
+        self.entered.set()
+        self.release.wait(DEADLINE)
+
+
 def joined(rx_kwargs: dict) -> threading.Event:
     """An event set when the receiver's worker has handled a team-mate joining (so no join is still queued)."""
     event = threading.Event()
@@ -72,24 +86,19 @@ def test_wait_for_subscribers_waits_until_someone_subscribes(endpoint):
 
 def test_a_slow_consumer_keeps_at_most_queue_size_messages_and_counts_every_one_dropped(endpoint):
     n, queue_size = 200, 8
-    entered, release = threading.Event(), threading.Event()
-
-    def slow(rx):  # the worker is stuck here until released: the receiver is slower than the sender
-        entered.set()
-        release.wait(DEADLINE)
-
+    slow = StuckHandler()
     kwargs = {"queue_size": queue_size}
     mate = joined(kwargs)
     with open_bus("tx", endpoint, listen=True) as tx, open_bus("rx", endpoint, **kwargs) as rx:
         rx.subscribe(Topic.HINT, slow)
         assert mate.wait(DEADLINE) and tx.wait_for_subscribers(Topic.HINT, DEADLINE)
         tx.publish_hint(np.zeros(6))
-        assert entered.wait(DEADLINE)
+        assert slow.entered.wait(DEADLINE)
         for i in range(1, n):
             tx.publish_hint(np.array([i, 0, 10, 0, 0, 0]))
         # one in the handler, queue_size waiting in the inbox, every other one dropped and counted
         assert until(lambda: rx.counters.rejected["overflow"] == n - 1 - queue_size), rx.counters.snapshot()
-        release.set()
+        slow.release.set()
         assert until(lambda: rx.counters.received["hint"] == 1 + queue_size), rx.counters.snapshot()
         # nobody calls recv(): its queue keeps the newest queue_size, the one pushed out is counted as unread
         received = []
@@ -103,14 +112,7 @@ def test_a_slow_consumer_keeps_at_most_queue_size_messages_and_counts_every_one_
 
 def test_images_keep_the_newest_frames_and_count_the_older_ones_dropped(endpoint):
     n, ring = 10, 2
-    entered, release = threading.Event(), threading.Event()
-    seqs: list[int] = []
-
-    def slow(rx):
-        seqs.append(rx.message.seq)
-        entered.set()
-        release.wait(DEADLINE)
-
+    slow = StuckHandler()
     kwargs = {"image_ring": ring}
     mate = joined(kwargs)
     with open_bus("tx", endpoint, listen=True) as tx, open_bus("rx", endpoint, **kwargs) as rx:
@@ -118,13 +120,13 @@ def test_images_keep_the_newest_frames_and_count_the_older_ones_dropped(endpoint
         assert mate.wait(DEADLINE) and tx.wait_for_subscribers(Topic.IMAGE, DEADLINE)
         small = {"width": 32, "height": 24}
         tx.publish(message(tx, Topic.IMAGE, seq=0, **small))
-        assert entered.wait(DEADLINE)
+        assert slow.entered.wait(DEADLINE)
         for seq in range(1, n):
             tx.publish(message(tx, Topic.IMAGE, seq=seq, **small))
         assert until(lambda: rx.counters.rejected["overflow"] == n - 1 - ring), rx.counters.snapshot()
-        release.set()
+        slow.release.set()
         assert until(lambda: rx.counters.received["image"] == 1 + ring), rx.counters.snapshot()
-    assert seqs == [0, n - 2, n - 1]  # the oldest frames were dropped, the newest kept
+    assert slow.seqs == [0, n - 2, n - 1]  # the oldest frames were dropped, the newest kept
     assert rx.counters.snapshot()["lost"] == {"image": n - 3}  # and the receiver sees the gap in seq
 
 
@@ -197,12 +199,7 @@ def test_a_teammate_that_leaves_is_dropped_and_used_again_when_it_is_back(endpoi
 
 def test_close_hands_over_what_was_already_received(endpoint):
     n = 50
-    entered, release = threading.Event(), threading.Event()
-
-    def slow(rx):
-        entered.set()
-        release.wait(DEADLINE)
-
+    slow = StuckHandler()
     kwargs: dict = {}
     mate = joined(kwargs)
     with open_bus("tx", endpoint, listen=True) as tx:
@@ -212,15 +209,15 @@ def test_close_hands_over_what_was_already_received(endpoint):
             assert mate.wait(DEADLINE) and tx.wait_for_subscribers(Topic.ATTITUDE, DEADLINE)
             for seq in range(n):
                 tx.publish(message(tx, Topic.ATTITUDE, seq=seq))
-            assert entered.wait(DEADLINE)
+            assert slow.entered.wait(DEADLINE)
             # white box: everything sent is in the receiver's hands (one in the handler, the rest in its inbox)
             assert until(lambda: len(rx._inbox.fifo) == n - 1)
             closing = threading.Thread(target=rx.close)
             closing.start()
-            release.set()
+            slow.release.set()
             closing.join(DEADLINE)
             assert not closing.is_alive()
         finally:
-            release.set()
+            slow.release.set()
             rx.close()
     assert rx.counters.snapshot()["received"] == {"attitude": n}

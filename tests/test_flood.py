@@ -4,17 +4,16 @@ new sender name each message, against a real agent; its camera rate holds and it
 from __future__ import annotations
 
 import json
-import socket
 import subprocess
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
-import zenoh
 
 from agents.transport.inbox import MAX_SENDERS, BoundedSenders, SenderBudget
 from protocol import CameraInfo, FeatureSet, Topic, encode, topic_key
+from tests.fleet_procs import free_port, peer_session
 
 ROOT = Path(__file__).resolve().parents[1]
 CAMERA = CameraInfo(fx=1700, fy=1700, cx=320, cy=240, width=640, height=480, world_from_camera=(-27, 6, 12, 0, 0, 0))
@@ -38,31 +37,20 @@ def _rss_kb(pid: int) -> int:
     return 0
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
 def test_a_flood_of_valid_feature_sets_leaves_the_camera_rate_and_memory_alone():
-    port, fleet, frames = _free_port(), "flooded", 60
+    port, fleet, frames = free_port(), "flooded", 60
     epoch = time.time_ns() + int(4e9)
     victim = subprocess.Popen([sys.executable, "-m", "agents.cli", "agent", "--fleet", fleet, "--vehicle", "H1",
                                "--share", "features", "--frames", str(frames), "--epoch-ns", str(epoch), "--json",
                                "--listen", f"tcp/127.0.0.1:{port}"], cwd=ROOT, stdout=subprocess.PIPE,
                               stderr=subprocess.PIPE, text=True)
-    config = zenoh.Config()
-    config.insert_json5("mode", '"peer"')
-    config.insert_json5("connect/endpoints", json.dumps([f"tcp/127.0.0.1:{port}"]))
-    config.insert_json5("listen/endpoints", "[]")
-    config.insert_json5("scouting/multicast/enabled", "false")
     points = np.random.default_rng(0).uniform(300, 340, (30, 2)).astype("<f4").tobytes()
     sent, rss = 0, []
     try:
         ready = victim.stdout.readline()
         while ready and json.loads(ready).get("event") != "ready":
             ready = victim.stdout.readline()
-        with zenoh.open(config) as session:
+        with peer_session(f"tcp/127.0.0.1:{port}") as session:
             token = session.liveliness().declare_token(f"evopose/{fleet}/@alive/H2")
             publisher = session.declare_publisher(topic_key(fleet, "H2", "features"))
             time.sleep(max(0.0, (epoch - time.time_ns()) / 1e9) + 2.0)  # 20 frames of normal running first

@@ -5,18 +5,17 @@ from __future__ import annotations
 
 import json
 import math
-import socket
 import subprocess
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
-import zenoh
 
 from agents.vehicle.plausibility import Plausibility
 from evopose import Bounds
 from protocol import Attitude, CameraInfo, FeatureSet, encode, topic_key
+from tests.fleet_procs import free_port, peer_session
 
 ROOT = Path(__file__).resolve().parents[1]
 BOX = Bounds.from_dict({"x": (-3, 3), "y": (-3, 3), "z": (-0.2, 0.5)})
@@ -43,27 +42,16 @@ def test_what_a_sane_team_mate_cannot_send_is_refused():
     assert check.feature_set(features) == "outside-search-box"
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
 def test_a_hostile_imu_reading_is_counted_and_the_station_keeps_going():
     """An Attitude with sigma = 1e308 (valid per the schema) once killed the ground station."""
-    port, fleet = _free_port(), "hostile-attitude"
+    port, fleet = free_port(), "hostile-attitude"
     epoch = time.time_ns() + int(4e9)
     station = subprocess.Popen([sys.executable, "-m", "agents.cli", "agent", "--scenario", "exp1-airship", "--fleet",
                                 fleet, "--vehicle", "ground-station", "--frames", "25", "--epoch-ns", str(epoch),
                                 "--listen", f"tcp/127.0.0.1:{port}", "--json"], cwd=ROOT, stdout=subprocess.PIPE,
                                stderr=subprocess.PIPE, text=True)
-    config = zenoh.Config()
-    config.insert_json5("mode", '"peer"')
-    config.insert_json5("connect/endpoints", json.dumps([f"tcp/127.0.0.1:{port}"]))
-    config.insert_json5("listen/endpoints", "[]")
-    config.insert_json5("scouting/multicast/enabled", "false")
     try:
-        with zenoh.open(config) as session:
+        with peer_session(f"tcp/127.0.0.1:{port}") as session:
             token = session.liveliness().declare_token(f"evopose/{fleet}/@alive/airship")
             key = topic_key(fleet, "airship", "attitude")
             deadline = time.monotonic() + 60
