@@ -237,7 +237,7 @@ class CooperativeEstimator:
         search = self._confirm
         until = None if generations is None else search.run.told.generation + generations
         run = evolve(search.optimiser, search.run.state, search.run.evaluator, deadline=deadline,
-                     elapsed_before=search.run.seconds, until_generation=until)
+                     elapsed_before=search.run.seconds, until_generation=until, time_budget=self.options.time_budget)
         if not run.finished:
             self._confirm = replace(search, run=run)
             return solution
@@ -325,7 +325,8 @@ class CooperativeEstimator:
 
         until = None if generations is None else search.run.told.generation + generations
         run = evolve(search.optimiser, search.run.state, search.run.evaluator, on_generation=watch,
-                     deadline=deadline, elapsed_before=search.run.seconds, until_generation=until)
+                     deadline=deadline, elapsed_before=search.run.seconds, until_generation=until,
+                     time_budget=self.options.time_budget)
         solution = solution_of(search.problem, self.options, run, run.seconds)
         if not run.finished:
             self._search = replace(search, run=run, good_at=good_at)

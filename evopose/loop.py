@@ -217,7 +217,7 @@ class Run:
 def evolve(optimiser: AskTell, state: Any, evaluator: Evaluator, *,
            hint_source: Callable[[], np.ndarray | None] | None = None,
            on_generation: Callable[[Any], None] | None = None, deadline: float | None = None,
-           elapsed_before: float = 0.0, until_generation: int | None = None) -> Run:
+           elapsed_before: float = 0.0, until_generation: int | None = None, time_budget: float | None = None) -> Run:
     """Run generations until the optimiser's ``tell`` gives a stop reason, or until ``deadline``.
 
     Parameters
@@ -239,12 +239,14 @@ def evolve(optimiser: AskTell, state: Any, evaluator: Evaluator, *,
     until_generation : int, optional
         Also return (unfinished) once this many generations are told: slices of a fixed number of
         generations, which two vehicles with the same inputs run alike whatever their clocks.
+    time_budget : float, optional
+        The search's whole budget, s (``SearchOptions.time_budget``; earlier calls' ``elapsed_before`` count):
+        held inside a generation too (:meth:`Evaluator.until`). The optimiser's ``tell`` stops on it.
     """
     t0 = time.perf_counter() - elapsed_before
     # inside a generation, evaluation stops at the search's time budget (a slice's ``deadline`` is a pause between
     # whole generations: the resumed search is the same as an unpaused one)
-    budget = getattr(getattr(optimiser, "options", None), "time_budget", None)
-    inside = None if budget is None else t0 + budget
+    inside = None if time_budget is None else t0 + time_budget
     while True:
         if hint_source is not None:
             new = hint_source()

@@ -131,7 +131,7 @@ def solve(problem: PoseProblem, options: SearchOptions | None = None,
     options = options or SearchOptions()
     evo = EvoPose(problem, options, _rng(seed))
     run = evolve(evo, evo.start(initial), Evaluator.for_search(problem, options), hint_source=hint_source,
-                 on_generation=on_generation)
+                 on_generation=on_generation, time_budget=options.time_budget)
     return solution_of(problem, options, run, time.perf_counter() - t0)
 
 
@@ -153,12 +153,12 @@ def solution_of(problem: PoseProblem, options: SearchOptions, run: Run, seconds:
     mismatch = objective.mismatch(fitness)
     match = Match(None if mismatch is None else float(mismatch), state.best_match.unmatched)
     terms = objective.view_terms(pose[None])[0]
-    # matches judged on every view with its own weight: a view the step rule dropped still counts against a pose
-    # (a wrong basin that fits one view and gave up the other must not look sure)
     rivals, checked = _rivals(state, objective, options, deadline)
     if checked and options.refine_steps:  # repeated structure: the best moved by the model's own spacing
         rivals = np.concatenate([rivals, shifted_rivals(objective, pose)])
     checked = checked and in_time
+    # matches judged on every view with its own weight: a view the step rule dropped still counts against a pose
+    # (a wrong basin that fits one view and gave up the other must not look sure)
     confidence = assess(objective, pose, rivals, options.confidence,
                         judge=objective.with_weights(objective.base_weights))
     if not checked and confidence.confident:  # the other basins were not polished in time: not sure

@@ -59,6 +59,9 @@ def test_a_search_cut_by_its_budget_is_not_confident():
     problem = make_paper_scale_problem(np.random.default_rng(3), cameras=("H1", "H2")).problem
     cut = solve(problem, SearchOptions(time_budget=1e-9), seed=3)
     assert cut.generations == 1 and cut.stop_reason == "time_budget" and not cut.converged and not cut.confident
+    # solve holds the budget inside its generation: a few candidates' work, not a whole generation's
+    whole_generation = solve(problem, SearchOptions(max_generations=1), seed=3)
+    assert cut.evaluations * 100 < whole_generation.evaluations, (cut.evaluations, whole_generation.evaluations)
     free = solve(problem, SearchOptions(time_budget=1e3), seed=3)
     assert np.array_equal(free.pose, solve(problem, SearchOptions(), seed=3).pose)
 
