@@ -38,6 +38,7 @@ bench: $(STAMP)
 	NUMBA_NUM_THREADS=1 $(PY) -m benchmarks.bench_confidence
 	NUMBA_NUM_THREADS=1 $(PY) -m benchmarks.bench_weights
 	NUMBA_NUM_THREADS=1 $(PY) -m benchmarks.bench_image_only
+	NUMBA_NUM_THREADS=1 $(PY) -m benchmarks.bench_time_budget
 	$(PY) -m benchmarks.report
 
 # Three agent pairs for 10 minutes each (30 min): memory and CPU over time.
