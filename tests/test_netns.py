@@ -44,8 +44,10 @@ def pose_of(record: dict) -> np.ndarray:
     return np.array([record["pose"][n] for n in ("x", "y", "z", "roll", "pitch", "yaw")])
 
 
-#: Share of the frames run together that must use both views on a 20 % lossy link, per run (see the test).
-MOSTLY_BOTH = 0.8
+#: --max-age on the lossy link: TCP's backed-off retransmissions stall a stream for 1-2 s now and then (head of
+#: line), past the default 1 s, which left a helicopter alone for 6-7 frames in 2 of ~12 runs (docs/scaling.md,
+#: "Faults"). On a lossy link a team-mate's newest view a few seconds old is still worth using.
+LOSSY_MAX_AGE_S = 3.0
 
 
 def start_team(fleet: FleetOnHosts, *h_args: str) -> None:
@@ -58,11 +60,12 @@ def start_team(fleet: FleetOnHosts, *h_args: str) -> None:
 
 def test_a_lossy_link_between_the_hosts_keeps_both_views_and_agreement(hosts):
     # Linux's default TCP: a lost segment is sent again after >= 200 ms, doubling when lost again; the feature sets
-    # behind it wait (head-of-line blocking). Stalls past --max-age (1 s) leave the receiver alone for a few frames
-    # (6-7 frames in a row in 2 of ~12 runs; once under 95 %: docs/scaling.md, "Faults").
+    # behind it wait (head-of-line blocking). Stalls past the default --max-age (1 s) left the receiver alone for
+    # 6-7 frames in 2 of ~12 runs (once under 95 %: docs/scaling.md, "Faults"), so this link runs with
+    # LOSSY_MAX_AGE_S, the setting docs/scaling.md recommends for lossy links.
     fleet = FleetOnHosts(hosts, "lossy")
     hosts.drop_inbound("B", 0.2)
-    start_team(fleet, "--frames", str(LOSSY_FRAMES))
+    start_team(fleet, "--frames", str(LOSSY_FRAMES), "--max-age", f"{LOSSY_MAX_AGE_S:g}")
     summaries = {v: fleet.summary(v, 90) for v in BOTH}
     h1, h2 = fleet.frames("H1"), fleet.frames("H2")
     # --frames counts the frames a vehicle ran: one that skipped frames (CPU contention: late frames) runs on after
@@ -76,10 +79,7 @@ def test_a_lossy_link_between_the_hosts_keeps_both_views_and_agreement(hosts):
         ran = [r for n, r in frames.items() if n in together]
         multi[vehicle] = (sum(r["views"] == BOTH for r in ran), len(ran))
         alone = [n for n, r in frames.items() if n in together and r["views"] != BOTH]
-        # the 95 % is a measurement over runs (docs/scaling.md, "Faults": met in 11 of 12), not a per-run
-        # guarantee over TCP: one unlucky run of retransmissions stalls past --max-age for 6-7 frames. The bar here
-        # is what fails if the bus or the pairing broke under loss (a team-mate lost for good, or never paired)
-        assert multi[vehicle][0] >= MOSTLY_BOTH * len(ran), (vehicle, multi[vehicle], alone, s["traffic"])
+        assert multi[vehicle][0] >= 0.95 * len(ran), (vehicle, multi[vehicle], alone, s["traffic"])
     same = [n for n in h1 if n in h2 and h1[n]["views"] == h2[n]["views"] == BOTH
             and h1[n]["views_of_this_instant"] and h2[n]["views_of_this_instant"]]
     print(f"lossy link: frames with both views (of those run while both ran) {multi}; {len(same)} frames with "
