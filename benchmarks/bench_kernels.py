@@ -58,7 +58,7 @@ def throughput(rng: np.random.Generator) -> list[list]:
         u, v = rng.uniform(0, 640, (n, m)), rng.uniform(0, 480, (n, m))
         usable = np.ones((n, m), bool)
         px, py = rng.uniform(0, 640, p), rng.uniform(0, 480, p)
-        ours = _rate(lambda: chamfer_sums(u, v, usable, px, py, 8.0, True), n * m * p)
+        ours = _rate(lambda: chamfer_sums(u, v, np.zeros(u.shape[1]), usable, px, py, np.zeros(len(px)), 8.0, True), n * m * p)
         plain = _rate(lambda: numpy_chamfer(u, v, px, py, 8.0), n * m * p)
         rows.append([f"{n} x {m} x {p}", f"{ours / 1e6:,.0f}", f"{plain / 1e6:,.0f}", f"{ours / plain:.0f}x"])
     return rows

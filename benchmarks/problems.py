@@ -177,8 +177,11 @@ def make_problem(kind: str, rng: np.random.Generator, *, distance: float | None 
 
 def observe(model: Model, camera: Camera, pose: np.ndarray, rng: np.random.Generator, *, noise: float,
             clutter: float, missing: float, scene_points: int = 0,
-            min_visible: int = 6) -> tuple[View, tuple[np.ndarray, np.ndarray]] | None:
+            min_visible: int = 6, labelled: bool = False) -> tuple[View, tuple[np.ndarray, np.ndarray]] | None:
     """What ``camera`` sees of ``model`` at ``pose`` (world_from_target, (6,)): a view and its true matches.
+
+    ``labelled``: the points carry colour labels (the model's must be set), as a colour-mark detector gives them:
+    a mark its own colour, a false point any of the model's colours (distractors in the mark colours).
 
     Visible marks get Gaussian pixel ``noise``, a fraction ``missing`` is dropped, false points
     make up a fraction ``clutter`` of the result (scattered around the target), and
@@ -205,7 +208,12 @@ def observe(model: Model, camera: Camera, pose: np.ndarray, rng: np.random.Gener
         scene = rng.uniform([0, 0], [camera.width, camera.height], (scene_points, 2))
         all_pts = np.concatenate([all_pts, scene])
     perm = rng.permutation(len(all_pts))
-    return View(camera, all_pts[perm]), (keep, pts)
+    if not labelled:
+        return View(camera, all_pts[perm]), (keep, pts)
+    classes = np.unique(model.labels)
+    label_rng = np.random.Generator(rng.bit_generator.jumped())  # draws nothing from rng: the same problem either way
+    labels = np.concatenate([model.labels[keep], label_rng.choice(classes, len(all_pts) - len(keep))])
+    return View(camera, all_pts[perm], labels=labels[perm]), (keep, pts)
 
 
 def pose_errors(estimate: np.ndarray, truth: np.ndarray, symmetries: list[np.ndarray],
@@ -255,12 +263,14 @@ def _paper_scale_world():
 
 def make_paper_scale_problem(rng: np.random.Generator, *, cameras: tuple[str, ...] = ("H1",),
                              noise: float | None = None, clutter: float | None = None, missing: float = 0.1,
-                             min_visible: int = 6) -> SyntheticProblem:
+                             min_visible: int = 6, labelled: bool = False) -> SyntheticProblem:
     """A Pioneer-2 DX (``scenarios/models/pioneer.yaml``, 18 marks) on the ground, seen by exp2-paper-scale's
     cameras (H1: f = 1700 px at 30 m, H2: f = 1150 px at 20 m; the robot ~25 px wide, marks 3-5 px apart).
 
     The robot stands anywhere in a 3 m square with any heading (roll = pitch = 0); the search box is the
     world's (x, y within 3 m, z -0.2..0.5 m, every attitude). Noise 0.5-2 px and clutter 0-30 % when not given.
+    ``labelled``: the points carry the marks' colours (:func:`observe`); the same seed gives the same problem
+    with and without them.
     """
     model, all_cameras, bounds = _paper_scale_world()
     noise = rng.uniform(0.5, 2.0) if noise is None else noise
@@ -268,7 +278,7 @@ def make_paper_scale_problem(rng: np.random.Generator, *, cameras: tuple[str, ..
     for _ in range(200):
         pose = np.r_[rng.uniform(-PAPER_SCALE_AREA, PAPER_SCALE_AREA, 2), 0.0, 0.0, 0.0, rng.uniform(-np.pi, np.pi)]
         seen = [observe(model, all_cameras[c], pose, rng, noise=noise, clutter=clutter, missing=missing,
-                        min_visible=min_visible) for c in cameras]
+                        min_visible=min_visible, labelled=labelled) for c in cameras]
         if all(x is not None for x in seen):
             break
     else:

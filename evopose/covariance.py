@@ -14,8 +14,7 @@ from functools import lru_cache
 
 import numpy as np
 
-from .fitness import POINT_NOISE_PX, PoseObjective
-from .kernels import chamfer_matches
+from .fitness import POINT_NOISE_PX, PoseObjective, matches
 
 #: Central-difference steps of the projection Jacobian: metres (x, y, z), radians (roll, pitch, yaw).
 JACOBIAN_STEP = np.array([1e-4, 1e-4, 1e-4, 1e-5, 1e-5, 1e-5])
@@ -75,7 +74,7 @@ def mutual_matches(objective: PoseObjective, pose: np.ndarray) -> Matches:
     for k, view in enumerate(objective.problem.views):
         proj = objective.project(k, pose)
         px, py = np.ascontiguousarray(view.points[:, 0]), np.ascontiguousarray(view.points[:, 1])
-        img_nn, _, mod_nn, mod_d2 = chamfer_matches(proj.u, proj.v, proj.usable, px, py)
+        img_nn, _, mod_nn, mod_d2 = matches(proj, view.points, objective.labels(k))
         usable = proj.usable[0]
         m = np.nonzero(usable & (mod_d2[0] < objective.taus[k] ** 2))[0]
         m = m[img_nn[0, mod_nn[0, m]] == m]

@@ -39,7 +39,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from .kernels import MUTUAL, PAPER, ROBUST, chamfer_matches, view_terms
-from .problem import Model, PoseProblem, View
+from .problem import Model, PoseProblem, View, label_coordinates
 from .projection import project_poses
 
 FitnessKind = Literal["mutual", "robust", "paper"]
@@ -112,10 +112,25 @@ def project_into_view(model: Model, view: View, poses: np.ndarray, use_normals: 
     return ViewProjection(u, v, usable)
 
 
-def view_term(proj: ViewProjection, points: np.ndarray, kind: FitnessKind, tau: float) -> np.ndarray:
-    """Distance term ``d^(k)`` of one view for every individual, shape (N,) (:func:`evopose.kernels.view_terms`)."""
-    return view_terms(proj.u, proj.v, proj.usable, np.ascontiguousarray(points[:, 0]),
-                      np.ascontiguousarray(points[:, 1]), float(tau), KERNEL_MODES[kind])
+def view_term(proj: ViewProjection, points: np.ndarray, kind: FitnessKind, tau: float,
+              labels: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
+    """Distance term ``d^(k)`` of one view for every individual, shape (N,) (:func:`evopose.kernels.view_terms`).
+
+    ``labels``: the view's and the model's label coordinates, (P,) and (M,) (:func:`label_coordinates`); untyped
+    points when None."""
+    pz, mz = labels if labels is not None else (np.zeros(len(points)), np.zeros(proj.u.shape[1]))
+    return view_terms(proj.u, proj.v, np.ascontiguousarray(mz, float), proj.usable,
+                      np.ascontiguousarray(points[:, 0]), np.ascontiguousarray(points[:, 1]),
+                      np.ascontiguousarray(pz, float), float(tau), KERNEL_MODES[kind])
+
+
+def matches(proj: ViewProjection, points: np.ndarray, labels: tuple[np.ndarray, np.ndarray]):
+    """Nearest neighbours both ways for every projected pose (:func:`evopose.kernels.chamfer_matches`), in (u, v,
+    label) space; ``labels`` as :func:`view_term`'s."""
+    pz, mz = labels
+    return chamfer_matches(proj.u, proj.v, np.ascontiguousarray(mz, float), proj.usable,
+                           np.ascontiguousarray(points[:, 0]), np.ascontiguousarray(points[:, 1]),
+                           np.ascontiguousarray(pz, float))
 
 
 def step_weights(terms: np.ndarray, weights: np.ndarray, threshold: float | np.ndarray) -> np.ndarray:
@@ -186,13 +201,16 @@ class Packed:
     """An objective's views as flat arrays for the compiled kernels (:mod:`evopose.refine_kernel`).
 
     ``intr`` (V, 9) fx, fy, cx, cy, k1, k2, p1, p2, k3; ``cfw`` (V, 4, 4) camera_from_world;
-    ``pts`` (P_total, 2) with view k's points at ``offsets[k]:offsets[k+1]``; ``model`` (M, 3);
+    ``pts`` (P_total, 2) with view k's points at ``offsets[k]:offsets[k+1]``; ``pz`` (P_total,) and ``mz``
+    (V, M) the points' and the marks' label coordinates per view (:func:`label_coordinates`); ``model`` (M, 3);
     ``normals`` (M, 3) (a dummy (1, 3) when unused).
     """
 
     intr: np.ndarray
     cfw: np.ndarray
     pts: np.ndarray
+    pz: np.ndarray
+    mz: np.ndarray
     offsets: np.ndarray
     model: np.ndarray
     normals: np.ndarray
@@ -294,14 +312,21 @@ class PoseObjective:
         views = self.problem.views
         model = self.problem.model
         use_normals = self.bounded and model.normals is not None
+        labels = [self.labels(k) for k in range(len(views))]
         return Packed(
             intr=np.ascontiguousarray([v.camera.intrinsics for v in views]),
             cfw=np.ascontiguousarray([v.camera.camera_from_world for v in views]),
             pts=np.ascontiguousarray(np.concatenate([v.points for v in views])),
+            pz=np.ascontiguousarray(np.concatenate([pz for pz, _ in labels])),
+            mz=np.ascontiguousarray([mz for _, mz in labels]),
             offsets=np.cumsum([0] + [len(v.points) for v in views]).astype(np.int64),
             model=np.ascontiguousarray(model.points),
             normals=np.ascontiguousarray(model.normals) if use_normals else np.zeros((1, 3)),
             use_normals=use_normals)
+
+    def labels(self, k: int) -> tuple[np.ndarray, np.ndarray]:
+        """View ``k``'s and the model's label coordinates, (P_k,) and (M,) (:func:`label_coordinates`)."""
+        return label_coordinates(self.problem.model, self.problem.views[k])
 
     def project(self, k: int, poses: np.ndarray) -> ViewProjection:
         return project_into_view(self.problem.model, self.problem.views[k], poses,
@@ -317,7 +342,7 @@ class PoseObjective:
         for k, view in enumerate(self.problem.views):
             if only_weighted and self.weights[k] == 0:
                 continue
-            out[:, k] = view_term(self.project(k, poses), view.points, self.kind, self.taus[k])
+            out[:, k] = view_term(self.project(k, poses), view.points, self.kind, self.taus[k], self.labels(k))
         self.counter.add(len(poses))
         return out
 
@@ -371,9 +396,7 @@ class PoseObjective:
             if self.weights[k] == 0:
                 continue
             proj = self.project(k, pose)
-            img_nn, _, mod_nn, mod_d2 = chamfer_matches(proj.u, proj.v, proj.usable,
-                                                        np.ascontiguousarray(view.points[:, 0]),
-                                                        np.ascontiguousarray(view.points[:, 1]))
+            img_nn, _, mod_nn, mod_d2 = matches(proj, view.points, self.labels(k))
             visible = proj.usable[0]
             n_visible = int(np.count_nonzero(visible))
             if n_visible < need:

@@ -10,7 +10,9 @@ both call them, so the two cannot drift apart. :func:`nearest_row` is the one ne
 matching with indices (the refinement's hard steps, the unmatched-marks count).
 
 Squared distances are used inside the loops; a large finite sentinel stands for "no candidate" so
-that ``fastmath`` stays valid.
+that ``fastmath`` stays valid. Every distance is taken in (u, v, label) space: ``pz`` (P,) and ``mz`` (M,) are
+the image points' and the marks' label coordinates (:func:`evopose.problem.label_coordinates`; zeros for untyped
+points, the paper's case), so points of different classes are never within a truncation distance.
 """
 
 from __future__ import annotations
@@ -27,31 +29,34 @@ PAPER, ROBUST, MUTUAL = 0, 1, 2
 
 
 @nb.njit(cache=True, fastmath=_FASTMATH, nogil=True, inline="always")
-def _nearest(um, vm, px, py, row):  # pragma: no cover - compiled
-    """The squared distance from the model point ``(um, vm)`` to its nearest image point ``(px, py)``; ``row``
-    (>= P,) keeps, per image point, its nearest squared distance to the model points seen so far (one pass
+def _nearest(um, vm, zm, px, py, pz, row):  # pragma: no cover - compiled
+    """The squared distance from the model point ``(um, vm, zm)`` to its nearest image point ``(px, py, pz)``;
+    ``row`` (>= P,) keeps, per image point, its nearest squared distance to the model points seen so far (one pass
     serves both matching directions of eq. 1)."""
     best = NO_MATCH_D2
     for p in range(px.shape[0]):
         dx = px[p] - um
         dy = py[p] - vm
-        d2 = dx * dx + dy * dy
+        dz = pz[p] - zm
+        d2 = dx * dx + dy * dy + dz * dz
         best = min(best, d2)
         row[p] = min(row[p], d2)
     return best
 
 
 @nb.njit(cache=True, fastmath=_FASTMATH, nogil=True)
-def chamfer_row(u, v, usable, px, py, tau, robust, row):  # pragma: no cover - compiled
+def chamfer_row(u, v, mz, usable, px, py, pz, tau, robust, row):  # pragma: no cover - compiled
     """Both matching directions of one pose in one view.
 
     Parameters
     ----------
     u, v : float64 arrays, shape (M,)
         Projected model points (pixels).
+    mz : float64 array, shape (M,)
+        The model points' label coordinates.
     usable : bool array, shape (M,)
-    px, py : float64 arrays, shape (P,)
-        Image points.
+    px, py, pz : float64 arrays, shape (P,)
+        Image points and their label coordinates.
     tau : float
         Truncation of the per-point distance (pixels) when ``robust``.
     robust : bool
@@ -73,7 +78,7 @@ def chamfer_row(u, v, usable, px, py, tau, robust, row):  # pragma: no cover - c
     for m in range(u.shape[0]):
         if not usable[m]:
             continue
-        best = _nearest(u[m], v[m], px, py, row)
+        best = _nearest(u[m], v[m], mz[m], px, py, pz, row)
         cnt += 1
         s_mod += np.sqrt(min(best, tau2))
     s_img = 0.0
@@ -87,7 +92,7 @@ def chamfer_row(u, v, usable, px, py, tau, robust, row):  # pragma: no cover - c
 
 
 @nb.njit(cache=True, fastmath=_FASTMATH, nogil=True)
-def mutual_row(u, v, usable, px, py, tau, row, col):  # pragma: no cover - compiled
+def mutual_row(u, v, mz, usable, px, py, pz, tau, row, col):  # pragma: no cover - compiled
     """One-to-one matching of one pose in one view: mutual nearest neighbours closer than ``tau``.
 
     ``row`` (>= P,) and ``col`` (M,) are scratch: one branch-free pass gives every image point's and every
@@ -110,7 +115,7 @@ def mutual_row(u, v, usable, px, py, tau, row, col):  # pragma: no cover - compi
         col[m] = NO_MATCH_D2
         if not usable[m]:
             continue
-        col[m] = _nearest(u[m], v[m], px, py, row)
+        col[m] = _nearest(u[m], v[m], mz[m], px, py, pz, row)
     tau2 = tau * tau
     s = 0.0
     n_usable = 0
@@ -124,10 +129,12 @@ def mutual_row(u, v, usable, px, py, tau, row, col):  # pragma: no cover - compi
             continue
         um = u[m]
         vm = v[m]
+        zm = mz[m]
         for p in range(P):  # the nearest image point (recomputed: equal up to rounding, first one wins)
             dx = px[p] - um
             dy = py[p] - vm
-            if dx * dx + dy * dy <= best * (1.0 + 1e-9):
+            dz = pz[p] - zm
+            if dx * dx + dy * dy + dz * dz <= best * (1.0 + 1e-9):
                 if best <= row[p]:  # and this model point is the image point's nearest: a mutual pair
                     s += 2.0 * best
                     n_pairs += 1
@@ -137,7 +144,7 @@ def mutual_row(u, v, usable, px, py, tau, row, col):  # pragma: no cover - compi
 
 
 @nb.njit(cache=True, fastmath=_FASTMATH, nogil=True)
-def view_term_row(u, v, usable, px, py, tau, mode, row, col):  # pragma: no cover - compiled
+def view_term_row(u, v, mz, usable, px, py, pz, tau, mode, row, col):  # pragma: no cover - compiled
     """The view's term ``d^(k)`` for one pose (pixels); ``row`` (>= P,) and ``col`` (M,) are scratch.
 
     ``mode`` :data:`PAPER`: the paper's eq. (1) ``sum_i min_j |p_i - m_j(s)|``;
@@ -146,28 +153,28 @@ def view_term_row(u, v, usable, px, py, tau, mode, row, col):  # pragma: no cove
     nearest partner, ``tau`` for a point without one within ``tau`` (:func:`mutual_row`).
     """
     if mode == MUTUAL:
-        s, n_usable, _ = mutual_row(u, v, usable, px, py, tau, row, col)
+        s, n_usable, _ = mutual_row(u, v, mz, usable, px, py, pz, tau, row, col)
         return np.sqrt(s / (px.shape[0] + n_usable))
-    s_img, s_mod, cnt = chamfer_row(u, v, usable, px, py, tau, mode == ROBUST, row)
+    s_img, s_mod, cnt = chamfer_row(u, v, mz, usable, px, py, pz, tau, mode == ROBUST, row)
     if mode == ROBUST:
         return (s_img + s_mod) / (px.shape[0] + cnt)
     return s_img
 
 
 @nb.njit(cache=True, fastmath=_FASTMATH, nogil=True)
-def view_terms(u, v, usable, px, py, tau, mode):  # pragma: no cover - compiled
-    """:func:`view_term_row` for every pose: ``u``, ``v``, ``usable`` (N, M) -> (N,)."""
+def view_terms(u, v, mz, usable, px, py, pz, tau, mode):  # pragma: no cover - compiled
+    """:func:`view_term_row` for every pose: ``u``, ``v``, ``usable`` (N, M), ``mz`` (M,) -> (N,)."""
     N, M = u.shape
     out = np.empty(N)
     row = np.empty(px.shape[0])
     col = np.empty(M)
     for n in range(N):
-        out[n] = view_term_row(u[n], v[n], usable[n], px, py, tau, mode, row, col)
+        out[n] = view_term_row(u[n], v[n], mz, usable[n], px, py, pz, tau, mode, row, col)
     return out
 
 
 @nb.njit(cache=True, fastmath=_FASTMATH, nogil=True)
-def chamfer_sums(u, v, usable, px, py, tau, robust):  # pragma: no cover - compiled
+def chamfer_sums(u, v, mz, usable, px, py, pz, tau, robust):  # pragma: no cover - compiled
     """:func:`chamfer_row` for every pose: ``u``, ``v``, ``usable`` (N, M) -> img_sum, mod_sum, n_usable (N,)."""
     N = u.shape[0]
     img_sum = np.zeros(N)
@@ -175,7 +182,7 @@ def chamfer_sums(u, v, usable, px, py, tau, robust):  # pragma: no cover - compi
     n_usable = np.zeros(N)
     row = np.empty(px.shape[0])
     for n in range(N):
-        s_img, s_mod, cnt = chamfer_row(u[n], v[n], usable[n], px, py, tau, robust, row)
+        s_img, s_mod, cnt = chamfer_row(u[n], v[n], mz, usable[n], px, py, pz, tau, robust, row)
         img_sum[n] = s_img
         mod_sum[n] = s_mod
         n_usable[n] = cnt
@@ -183,7 +190,7 @@ def chamfer_sums(u, v, usable, px, py, tau, robust):  # pragma: no cover - compi
 
 
 @nb.njit(cache=True, fastmath=_FASTMATH, nogil=True)
-def nearest_row(u, v, usable, px, py, img_nn, img_d2, mod_nn, mod_d2):  # pragma: no cover - compiled
+def nearest_row(u, v, mz, usable, px, py, pz, img_nn, img_d2, mod_nn, mod_d2):  # pragma: no cover - compiled
     """Nearest neighbours in both directions for one pose in one view, with indices.
 
     Fills ``img_nn`` / ``img_d2`` (P,): the nearest usable model point to each image point (-1 and
@@ -200,12 +207,14 @@ def nearest_row(u, v, usable, px, py, img_nn, img_d2, mod_nn, mod_d2):  # pragma
             continue
         um = u[m]
         vm = v[m]
+        zm = mz[m]
         best = NO_MATCH_D2
         best_p = -1
         for p in range(px.shape[0]):
             dx = px[p] - um
             dy = py[p] - vm
-            d2 = dx * dx + dy * dy
+            dz = pz[p] - zm
+            d2 = dx * dx + dy * dy + dz * dz
             if d2 < best:
                 best = d2
                 best_p = p
@@ -217,7 +226,7 @@ def nearest_row(u, v, usable, px, py, img_nn, img_d2, mod_nn, mod_d2):  # pragma
 
 
 @nb.njit(cache=True, fastmath=_FASTMATH, nogil=True)
-def chamfer_matches(u, v, usable, px, py):  # pragma: no cover - compiled
+def chamfer_matches(u, v, mz, usable, px, py, pz):  # pragma: no cover - compiled
     """:func:`nearest_row` for every pose (N, M).
 
     Returns
@@ -234,5 +243,5 @@ def chamfer_matches(u, v, usable, px, py):  # pragma: no cover - compiled
     mod_nn = np.empty((N, M), np.int64)
     mod_d2 = np.empty((N, M))
     for n in range(N):
-        nearest_row(u[n], v[n], usable[n], px, py, img_nn[n], img_d2[n], mod_nn[n], mod_d2[n])
+        nearest_row(u[n], v[n], mz, usable[n], px, py, pz, img_nn[n], img_d2[n], mod_nn[n], mod_d2[n])
     return img_nn, img_d2, mod_nn, mod_d2

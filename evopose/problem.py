@@ -22,10 +22,15 @@ class Model:
         Metres.
     normals : array, shape (M, 3), optional
         Outward surface normals; when given, a point is visible only from the side its normal faces.
+    labels : int array, shape (M,), optional
+        Each mark's class (its colour), integers >= 0. A view whose image points carry labels too matches a
+        point only to marks of its own class (:func:`label_coordinates`); our extension of eq. (1), whose
+        points are untyped. Views without labels match every mark, as in the paper.
     """
 
     points: np.ndarray
     normals: np.ndarray | None = None
+    labels: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         pts = np.asarray(self.points, dtype=float)
@@ -42,6 +47,8 @@ class Model:
             if np.any(norm < 1e-12):
                 raise ValueError("model.normals must be non-zero vectors")
             object.__setattr__(self, "normals", n / norm)
+        if self.labels is not None:
+            object.__setattr__(self, "labels", _labels("model.labels", self.labels, len(pts)))
 
     @property
     def radius(self) -> float:
@@ -61,11 +68,14 @@ class View:
         Pixels.
     weight : float
         ``W_k`` of eq. (4).
+    labels : int array, shape (P,), optional
+        Each point's class (the colour of the mark it would be), integers >= 0; see :attr:`Model.labels`.
     """
 
     camera: Camera
     points: np.ndarray
     weight: float = 1.0
+    labels: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         pts = np.asarray(self.points, dtype=float)
@@ -76,6 +86,32 @@ class View:
         if not np.isfinite(self.weight) or self.weight < 0:
             raise ValueError(f"view weight must be a finite number >= 0, got {self.weight}")
         object.__setattr__(self, "points", pts)
+        if self.labels is not None:
+            object.__setattr__(self, "labels", _labels("view labels", self.labels, len(pts)))
+
+
+#: Distance (pixels) between neighbouring classes on the label axis (:func:`label_coordinates`): far beyond any
+#: truncation distance, so a point and a mark of different classes never match, and far below the kernels'
+#: "no candidate" sentinel, so they still rank below a match.
+LABEL_SPACING_PX = 1e6
+
+
+def _labels(what: str, labels, n: int) -> np.ndarray:
+    a = np.asarray(labels)
+    if a.shape != (n,) or not np.issubdtype(a.dtype, np.integer) or (n and a.min() < 0):
+        raise ValueError(f"{what} must be {n} integers >= 0, got shape {a.shape} of {a.dtype}")
+    return a.astype(np.int64)
+
+
+def label_coordinates(model: Model, view: View) -> tuple[np.ndarray, np.ndarray]:
+    """The third coordinate of a view's image points and of the model's marks in the matching kernels, shapes
+    (P,) and (M,): ``label * LABEL_SPACING_PX`` when both the view and the model are labelled, zeros otherwise.
+    Eq. (1)'s distance ``|p_i - m_j(s)|`` is then taken in (u, v, label) space: unchanged between points of one
+    class, and beyond every truncation distance between classes (no derivative: the label does not move with
+    the pose)."""
+    if view.labels is None or model.labels is None:
+        return np.zeros(len(view.points)), np.zeros(len(model.points))
+    return view.labels * LABEL_SPACING_PX, model.labels * LABEL_SPACING_PX
 
 
 @dataclass(frozen=True, eq=False)

@@ -93,7 +93,7 @@ def refine(objective: PoseObjective, poses: np.ndarray, fitness: np.ndarray | No
     refine_population(poses, fitness, bounds.lo, bounds.hi, bounds.periodic, bounds.free, packed.model,
                       packed.normals, packed.use_normals, packed.intr, packed.cfw,
                       np.array(objective.weights, dtype=float), np.array(objective.taus, dtype=float),
-                      sigmas, packed.pts, packed.offsets, objective.mode, kinds, values,
+                      sigmas, packed.pts, packed.pz, packed.mz, packed.offsets, objective.mode, kinds, values,
                       SOFT_OUTLIER, damping)
     # count every projection of the model as an evaluation: 7 per step (pose + 6 Jacobian columns),
     # one fitness per hard step, and the fitness before the first hard step and at the end
@@ -123,8 +123,9 @@ def match_residuals(objective: PoseObjective, pose: np.ndarray) -> list[tuple[np
         P = len(pts)
         img_nn, img_d2 = np.empty(P, np.int64), np.empty(P)
         mod_nn, mod_d2 = np.empty(M, np.int64), np.empty(M)
-        nearest_row(u, v, usable, np.ascontiguousarray(pts[:, 0]), np.ascontiguousarray(pts[:, 1]), img_nn, img_d2,
-                    mod_nn, mod_d2)
+        pz = packed.pz[packed.offsets[k]:packed.offsets[k + 1]]
+        nearest_row(u, v, packed.mz[k], usable, np.ascontiguousarray(pts[:, 0]), np.ascontiguousarray(pts[:, 1]),
+                    np.ascontiguousarray(pz), img_nn, img_d2, mod_nn, mod_d2)
         image = np.where(img_nn >= 0, np.sqrt(img_d2), np.inf)
         out.append((image, np.sqrt(mod_d2[usable])))
     return out

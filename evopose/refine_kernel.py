@@ -9,7 +9,8 @@ nearest-neighbour matching (:mod:`evopose.kernels`) are the very functions the f
 
 Array conventions (V views, M model points, P_total image points):
 ``intr`` (V, 9) = fx, fy, cx, cy, k1, k2, p1, p2, k3; ``cam_from_world`` (V, 4, 4);
-``pts`` (P_total, 2) with view k's points at ``offsets[k]:offsets[k+1]``.
+``pts`` (P_total, 2) with view k's points at ``offsets[k]:offsets[k+1]``; ``pz`` (P_total,) their label
+coordinates and ``mz`` (V, M) the marks' in each view (:func:`evopose.problem.label_coordinates`).
 """
 
 from __future__ import annotations
@@ -26,7 +27,8 @@ _FD = np.array([1e-5, 1e-5, 1e-5, 1e-6, 1e-6, 1e-6])
 
 
 @nb.njit(cache=True, fastmath=_FASTMATH, nogil=True)
-def _soft_accumulate(u, v, J, usable, px, py, sigma, outlier, w_img, w_mod, H, g, w_pair, row_sum):  # pragma: no cover
+def _soft_accumulate(u, v, mz, J, usable, px, py, pz, sigma, outlier, w_img, w_mod, H, g, w_pair,
+                     row_sum):  # pragma: no cover
     """EM-ICP normal equations of one pose in one view (weights aggregated per model point)."""
     M = u.shape[0]
     P = px.shape[0]
@@ -41,10 +43,12 @@ def _soft_accumulate(u, v, J, usable, px, py, sigma, outlier, w_img, w_mod, H, g
         n_usable += 1
         um = u[m]
         vm = v[m]
+        zm = mz[m]
         for p in range(P):
             dx = px[p] - um
             dy = py[p] - vm
-            d2 = dx * dx + dy * dy
+            dz = pz[p] - zm
+            d2 = dx * dx + dy * dy + dz * dz
             w = np.exp(-d2 * inv2s2) if d2 < cut2 else 0.0
             w_pair[m, p] = w
             row_sum[p] += w
@@ -81,14 +85,14 @@ def _soft_accumulate(u, v, J, usable, px, py, sigma, outlier, w_img, w_mod, H, g
 
 
 @nb.njit(cache=True, fastmath=_FASTMATH, nogil=True)
-def _hard_accumulate(u, v, J, usable, px, py, gate2, w_img, w_mod, H, g, img_nn, img_d2, mod_nn,
+def _hard_accumulate(u, v, mz, J, usable, px, py, pz, gate2, w_img, w_mod, H, g, img_nn, img_d2, mod_nn,
                      mod_d2, mutual):  # pragma: no cover - compiled
     """Nearest-neighbour normal equations of one pose in one view, both directions within a gate.
 
     With ``mutual`` only mutual nearest pairs count (the pairs of the mutual fitness, :func:`mutual_row`).
     """
     P = px.shape[0]
-    nearest_row(u, v, usable, px, py, img_nn, img_d2, mod_nn, mod_d2)
+    nearest_row(u, v, mz, usable, px, py, pz, img_nn, img_d2, mod_nn, mod_d2)
     n_usable = 0
     for m in range(u.shape[0]):
         if usable[m]:
@@ -128,7 +132,7 @@ def _to_bounds(s, lo, hi, periodic):  # pragma: no cover - compiled
 
 
 @nb.njit(cache=True, fastmath=_FASTMATH, nogil=True)
-def fitness_one(s, model, normals, use_normals, intr, cfw, weights, taus, pts, offsets, mode,
+def fitness_one(s, model, normals, use_normals, intr, cfw, weights, taus, pts, pz, mz, offsets, mode,
                 u, v, usable, row, col, R, Rc):  # pragma: no cover - compiled
     """Eq. (4) for one pose: ``sum_k W_k d^(k)``, with the fitness's own view term (``mode``: :mod:`evopose.kernels`)."""
     total = 0.0
@@ -137,7 +141,8 @@ def fitness_one(s, model, normals, use_normals, intr, cfw, weights, taus, pts, o
             continue
         project_pose(s, model, normals, use_normals, intr[k], cfw[k], u, v, usable, R, Rc)
         a, b = offsets[k], offsets[k + 1]
-        total += weights[k] * view_term_row(u, v, usable, pts[a:b, 0], pts[a:b, 1], taus[k], mode, row, col)
+        total += weights[k] * view_term_row(u, v, mz[k], usable, pts[a:b, 0], pts[a:b, 1], pz[a:b], taus[k], mode,
+                                            row, col)
     return total
 
 
@@ -187,7 +192,7 @@ def _bounded_step(H, g, s, lo, hi, periodic, step_free, lam, A, clamp):  # pragm
 
 @nb.njit(cache=True, fastmath=_FASTMATH, nogil=True)
 def refine_population(poses, fitness, lo, hi, periodic, free, model, normals, use_normals, intr, cfw,
-                      weights, taus, sigmas, pts, offsets, mode, kinds, scales, outlier,
+                      weights, taus, sigmas, pts, pz, mz, offsets, mode, kinds, scales, outlier,
                       damping):  # pragma: no cover - compiled
     """Refine every pose (N, 6) in place along the schedule; fitness (N,) is updated.
 
@@ -256,14 +261,15 @@ def refine_population(poses, fitness, lo, hi, periodic, free, model, normals, us
                 a, b = offsets[k], offsets[k + 1]
                 px = pts[a:b, 0]
                 py = pts[a:b, 1]
+                pz_k = pz[a:b]
                 w_k = weights[k]
                 if kinds[step] != 1:
-                    _soft_accumulate(u, v, J, usable, px, py, sigmas[step, k], outlier, w_k, w_k, H, g, w_pair,
-                                     row)
+                    _soft_accumulate(u, v, mz[k], J, usable, px, py, pz_k, sigmas[step, k], outlier, w_k, w_k, H, g,
+                                     w_pair, row)
                 else:
                     gate = scales[step] * taus[k]
-                    _hard_accumulate(u, v, J, usable, px, py, gate * gate, w_k, w_k, H, g, img_nn, row, mod_nn,
-                                     mod_d2, mode == MUTUAL)
+                    _hard_accumulate(u, v, mz[k], J, usable, px, py, pz_k, gate * gate, w_k, w_k, H, g, img_nn, row,
+                                     mod_nn, mod_d2, mode == MUTUAL)
             # damped step (Levenberg–Marquardt), fixed parameters held
             for i in range(6):
                 for j in range(i):
@@ -278,9 +284,9 @@ def refine_population(poses, fitness, lo, hi, periodic, free, model, normals, us
                 f_cur = np.inf  # unknown until the next hard step or the end
                 continue
             if not np.isfinite(f_cur):
-                f_cur = fitness_one(s, model, normals, use_normals, intr, cfw, weights, taus, pts, offsets,
+                f_cur = fitness_one(s, model, normals, use_normals, intr, cfw, weights, taus, pts, pz, mz, offsets,
                                     mode, u, v, usable, row, mod_d2, R, Rc)
-            f_try = fitness_one(s_try, model, normals, use_normals, intr, cfw, weights, taus, pts, offsets,
+            f_try = fitness_one(s_try, model, normals, use_normals, intr, cfw, weights, taus, pts, pz, mz, offsets,
                                 mode, u, v, usable, row, mod_d2, R, Rc)
             if f_try <= f_cur:
                 for d in range(6):
@@ -290,7 +296,7 @@ def refine_population(poses, fitness, lo, hi, periodic, free, model, normals, us
             else:
                 lam = min(lam * 10.0, 1e4)
         if not np.isfinite(f_cur):
-            f_cur = fitness_one(s, model, normals, use_normals, intr, cfw, weights, taus, pts, offsets,
+            f_cur = fitness_one(s, model, normals, use_normals, intr, cfw, weights, taus, pts, pz, mz, offsets,
                                 mode, u, v, usable, row, mod_d2, R, Rc)
         if f_cur <= f_start:  # never worse than the input
             for d in range(6):

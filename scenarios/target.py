@@ -140,8 +140,9 @@ class TargetModel:
         return float(np.max(np.ptp(pts, axis=0)))
 
     def evopose_model(self) -> Model:
-        """The marks as an :class:`evopose.Model` (points and normals) for the solver."""
-        return Model(self.mark_points.copy(), self.mark_normals.copy())
+        """The marks as an :class:`evopose.Model` for the solver: points, normals, and each mark's colour as its
+        label (:meth:`colour_labels`; used by views whose points carry colour labels too)."""
+        return Model(self.mark_points.copy(), self.mark_normals.copy(), self.colour_labels())
 
     def colour_labels(self) -> np.ndarray:
         """Index of each mark's colour in ``palette`` order, shape (M,)."""

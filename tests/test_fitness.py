@@ -46,12 +46,17 @@ def reference_d2(u, v, usable, px, py):
     return np.where(usable[:, :, None], d2, NO_MATCH_D2)
 
 
+def _untyped(n: int) -> np.ndarray:
+    """Label coordinates of untyped points (the paper's eq. 1): zeros."""
+    return np.zeros(n)
+
+
 @pytest.mark.parametrize("robust", [True, False])
 @pytest.mark.parametrize("seed", [0, 1])
 def test_chamfer_sums_matches_brute_force(seed, robust):
     u, v, usable, px, py = kernel_data(seed)
     tau = 25.0
-    img_sum, mod_sum, n_usable = chamfer_sums(u, v, usable, px, py, tau, robust)
+    img_sum, mod_sum, n_usable = chamfer_sums(u, v, _untyped(u.shape[1]), usable, px, py, _untyped(len(px)), tau, robust)
     d2 = reference_d2(u, v, usable, px, py)
     img_min = d2.min(axis=1)                                   # (N, P): nearest usable model point per image point
     mod_min = d2.min(axis=2)                                   # (N, M)
@@ -76,7 +81,7 @@ def test_mutual_term_matches_brute_force(seed):
     partner within tau, tau for a point without one."""
     u, v, usable, px, py = kernel_data(seed)
     tau = 40.0
-    got = view_terms(u, v, usable, px, py, tau, MUTUAL)
+    got = view_terms(u, v, _untyped(u.shape[1]), usable, px, py, _untyped(len(px)), tau, MUTUAL)
     d2 = reference_d2(u, v, usable, px, py)                    # (N, M, P)
     for n in range(len(u)):
         used = np.nonzero(usable[n])[0]
@@ -98,14 +103,14 @@ def test_chamfer_sums_exact_matches_give_zero():
     px, py = rng.uniform(0, 100, 7), rng.uniform(0, 100, 7)
     u, v = px[None].copy(), py[None].copy()
     for robust in (True, False):
-        img_sum, mod_sum, n_usable = chamfer_sums(u, v, np.ones((1, 7), bool), px, py, 5.0, robust)
+        img_sum, mod_sum, n_usable = chamfer_sums(u, v, _untyped(7), np.ones((1, 7), bool), px, py, _untyped(7), 5.0, robust)
         assert img_sum[0] == 0.0 and mod_sum[0] == 0.0 and n_usable[0] == 7
 
 
 @pytest.mark.parametrize("seed", [0, 1])
 def test_chamfer_matches_matches_brute_force(seed):
     u, v, usable, px, py = kernel_data(seed)
-    img_nn, img_d2, mod_nn, mod_d2 = chamfer_matches(u, v, usable, px, py)
+    img_nn, img_d2, mod_nn, mod_d2 = chamfer_matches(u, v, _untyped(u.shape[1]), usable, px, py, _untyped(len(px)))
     N, M = u.shape
     P = len(px)
     assert img_nn.shape == img_d2.shape == (N, P) and mod_nn.shape == mod_d2.shape == (N, M)
