@@ -18,13 +18,15 @@ HINT_SIZE = 24
 MAX_FEATURE_POINTS = 16_384
 #: Bytes per packed feature point: two little-endian float32 (u, v).
 FEATURE_POINT_SIZE = 8
+#: Bytes per feature point's colour label (uint8), when the sender sends labels.
+FEATURE_LABEL_SIZE = 1
 #: Largest raw image: 1920 x 1080 x 3 bytes fits, with room for the header.
 MAX_IMAGE_BYTES = 8 * MIB
 
 #: Largest payload accepted per topic, bytes.
 SIZE_LIMITS: dict[Topic, int] = {
     Topic.IMAGE: MAX_IMAGE_BYTES,
-    Topic.FEATURES: 16 * KIB + MAX_FEATURE_POINTS * FEATURE_POINT_SIZE,
+    Topic.FEATURES: 16 * KIB + MAX_FEATURE_POINTS * (FEATURE_POINT_SIZE + FEATURE_LABEL_SIZE),
     Topic.HINT: HINT_SIZE,
     Topic.ATTITUDE: 1 * KIB,
     Topic.POSE: 4 * KIB,

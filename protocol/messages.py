@@ -171,6 +171,7 @@ class FeatureSet(Message):
     camera: CameraInfo
     points: bytes
     best: Pose6 | None = None
+    labels: bytes | None = None
 
     @field_validator("points")
     @classmethod
@@ -182,16 +183,31 @@ class FeatureSet(Message):
             raise ValueError("points must be finite")
         return data
 
+    @model_validator(mode="after")
+    def _one_label_per_point(self) -> "FeatureSet":
+        if self.labels is not None and len(self.labels) != len(self.points) // FEATURE_POINT_SIZE:
+            raise ValueError(f"labels: {len(self.labels)} bytes for {len(self.points) // FEATURE_POINT_SIZE} "
+                             "points, expected one per point")
+        return self
+
     @property
     def points_uv(self) -> np.ndarray:
         """The points as float32, shape ``(N, 2)``, pixels."""
         return unpack_points(self.points)
 
+    @property
+    def labels_array(self) -> np.ndarray | None:
+        """Each point's colour class (an index into the target model's colours), int64 shape ``(N,)``; None when
+        the sender's points are untyped."""
+        return None if self.labels is None else np.frombuffer(self.labels, np.uint8).astype(np.int64)
+
     @classmethod
     def from_array(cls, points_uv: np.ndarray, camera: CameraInfo, *, sender: str, seq: int,
-                   stamp_ns: int) -> "FeatureSet":
-        """A feature set from image points of shape ``(N, 2)``, pixels."""
-        return cls(sender=sender, seq=seq, stamp_ns=stamp_ns, camera=camera, points=pack_points(points_uv))
+                   stamp_ns: int, labels: np.ndarray | None = None) -> "FeatureSet":
+        """A feature set from image points of shape ``(N, 2)``, pixels, and their colour classes ``(N,)`` (0-255)."""
+        packed = None if labels is None else np.asarray(labels, np.int64).clip(0, 255).astype(np.uint8).tobytes()
+        return cls(sender=sender, seq=seq, stamp_ns=stamp_ns, camera=camera, points=pack_points(points_uv),
+                   labels=packed)
 
 
 class Attitude(Message):

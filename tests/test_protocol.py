@@ -202,3 +202,15 @@ def test_decode_sample_checks_the_sender_against_the_key():
     with pytest.raises(p.InvalidName):
         p.decode_sample("evopose/f/uav1/video", payload)
     assert p.decode_sample("evopose/f/anyone/hint", golden_path("hint").read_bytes())[0].vehicle == "anyone"
+
+
+def test_feature_labels_round_trip_and_must_be_one_per_point():
+    points = np.array([[1.0, 2.0], [3.0, 4.0]])
+    message = p.FeatureSet.from_array(points, CAMERA, sender="uav1", seq=1, stamp_ns=STAMP_NS, labels=np.array([2, 0]))
+    decoded = p.decode("features", p.encode(message))
+    np.testing.assert_array_equal(decoded.labels_array, [2, 0])
+    assert p.FeatureSet.from_array(points, CAMERA, sender="uav1", seq=1, stamp_ns=STAMP_NS).labels_array is None
+    wire = msgpack.unpackb(p.encode(message), raw=False)
+    wire["labels"] = b"\x01"  # one label for two points
+    with pytest.raises(p.ProtocolError, match="labels: 1 bytes for 2 points"):
+        p.decode("features", msgpack.packb(wire, use_bin_type=True))

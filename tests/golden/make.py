@@ -28,7 +28,8 @@ def golden_messages() -> dict[str, Payload]:
     return {
         "hint": Hint(pose=(1.5, -2.0, 10.25, 0.125, -0.25, 3.0)),
         "features": FeatureSet.from_array(np.array([[320.5, 240.25], [10.0, 20.0], [639.0, 0.5]]), CAMERA,
-                                          sender="uav1", seq=7, stamp_ns=STAMP_NS).model_copy(
+                                          sender="uav1", seq=7, stamp_ns=STAMP_NS,
+                                          labels=np.array([0, 3, 1])).model_copy(
             update={"best": (0.5, -0.25, 0.0, 0.0, 0.0, 0.75)}),
         "image_raw": ImageFrame.from_array(np.arange(36, dtype=np.uint8).reshape(3, 4, 3), CAMERA,
                                            sender="uav1", seq=8, stamp_ns=STAMP_NS),
