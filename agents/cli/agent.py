@@ -81,13 +81,17 @@ def register(app: typer.Typer) -> None:
                                                              "(team-mates' clocks must agree to within it).")] = 0.5,
         source: Annotated[str | None, typer.Option(
             help="Real images instead of the renderer: a video file, an image sequence (printf pattern like "
-                 "left%02d.jpg, a glob, or a directory) or a V4L2 device (/dev/videoN or N). A file source is played "
-                 "one frame per tick and ends the run; a device gives its newest frame.")] = None,
+                 "left%02d.jpg, a glob, or a directory), a V4L2 device (/dev/videoN or N), or a ROS 2 topic in the "
+                 "rmw_zenoh format, ros2:/camera/image_raw (sensor_msgs/msg/Image or CompressedImage). A file source "
+                 "is played one frame per tick and ends the run; a device or a topic gives its newest frame.")] = None,
         camera_info: Annotated[str | None, typer.Option(
-            help="ROS camera_info YAML of --source's camera (default: the scenario vehicle's intrinsics).")] = None,
+            help="--source's intrinsics: a ROS camera_info YAML, or ros2:/TOPIC (its first valid "
+                 "sensor_msgs/msg/CameraInfo); default: the scenario vehicle's.")] = None,
         camera_pose: Annotated[str | None, typer.Option(
-            help="YAML/JSON file with --source's static world_from_camera x, y, z, roll, pitch, yaw (m, rad; "
-                 "default: the scenario vehicle's pose).")] = None,
+            help="--source's world_from_camera: a YAML/JSON file with a static x, y, z, roll, pitch, yaw (m, rad), or "
+                 "ros2:/TOPIC (the newest geometry_msgs/msg/PoseStamped of the optical frame in map at each frame); "
+                 "default: the scenario vehicle's pose.")] = None,
+        ros_domain: Annotated[int, typer.Option(min=0, max=232, help="ROS_DOMAIN_ID of the ros2: inputs.")] = 0,
         features: Annotated[str, typer.Option(help=f"Feature points: {', '.join(FEATURES)} (colour marks, or a "
                                                    "chessboard's inner corners).")] = "marks",
         as_json: Annotated[bool, typer.Option("--json", help="One JSON object per event on stdout.")] = False,
@@ -103,7 +107,7 @@ def register(app: typer.Typer) -> None:
             hint_rate_hz=hint_rate, image_encoding=image_encoding, use_attitude=imu, attitude_sigmas=imu_sigmas,
             wait_for=tuple(v.strip() for v in wait_for.split(",") if v.strip()), wait_timeout_s=wait_timeout,
             time_budget_s=time_budget, operating_radius_m=operating_radius, max_clock_offset_s=max_clock_offset,
-            source=source, camera_info=camera_info, camera_pose=camera_pose, features=features,
+            source=source, camera_info=camera_info, camera_pose=camera_pose, ros_domain=ros_domain, features=features,
             view_weights=view_weights)
         console = Console(stderr=True)
 

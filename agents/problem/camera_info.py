@@ -1,4 +1,5 @@
-"""Camera files: ROS ``camera_info`` YAML (camera_calibration_parsers), the problem file's camera, a camera pose.
+"""Camera files: ROS ``camera_info`` YAML (camera_calibration_parsers) or a ``sensor_msgs/msg/CameraInfo`` message,
+the problem file's camera, a camera pose.
 
 A ROS calibration file, as ``camera_calibration`` and ``camera_calibration_parsers`` write it::
 
@@ -114,6 +115,39 @@ def read_camera_info(path: str | Path) -> Camera:
     return validate(CameraInfoSpec, document, path, ProblemFileError).to_camera()
 
 
+def camera_info_document(message: Any) -> dict[str, Any]:
+    """The calibration-file mapping of a ``sensor_msgs/msg/CameraInfo`` message (any object with its fields ``width,
+    height, distortion_model, d, k, r, p``), so that a message is checked exactly as a file is.
+
+    An empty ``d`` is no distortion (uncalibrated or rectified cameras publish ``d = []``, often with an empty
+    model); otherwise the model and its coefficients are taken as sent and must be plumb_bob's five.
+    """
+    d = [float(v) for v in np.asarray(message.d, float).reshape(-1)]
+    document: dict[str, Any] = {
+        "image_width": int(message.width), "image_height": int(message.height),
+        "camera_matrix": {"rows": 3, "cols": 3, "data": [float(v) for v in np.asarray(message.k, float).reshape(-1)]},
+        "distortion_model": str(message.distortion_model) if d or message.distortion_model else "plumb_bob",
+        "rectification_matrix": {"rows": 3, "cols": 3, "data": [float(v) for v in np.asarray(message.r).reshape(-1)]},
+        "projection_matrix": {"rows": 3, "cols": 4, "data": [float(v) for v in np.asarray(message.p).reshape(-1)]}}
+    if d:
+        document["distortion_coefficients"] = {"rows": 1, "cols": len(d), "data": d}
+    return document
+
+
+def camera_from_camera_info_message(message: Any, name: str) -> Camera:
+    """The camera of a ``sensor_msgs/msg/CameraInfo`` message, world frame = camera frame; ``name`` (the topic)
+    begins the error line. A non-zero ``d`` is kept as the camera's plumb_bob distortion: EvoPose projects the model
+    through it onto the raw image, as with a calibration file (the image points are not undistorted).
+
+    Raises
+    ------
+    ProblemFileError
+        One line naming the offending field (``camera_matrix: fx and fy must be > 0`` for an uncalibrated camera's
+        zero ``k``).
+    """
+    return validate(CameraInfoSpec, camera_info_document(message), name, ProblemFileError).to_camera()
+
+
 def read_camera_file(path: str | Path) -> Camera:
     """A camera file in either format: ROS ``camera_info`` (when it has ``camera_matrix``) or the problem
     file's camera (``fx, fy, cx, cy, width, height``, optional ``distortion`` and ``world_from_camera``).
@@ -141,5 +175,5 @@ def read_camera_pose(path: str | Path) -> np.ndarray:
     return validate(PoseSpec, read_mapping(path, ProblemFileError), path, ProblemFileError).vector()
 
 
-__all__ = ["CameraInfoSpec", "MatrixSpec", "is_camera_info", "read_camera_file", "read_camera_info",
-           "read_camera_pose"]
+__all__ = ["CameraInfoSpec", "MatrixSpec", "camera_from_camera_info_message", "camera_info_document", "is_camera_info",
+           "read_camera_file", "read_camera_info", "read_camera_pose"]

@@ -22,6 +22,8 @@ FEATURES = ("marks", "corners")
 #: Share modes in which a vehicle keeps improving its own estimate between frames (generations on the last
 #: views). Not with raw images or features: there every vehicle must compute the same pose from the same data.
 IDLE_GENERATIONS = ("none", "hint")
+#: Largest ROS_DOMAIN_ID (ROS 2's documented range, as ``evopose ros2 --domain``).
+MAX_ROS_DOMAIN = 232
 #: IMU random stream of the scenario's target (as in scenarios.render's ground truth).
 TARGET_IMU_STREAM = 1000
 
@@ -55,6 +57,8 @@ class AgentConfig:
     source: str | None = None
     camera_info: str | Path | None = None
     camera_pose: str | Path | None = None
+    #: ROS_DOMAIN_ID of the ``ros2:`` inputs (--source, --camera-info, --camera-pose)
+    ros_domain: int = 0
     features: str = "marks"
     view_weights: str = "step"
 
@@ -77,6 +81,8 @@ class AgentConfig:
             raise FleetError("--camera-info and --camera-pose describe a real camera: they need --source")
         if self.source is not None and not str(self.source).strip():
             raise FleetError("--source must not be empty")
+        if not 0 <= self.ros_domain <= MAX_ROS_DOMAIN:
+            raise FleetError(f"--ros-domain must be a ROS_DOMAIN_ID from 0 to {MAX_ROS_DOMAIN}, got {self.ros_domain}")
         if self.image_encoding not in ENCODINGS:
             raise FleetError(f"--image-encoding must be one of {', '.join(ENCODINGS)}, got {self.image_encoding!r}")
         for name, option in (("fps", "--fps"), ("hint_rate_hz", "--hint-rate"), ("max_age_s", "--max-age"),

@@ -140,7 +140,8 @@ class CameraVehicle(Vehicle):
         super().__init__(config, bus, scenario, emit)
         self.sync_wait_s = self.period_s / 2 if config.sync_wait_s is None else config.sync_wait_s
         self.team = TeamViews()
-        self.camera = open_camera(config, scenario)  # the renderer, or a real source (--source)
+        self.camera = open_camera(config, scenario, bus)  # the renderer, or a real source (--source; ROS topics on
+        # the bus's session)
         self.plausible = Plausibility(scenario.bounds(), config.operating_radius_m, config.max_clock_offset_s)
         self.estimator = CooperativeEstimator(scenario.model.evopose_model(), scenario.bounds(),
                                               SearchOptions(time_budget=config.time_budget_s,

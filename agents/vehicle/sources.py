@@ -1,4 +1,5 @@
-"""Real image sources for a camera vehicle: a video file, an image sequence or a V4L2 device (``--source``).
+"""Real image sources for a camera vehicle: a video file, an image sequence, a V4L2 device or a ROS 2 topic
+(``--source``).
 
 A :class:`SourceCamera` has the :class:`~agents.vehicle.frames.SimulatedCamera` interface
 (``acquire(index, stamp_ns) -> Frame``, ``extract(image)``), so a vehicle runs exactly the same per-frame loop on
@@ -10,11 +11,19 @@ only the latest). What ``--source`` may be:
 - a video file (``cv2.VideoCapture``, FFmpeg);
 - an image sequence: a printf pattern (``left%02d.jpg``, read by ``cv2.VideoCapture``), a glob (``'img/*.png'``)
   or a directory (its images in name order, read by ``cv2.imread``);
-- a V4L2 device: ``/dev/videoN`` or its index ``N``.
+- a V4L2 device: ``/dev/videoN`` or its index ``N``;
+- a ROS 2 topic in the rmw_zenoh format, ``ros2:/camera/image_raw`` (``sensor_msgs/msg/Image`` or
+  ``CompressedImage``, on ``--ros-domain``, followed on the agent's own Zenoh session): live, like a device, each
+  tick takes the newest valid frame (:mod:`agents.bridges.ros_sources`).
 
-The camera of frame ``k``: intrinsics from ``--camera-info`` (ROS camera_info), else the scenario vehicle's;
-``world_from_camera`` from ``--camera-pose``, else the scenario vehicle's at scenario frame ``k mod frames``
-(what the renderer would use for the same frame). Every bad input is one :class:`SourceError` line.
+The camera of frame ``k``: intrinsics from ``--camera-info`` (a ROS camera_info file, or ``ros2:/topic``: the first
+valid ``sensor_msgs/msg/CameraInfo``), else the scenario vehicle's; ``world_from_camera`` from ``--camera-pose`` (a
+static pose file, or ``ros2:/topic``: the newest ``geometry_msgs/msg/PoseStamped`` of the optical frame in ``map``
+when the frame is taken), else the scenario vehicle's at scenario frame ``k mod frames`` (what the renderer would
+use for the same frame). Every bad input is one :class:`SourceError` line; a bad ROS message is counted in the
+agent's traffic (``rejected``, by reason) and dropped.
+
+The ROS inputs are made by :mod:`agents.vehicle.ros_camera`, imported only when an input is a ``ros2:`` topic.
 """
 
 from __future__ import annotations
@@ -25,7 +34,7 @@ import os
 import sys
 import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import cv2
@@ -40,13 +49,17 @@ from agents.errors import FleetError
 from agents.problem.camera_info import read_camera_info, read_camera_pose
 from agents.problem.extract import Extractor, point_extractor
 from agents.problem.images import read_image
+from agents.transport.bus import FleetBus
 from agents.vehicle.config import AgentConfig
 from agents.vehicle.frames import Frame, SimulatedCamera
 
 #: Files a directory source plays (by suffix, lower case).
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".ppm", ".pgm", ".webp")
-#: How long a live device may take to deliver its first frame, s.
+#: How long a live device or ROS topic may take to deliver its first frame (a ROS topic: its first camera_info and
+#: pose too), s.
 FIRST_FRAME_TIMEOUT_S = 5.0
+#: The spelling of a ROS 2 topic as an input (``agents.bridges.ros_sources.SCHEME``).
+ROS_SCHEME = "ros2:"
 
 
 class SourceError(FleetError):
@@ -206,22 +219,30 @@ def open_reader(source: str) -> CaptureReader | FileListReader | LatestFrameRead
 
 
 class SourceCamera:
-    """A vehicle's real camera: frames from a reader, the camera from files or the scenario, features extracted."""
+    """A vehicle's real camera: frames from a reader, the camera from files, ROS topics or the scenario, features
+    extracted.
+
+    ``intrinsics`` and ``world_from_camera`` are asked when each frame is taken (after its image was read): a file's
+    are constant, a ROS topic's are its first valid CameraInfo and its newest pose. ``closing`` are further
+    inputs to close with the camera (the ROS topics followed).
+    """
 
     def __init__(self, reader, scenario: Scenario, vehicle: str, extract: Extractor, *,
-                 intrinsics: Camera | None = None, world_from_camera: np.ndarray | None = None,
-                 intrinsics_from: str | None = None) -> None:
+                 intrinsics: Callable[[], Camera] | None = None,
+                 world_from_camera: Callable[[], np.ndarray] | None = None,
+                 intrinsics_from: str | None = None, closing: tuple = ()) -> None:
         self.reader, self.scenario, self.extract = reader, scenario, extract
         self.vehicle = scenario.vehicle(vehicle).name
         self.intrinsics, self.world_from_camera = intrinsics, world_from_camera
         self.intrinsics_from = intrinsics_from or f"scenario {scenario.name!r} vehicle {self.vehicle}"
+        self.closing = closing
         self.frames = 0  # frames taken from the source
 
     def camera(self, k: int) -> Camera:
         """The camera of the source's frame ``k``."""
         scene = self.scenario.camera(self.vehicle, k % self.scenario.frames)
-        k_cam = self.intrinsics or scene
-        pose = scene.world_from_camera if self.world_from_camera is None else self.world_from_camera
+        k_cam = scene if self.intrinsics is None else self.intrinsics()
+        pose = scene.world_from_camera if self.world_from_camera is None else self.world_from_camera()
         return Camera(k_cam.fx, k_cam.fy, k_cam.cx, k_cam.cy, k_cam.width, k_cam.height, k_cam.distortion, pose)
 
     def acquire(self, index: int, stamp_ns: int) -> Frame:
@@ -240,20 +261,45 @@ class SourceCamera:
 
     def close(self) -> None:
         self.reader.close()
+        for item in self.closing:
+            item.close()
 
 
-def open_camera(config: AgentConfig, scenario: Scenario) -> SimulatedCamera | SourceCamera:
-    """The vehicle's camera: the renderer, or ``config.source`` with its camera files (read now, so that a bad
-    one is an error before the vehicle joins its fleet)."""
+def is_ros(spec: object) -> bool:
+    """Whether an input (``--source``, ``--camera-info``, ``--camera-pose``) is a ROS 2 topic."""
+    return spec is not None and str(spec).startswith(ROS_SCHEME)
+
+
+def open_camera(config: AgentConfig, scenario: Scenario, bus: FleetBus | None = None) -> SimulatedCamera | SourceCamera:
+    """The vehicle's camera: the renderer, or ``config.source`` with its camera files and topics (files read now, so
+    that a bad one is an error before the vehicle joins its fleet).
+
+    ROS 2 topics are followed on ``bus``'s Zenoh session. Without a bus (the warm-up, before the vehicle joins), a
+    camera with a ROS input is checked (topic names, files) and is then the renderer: its first frame compiles the
+    same kernels, and no ROS message can arrive before the session is open.
+    """
     extract = point_extractor(config.features, scenario.model.palette)
     if config.source is None:
         return SimulatedCamera(scenario, config.vehicle, extract)
-    intrinsics = None if config.camera_info is None else read_camera_info(config.camera_info)
-    pose = None if config.camera_pose is None else matrix_from_pose(read_camera_pose(config.camera_pose))
-    reader = open_reader(str(config.source))
-    return SourceCamera(reader, scenario, config.vehicle, extract, intrinsics=intrinsics, world_from_camera=pose,
+    ros_inputs = any(is_ros(spec) for spec in (config.source, config.camera_info, config.camera_pose))
+    if ros_inputs:  # imported here: ros_camera imports this module, and it brings in the bridges (rosbags)
+        from agents.vehicle.ros_camera import check_ros_topics, open_ros_camera
+
+        check_ros_topics(config)
+    k_file = None if config.camera_info is None or is_ros(config.camera_info) else read_camera_info(config.camera_info)
+    pose_file = None if config.camera_pose is None or is_ros(config.camera_pose) else \
+        matrix_from_pose(read_camera_pose(config.camera_pose))
+    if ros_inputs and bus is None:
+        if not is_ros(config.source):
+            open_reader(str(config.source)).close()
+        return SimulatedCamera(scenario, config.vehicle, extract)
+    if ros_inputs:
+        return open_ros_camera(config, scenario, bus, extract, k_file, pose_file)
+    return SourceCamera(open_reader(str(config.source)), scenario, config.vehicle, extract,
+                        intrinsics=None if k_file is None else (lambda: k_file),
+                        world_from_camera=None if pose_file is None else (lambda: pose_file),
                         intrinsics_from=None if config.camera_info is None else f"--camera-info {config.camera_info}")
 
 
 __all__ = ["CaptureReader", "FileListReader", "LatestFrameReader", "SourceCamera", "SourceEnded", "SourceError",
-           "open_camera", "open_reader", "quiet_native_stderr"]
+           "is_ros", "open_camera", "open_reader", "quiet_native_stderr"]

@@ -1,0 +1,169 @@
+"""A camera vehicle's ROS 2 inputs (``--source``, ``--camera-info``, ``--camera-pose`` given as ``ros2:/topic``), on
+the fleet bus's Zenoh session.
+
+- the image topic is a live source (:class:`TopicReader`): each tick of the fleet clock takes the newest valid frame,
+  the first one waited for up to :data:`~agents.vehicle.sources.FIRST_FRAME_TIMEOUT_S`;
+- the camera_info topic gives the intrinsics: its first valid ``sensor_msgs/msg/CameraInfo``, checked as a
+  calibration file is (:func:`agents.problem.camera_info.camera_from_camera_info_message`), then the topic is left;
+- the pose topic gives ``world_from_camera``: the newest ``geometry_msgs/msg/PoseStamped`` when a frame is taken.
+
+Frames are refused over the pixel budget of team-mates' images (:data:`~agents.vehicle.team_views.MAX_DECODED_PIXELS`)
+or of another size than the camera's. What each topic received and refused is counted in the bus's traffic counters
+under ``ros2:<topic>`` (reasons ``ros2 step``, ``ros2 pixels``, ...). The vehicle room does not import
+:mod:`agents.bridges` at module level (docs/architecture.md): the subscriber and the decoders are imported here, in
+the functions that need them, when an input is a ROS topic.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+
+from evopose import Camera
+from evopose.pose import matrix_from_pose
+from scenarios.world import Scenario
+
+from agents.problem.camera_info import camera_from_camera_info_message
+from agents.problem.extract import Extractor
+from agents.transport.bus import FleetBus
+from agents.vehicle.config import AgentConfig
+from agents.vehicle.sources import (FIRST_FRAME_TIMEOUT_S, ROS_SCHEME, SourceCamera, SourceError, is_ros,
+                                    open_reader)
+from agents.vehicle.team_views import MAX_DECODED_PIXELS
+
+
+class TopicReader:
+    """A ROS 2 image topic as a live source: each read gives the newest valid frame (the first one waited for up to
+    ``first_timeout_s``); never ends by itself."""
+
+    def __init__(self, feed, name: str, domain: int, first_timeout_s: float = FIRST_FRAME_TIMEOUT_S) -> None:
+        self.feed, self.name, self.domain, self.first_timeout_s = feed, name, domain, first_timeout_s
+
+    def read(self) -> np.ndarray:
+        image = self.feed.newest(self.first_timeout_s)
+        if image is None:
+            raise SourceError(f"--source {self.name}: no valid sensor_msgs/msg/Image or CompressedImage within "
+                              f"{self.first_timeout_s:g} s on ROS domain {self.domain}: {self.feed.describe()}")
+        return image
+
+    def close(self) -> None:
+        self.feed.close()
+
+
+class TopicValue:
+    """A ROS 2 topic as a camera's intrinsics or pose: its first valid value (``keep_first``: CameraInfo, then the
+    topic is left) or its newest at each call (the pose), the first one waited for up to ``first_timeout_s``."""
+
+    def __init__(self, feed, option: str, what: str, domain: int, *, keep_first: bool,
+                 first_timeout_s: float = FIRST_FRAME_TIMEOUT_S) -> None:
+        self.feed, self.option, self.what, self.domain = feed, option, what, domain
+        self.keep_first, self.first_timeout_s = keep_first, first_timeout_s
+        self._kept = None
+
+    def __call__(self):
+        if self._kept is not None:
+            return self._kept
+        value = self.feed.newest(self.first_timeout_s)
+        if value is None:
+            raise SourceError(f"{self.option} {self.feed.label}: no valid {self.what} within {self.first_timeout_s:g} s "
+                              f"on ROS domain {self.domain}: {self.feed.describe()}")
+        if self.keep_first:
+            self._kept = value
+            self.feed.close()
+        return value
+
+    def close(self) -> None:
+        self.feed.close()
+
+
+def open_ros_inputs(config: AgentConfig, bus: FleetBus, size_of_camera: Callable[[], tuple[int, int] | None]):
+    """The ROS 2 topics among ``config``'s inputs, followed on ``bus``'s session: ``(reader or None, intrinsics or
+    None, world_from_camera or None)``; received and refused messages are counted in ``bus.counters``.
+
+    ``size_of_camera()`` is the camera's ``(width, height)`` when known: a frame of another size is refused (counted
+    ``ros2 size``), not fatal.
+    """
+    from agents.bridges import ros_msgs
+    from agents.bridges.ros_sources import (HEADER_BYTES, IMAGE_TYPES, SMALL_MESSAGE_BYTES, Rejected, TopicFeed,
+                                            camera_pose, decode_image, ros_topic)
+
+    domain, session, counters = config.ros_domain, bus.session, bus.counters
+    common = dict(on_received=counters.count_received, on_rejected=counters.count_rejected)
+    reader = intrinsics = pose = None
+    if is_ros(config.source):
+        def image_of(msgtype: str, message) -> np.ndarray:
+            image = decode_image(msgtype, message, max_pixels=MAX_DECODED_PIXELS)
+            size = size_of_camera()
+            if size is not None and (image.shape[1], image.shape[0]) != size:
+                raise Rejected("size", f"{image.shape[1]}x{image.shape[0]}, the camera is {size[0]}x{size[1]}")
+            return image
+
+        feed = TopicFeed(session, domain, ros_topic(config.source), IMAGE_TYPES, image_of,
+                         max_bytes=3 * MAX_DECODED_PIXELS + HEADER_BYTES, **common)
+        reader = TopicReader(feed, str(config.source), domain)
+    if is_ros(config.camera_info):
+        topic = ros_topic(config.camera_info)
+        feed = TopicFeed(session, domain, topic, (ros_msgs.CAMERA_INFO,),
+                         lambda _, message: camera_from_camera_info_message(message, ROS_SCHEME + topic),
+                         max_bytes=SMALL_MESSAGE_BYTES, **common)
+        intrinsics = TopicValue(feed, "--camera-info", ros_msgs.CAMERA_INFO, domain, keep_first=True)
+    if is_ros(config.camera_pose):
+        feed = TopicFeed(session, domain, ros_topic(config.camera_pose), (ros_msgs.POSE_STAMPED,),
+                         lambda msgtype, message: matrix_from_pose(camera_pose(msgtype, message)),
+                         max_bytes=SMALL_MESSAGE_BYTES, **common)
+        pose = TopicValue(feed, "--camera-pose", ros_msgs.POSE_STAMPED, domain, keep_first=False)
+    return reader, intrinsics, pose
+
+
+def check_ros_topics(config: AgentConfig) -> None:
+    """Each ``ros2:`` input must name a valid ROS 2 topic: one :class:`SourceError` line otherwise."""
+    from agents.bridges.ros_sources import ros_topic
+
+    for option, spec in (("--source", config.source), ("--camera-info", config.camera_info),
+                         ("--camera-pose", config.camera_pose)):
+        if is_ros(spec):
+            try:
+                ros_topic(str(spec))
+            except ValueError as err:
+                raise SourceError(f"{option} {err}") from None
+
+
+def open_ros_camera(config: AgentConfig, scenario: Scenario, bus: FleetBus, extract: Extractor,
+                    intrinsics: Camera | None, world_from_camera: np.ndarray | None) -> SourceCamera:
+    """The camera of a source with ROS inputs; ``intrinsics`` and ``world_from_camera`` are those read from files
+    (None: from a ROS topic, or the scenario's). A file ``--source`` is opened here too."""
+    taken: list[Camera] = []  # the first valid CameraInfo, once taken: the size ROS frames must then have
+
+    def size_of_camera() -> tuple[int, int] | None:
+        if intrinsics is not None:
+            return intrinsics.width, intrinsics.height
+        if not is_ros(config.camera_info):
+            scene = scenario.camera(config.vehicle, 0)
+            return scene.width, scene.height
+        return (taken[0].width, taken[0].height) if taken else None
+
+    reader, ros_intrinsics, ros_pose = open_ros_inputs(config, bus, size_of_camera)
+    closing = tuple(item for item in (ros_intrinsics, ros_pose) if item is not None)
+    try:
+        if reader is None:
+            reader = open_reader(str(config.source))
+    except BaseException:
+        for item in closing:
+            item.close()
+        raise
+
+    def camera_info() -> Camera:
+        camera = ros_intrinsics()
+        taken[:] = [camera]
+        return camera
+
+    file_intrinsics = None if intrinsics is None else (lambda: intrinsics)
+    file_pose = None if world_from_camera is None else (lambda: world_from_camera)
+    return SourceCamera(reader, scenario, config.vehicle, extract,
+                        intrinsics=file_intrinsics if ros_intrinsics is None else camera_info,
+                        world_from_camera=ros_pose or file_pose, closing=closing,
+                        intrinsics_from=None if config.camera_info is None else f"--camera-info {config.camera_info}")
+
+
+__all__ = ["TopicReader", "TopicValue", "check_ros_topics", "open_ros_camera", "open_ros_inputs"]

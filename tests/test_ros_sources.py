@@ -1,0 +1,433 @@
+"""ROS 2 topics as a camera vehicle's inputs (issue 14): `evopose agent --source ros2:/.. --camera-info ros2:/..
+--camera-pose ros2:/..`. A pure-Python publisher in the rmw_zenoh format (the project's own `Ros2Node`, no live ROS 2
+install was available) sends H1's rendered frames as Image or CompressedImage, its CameraInfo and its camera pose as
+PoseStamped; the agent, a real process on a real router, must publish the poses of an agent on the renderer.
+Decoders against hostile messages (each a counted rejection, never an exception), golden CDR bytes of the four
+message types taken in, and the camera pose's round trip through the mirror's conventions.
+
+Rewrite the golden files (only on purpose) with ``python -m tests.test_ros_sources``.
+"""
+
+from __future__ import annotations
+
+import struct
+import sys
+import time
+import zlib
+from pathlib import Path
+from types import SimpleNamespace
+
+import cv2
+import numpy as np
+import pytest
+
+from agents.bridges import ros_msgs
+from agents.bridges.rmw_zenoh import DEFAULT_QOS, SENSOR_QOS, Node
+from agents.bridges.ros2_node import Ros2Node
+from agents.bridges.ros_sources import Rejected, TopicFeed, camera_pose, decode_image, ros_topic
+from agents.cli.main import main
+from agents.problem.camera_info import camera_from_camera_info_message
+from agents.problem.problem_file import ProblemFileError
+from agents.vehicle.team_views import MAX_DECODED_PIXELS
+from evopose.pose import matrix_from_pose, pose_from_matrix
+from scenarios.render import render_frame
+from scenarios.world import load_scenario
+from tests.fleet_procs import client_session, fleet_with_router, free_port
+
+FRAMES = 8  # the renderer's run is good (converged) from frame 6 on
+#: As tests/test_sources.py: slow enough that no frame runs late, so both agents seed the same searches per frame.
+FPS = 2.0
+#: Fleet frame 0 this far after the agent starts (its warm-up compiles before it joins: ready after ~3 s).
+LEAD_S = 6.0
+#: A frame's image, camera info and pose are published this long before its tick (after the previous tick).
+PUBLISH_AHEAD_S = 0.2
+IMAGE_TOPIC = "/h1/camera/image_raw"
+COMPRESSED_TOPIC = "/h1/camera/image_raw/compressed"
+INFO_TOPIC = "/h1/camera/camera_info"
+POSE_TOPIC = "/h1/camera/pose"
+#: Poses of the ROS run against the renderer's: the camera pose passes through a quaternion (float64 round-off).
+POSITION_TOLERANCE_M = 1e-9
+ANGLE_TOLERANCE_RAD = 1e-9
+GOLDEN = Path(__file__).resolve().parent / "golden"
+STAMP_NS = 1_700_000_000_123_456_789
+OPTICAL = "H1/camera_optical"
+
+
+def ros_camera(camera) -> SimpleNamespace:
+    """The fields of ``protocol.messages.CameraInfo`` that ``ros_msgs.camera_info`` reads, of an evopose camera."""
+    return SimpleNamespace(fx=camera.fx, fy=camera.fy, cx=camera.cx, cy=camera.cy, width=camera.width,
+                           height=camera.height, distortion=np.asarray(camera.distortion, float))
+
+
+def image_message(image: np.ndarray, stamp_ns: int, encoding: str = "bgr8"):
+    """``sensor_msgs/Image`` of a BGR or grey image (``rgb8``: channels swapped as the encoding says)."""
+    pixels = cv2.cvtColor(image, cv2.COLOR_BGR2RGB) if encoding == "rgb8" else image
+    channels = 1 if pixels.ndim == 2 else 3
+    frame = SimpleNamespace(height=pixels.shape[0], width=pixels.shape[1], channels=channels, data=pixels.tobytes())
+    message = ros_msgs.image(frame, stamp_ns, OPTICAL)
+    message.encoding = encoding
+    return message
+
+
+def compressed_message(image: np.ndarray, stamp_ns: int, fmt: str = "png"):
+    ok, data = cv2.imencode(".png" if fmt == "png" else ".jpg", image)
+    assert ok
+    frame = SimpleNamespace(encoding=fmt, data=data.tobytes())
+    return ros_msgs.compressed_image(frame, stamp_ns, OPTICAL)
+
+
+def roundtrip(message):
+    """The message as a subscriber gets it: CDR bytes, deserialized."""
+    return ros_msgs.deserialize(ros_msgs.serialize(message), message.__msgtype__)
+
+
+# -- decoders: what each message becomes, or its counted reason ------------------------------------------------
+
+IMAGE = np.random.default_rng(0).integers(0, 256, (6, 8, 3), dtype=np.uint8)
+
+
+@pytest.mark.parametrize("encoding", ["bgr8", "rgb8", "mono8"])
+def test_raw_images_decode_to_bgr_or_grey(encoding):
+    source = cv2.cvtColor(IMAGE, cv2.COLOR_BGR2GRAY) if encoding == "mono8" else IMAGE
+    decoded = decode_image(ros_msgs.IMAGE, roundtrip(image_message(source, STAMP_NS, encoding)), max_pixels=48)
+    assert np.array_equal(decoded, source)
+
+
+def test_a_padded_step_is_cut_to_the_row():
+    message = image_message(IMAGE, STAMP_NS)
+    padded = np.zeros((6, 8 * 3 + 8), np.uint8)
+    padded[:, :24] = IMAGE.reshape(6, 24)
+    message.step, message.data = 32, padded.reshape(-1)
+    assert np.array_equal(decode_image(ros_msgs.IMAGE, roundtrip(message), max_pixels=48), IMAGE)
+
+
+#: Smooth, with a different ramp per channel: JPEG keeps it closely, and a channel swap would show.
+SMOOTH = np.stack(np.broadcast_arrays(*np.meshgrid(np.arange(16) * 8, np.arange(16) * 4, indexing="xy"),
+                                      np.full((16, 16), 200)), axis=2).astype(np.uint8)
+
+
+@pytest.mark.parametrize("fmt, tolerance", [("png", 0), ("jpeg", 3)])
+def test_compressed_images_decode_with_opencv(fmt, tolerance):
+    decoded = decode_image(ros_msgs.COMPRESSED_IMAGE, roundtrip(compressed_message(SMOOTH, STAMP_NS, fmt)),
+                           max_pixels=256)
+    assert decoded.shape == SMOOTH.shape and np.abs(decoded.astype(int) - SMOOTH).mean() <= tolerance
+
+
+def png_claiming(width: int, height: int) -> bytes:
+    """A 1x1 PNG whose header (with a valid CRC) claims ``width`` x ``height``: a decompression bomb's header."""
+    ok, data = cv2.imencode(".png", IMAGE[:1, :1])
+    data = bytearray(data.tobytes())
+    ihdr = data.index(b"IHDR")
+    data[ihdr + 4:ihdr + 12] = struct.pack(">II", width, height)
+    data[ihdr + 17:ihdr + 21] = struct.pack(">I", zlib.crc32(bytes(data[ihdr:ihdr + 17])))
+    return bytes(data)
+
+
+def hostile(change: dict, base=None):
+    message = image_message(IMAGE, STAMP_NS) if base is None else base
+    for name, value in change.items():
+        setattr(message, name, value)
+    return message
+
+
+@pytest.mark.parametrize("msgtype, message, reason", [
+    (ros_msgs.IMAGE, hostile({"step": 20}), "step"),                                     # shorter than a row
+    (ros_msgs.IMAGE, hostile({"step": 25}), "length"),                                   # data not height x step
+    (ros_msgs.IMAGE, hostile({"height": 7}), "length"),
+    (ros_msgs.IMAGE, hostile({"width": 100_000, "height": 100_000, "step": 300_000}), "pixels"),
+    (ros_msgs.IMAGE, hostile({"width": 0}), "size"),
+    (ros_msgs.IMAGE, hostile({"encoding": "bayer_rggb8"}), "encoding"),
+    (ros_msgs.IMAGE, hostile({"encoding": "16UC1"}), "encoding"),
+    (ros_msgs.COMPRESSED_IMAGE, hostile({"format": "h264"}, compressed_message(IMAGE, STAMP_NS)), "format"),
+    (ros_msgs.COMPRESSED_IMAGE, hostile({"format": "png; compressedDepth"}, compressed_message(IMAGE, STAMP_NS)),
+     "format"),
+    (ros_msgs.COMPRESSED_IMAGE, hostile({"format": "jpeg"}, compressed_message(IMAGE, STAMP_NS)), "format"),
+    (ros_msgs.COMPRESSED_IMAGE, hostile({"data": np.frombuffer(b"\x89PNG garbage", np.uint8)},
+                                        compressed_message(IMAGE, STAMP_NS)), "data"),
+    (ros_msgs.COMPRESSED_IMAGE, hostile({"data": np.frombuffer(png_claiming(60_000, 60_000), np.uint8)},
+                                        compressed_message(IMAGE, STAMP_NS)), "pixels"),
+    (ros_msgs.COMPRESSED_IMAGE, hostile({"data": np.frombuffer(png_claiming(4, 4), np.uint8)},
+                                        compressed_message(IMAGE, STAMP_NS)), "data"),  # header lies about the size
+    (ros_msgs.POSE_STAMPED, ros_msgs.pose_stamped((0, 0, 0, 0, 0, 0), STAMP_NS, "map"), "type"),
+])
+def test_each_hostile_image_is_refused_with_its_reason(msgtype, message, reason):
+    with pytest.raises(Rejected) as err:
+        decode_image(msgtype, roundtrip(message), max_pixels=MAX_DECODED_PIXELS)
+    assert err.value.reason == reason and "\n" not in str(err.value)
+
+
+def test_an_uncalibrated_or_foreign_camera_info_is_one_line_naming_the_field():
+    camera = load_scenario("exp2").camera("H1", 0)
+    good = ros_msgs.camera_info(ros_camera(camera), STAMP_NS, OPTICAL)
+    assert camera_from_camera_info_message(roundtrip(good), "ros2:/c").fx == camera.fx
+    cases = [({"k": np.zeros(9)}, "camera_matrix: fx and fy must be > 0"),
+             ({"width": 0}, "image_width: must be > 0"),
+             ({"distortion_model": "equidistant", "d": np.zeros(4)}, "distortion_model: expected 'plumb_bob'"),
+             ({"d": np.zeros(8)}, "plumb_bob has 5 coefficients"),
+             ({"k": np.array([500.0, 3, 320, 0, 500, 240, 0, 0, 1])}, "(no skew)"),
+             ({"k": np.array([np.nan, 0, 320, 0, 500, 240, 0, 0, 1])}, "camera_matrix")]
+    for change, expected in cases:
+        with pytest.raises(ProblemFileError) as err:
+            camera_from_camera_info_message(roundtrip(hostile(dict(change), roundtrip(good))), "ros2:/c")
+        assert expected in str(err.value) and str(err.value).startswith("ros2:/c: "), (change, err.value)
+    uncalibrated = hostile({"d": np.zeros(0), "distortion_model": ""}, roundtrip(good))
+    assert np.array_equal(camera_from_camera_info_message(roundtrip(uncalibrated), "c").distortion, np.zeros(5))
+
+
+def test_a_camera_pose_is_the_optical_frame_in_map_as_the_mirror_publishes_it():
+    """Round trip through the mirror's conventions (docs/ros2.md, Frames): the camera pose a vehicle shares ->
+    the mirror's /tf map -> <V>/base_link -> <V>/camera_optical, and the same pose as a PoseStamped -> the
+    world_from_camera an agent takes in. All three are one matrix."""
+    rng = np.random.default_rng(2)
+    scenario = load_scenario("exp2")
+    poses = [pose_from_matrix(scenario.camera(v, k).world_from_camera) for v in ("H1", "H2") for k in range(3)]
+    for pose in [*poses, *rng.uniform(-3, 3, (20, 6))]:
+        world_from_camera = matrix_from_pose(pose)
+        message = roundtrip(ros_msgs.pose_stamped(pose, STAMP_NS, "map"))
+        taken = matrix_from_pose(camera_pose(ros_msgs.POSE_STAMPED, message))
+        assert np.allclose(taken, world_from_camera, atol=1e-12)
+        position, r_world_base, r_base_camera = ros_msgs.camera_rig(tuple(pose))
+        tf = np.eye(4)
+        tf[:3, :3], tf[:3, 3] = r_world_base @ r_base_camera, position
+        assert np.allclose(tf, world_from_camera, atol=1e-12)
+    with pytest.raises(Rejected) as err:
+        camera_pose(ros_msgs.POSE_STAMPED, roundtrip(ros_msgs.pose_stamped(poses[0], STAMP_NS, "H1/base_link")))
+    assert err.value.reason == "frame"
+
+
+def test_topic_names_are_checked():
+    assert ros_topic("ros2:/camera/image_raw") == "/camera/image_raw"
+    assert ros_topic("ros2:camera/image_raw/") == "/camera/image_raw"
+    for bad in ("ros2:", "ros2:/a//b", "ros2:/2nd", "ros2:/a__b", "ros2:/a-b", "ros2:/cam era"):
+        with pytest.raises(ValueError, match="is not a ROS 2 topic name"):
+            ros_topic(bad)
+
+
+# -- golden CDR --------------------------------------------------------------------------------------------------
+
+def golden_messages() -> dict[str, object]:
+    """One message of each type taken in, fixed."""
+    camera = SimpleNamespace(fx=800.0, fy=810.0, cx=320.5, cy=240.25, width=640, height=480,
+                             distortion=np.array([-0.1, 0.01, 0.001, -0.002, 0.0]))
+    pixels = np.arange(2 * 3 * 3, dtype=np.uint8).reshape(2, 3, 3)
+    ok, png = cv2.imencode(".png", pixels)
+    return {"ros2_image.cdr": image_message(pixels, STAMP_NS),
+            "ros2_compressed_image.cdr": ros_msgs.compressed_image(SimpleNamespace(encoding="png",
+                                                                                   data=png.tobytes()),
+                                                                   STAMP_NS, OPTICAL),
+            "ros2_camera_info.cdr": ros_msgs.camera_info(camera, STAMP_NS, OPTICAL),
+            "ros2_pose_stamped.cdr": ros_msgs.pose_stamped((1.0, -2.0, 30.0, 3.0, 0.2, -1.5), STAMP_NS, "map")}
+
+
+def test_the_cdr_of_the_types_taken_in_is_the_golden_files():
+    messages = golden_messages()
+    for name, message in messages.items():
+        assert ros_msgs.serialize(message) == (GOLDEN / name).read_bytes(), f"{name} changed; see the docstring"
+    # the Image layout by hand: encapsulation, Time, frame_id, height, width, encoding, is_bigendian, step, data
+    data = (GOLDEN / "ros2_image.cdr").read_bytes()
+    assert data[:4] == b"\x00\x01\x00\x00"
+    sec, nanosec, length = struct.unpack_from("<iII", data, 4)
+    assert (sec * 10**9 + nanosec, data[16:16 + length]) == (STAMP_NS, OPTICAL.encode() + b"\x00")
+    at = 16 + length + (-(16 + length - 4)) % 4
+    height, width, enc_length = struct.unpack_from("<III", data, at)
+    assert (height, width, data[at + 12:at + 12 + enc_length]) == (2, 3, b"bgr8\x00")
+    at += 12 + enc_length
+    is_bigendian, = struct.unpack_from("<B", data, at)
+    at += 1 + (-(at + 1 - 4)) % 4
+    step, size = struct.unpack_from("<II", data, at)
+    assert (is_bigendian, step, size, data[at + 8:]) == (0, 9, 18, bytes(range(18)))
+    # and each decodes to what an agent takes in
+    decoded = {name: ros_msgs.deserialize((GOLDEN / name).read_bytes(), m.__msgtype__) for name, m in messages.items()}
+    assert np.array_equal(decode_image(ros_msgs.IMAGE, decoded["ros2_image.cdr"], max_pixels=6),
+                          np.arange(18, dtype=np.uint8).reshape(2, 3, 3))
+    assert np.array_equal(decode_image(ros_msgs.COMPRESSED_IMAGE, decoded["ros2_compressed_image.cdr"], max_pixels=6),
+                          np.arange(18, dtype=np.uint8).reshape(2, 3, 3))
+    camera = camera_from_camera_info_message(decoded["ros2_camera_info.cdr"], "golden")
+    assert (camera.fx, camera.fy, camera.cx, camera.cy, camera.width, camera.height) == (800, 810, 320.5, 240.25,
+                                                                                         640, 480)
+    assert np.array_equal(camera.distortion, [-0.1, 0.01, 0.001, -0.002, 0.0])
+    pose = camera_pose(ros_msgs.POSE_STAMPED, decoded["ros2_pose_stamped.cdr"])
+    assert np.allclose(matrix_from_pose(pose), matrix_from_pose((1.0, -2.0, 30.0, 3.0, 0.2, -1.5)), atol=1e-12)
+
+
+# -- real Zenoh: a feed keeps the newest valid message and counts the rest --------------------------------------
+
+@pytest.fixture(scope="module")
+def fleet():
+    with fleet_with_router("ros-sources") as fleet:
+        yield fleet
+
+
+def wait(predicate, timeout: float = 10.0) -> bool:
+    deadline = time.monotonic() + timeout
+    while not predicate() and time.monotonic() < deadline:
+        time.sleep(0.02)
+    return predicate()
+
+
+def test_a_feed_counts_hostile_samples_and_keeps_the_newest_valid_frame(fleet):
+    refused: list[tuple[str, str]] = []
+    with client_session(fleet.endpoint) as listening, client_session(fleet.endpoint) as sending, \
+            Ros2Node(sending, Node("hostile", "/h1")) as node:
+        feed = TopicFeed(listening, 0, IMAGE_TOPIC, (ros_msgs.IMAGE, ros_msgs.COMPRESSED_IMAGE),
+                         lambda t, m: decode_image(t, m, max_pixels=48), max_bytes=4096,
+                         on_rejected=lambda label, reason: refused.append((label, reason)))
+        try:
+            images = node.publisher(IMAGE_TOPIC, ros_msgs.IMAGE, ros_msgs.type_hash(ros_msgs.IMAGE), SENSOR_QOS)
+            assert wait(lambda: images.matched)
+            sent = [ros_msgs.serialize(hostile({"step": 20})),                           # step
+                    b"\x00\x01\x00\x00garbage",                                          # cdr
+                    ros_msgs.serialize(hostile({"encoding": "yuv422"})),                 # encoding
+                    ros_msgs.serialize(image_message(np.zeros((40, 40, 3), np.uint8), STAMP_NS)),  # oversized
+                    ros_msgs.serialize(hostile({"width": 10, "height": 10, "step": 30}))]  # pixels
+            for data in sent:
+                images.publish(data)
+                time.sleep(0.05)  # one at a time through the one-sample slot: each is counted
+            assert wait(lambda: sum(feed.rejected.values()) == len(sent))
+            assert feed.newest() is None and "5 received, 5 rejected" in feed.describe()
+            images.publish(ros_msgs.serialize(image_message(IMAGE, STAMP_NS)))
+            assert np.array_equal(feed.newest(timeout=5), IMAGE)
+            with Ros2Node(sending, Node("confused", "/h1"), node_id=1) as other:  # another type on the topic
+                poses = other.publisher(IMAGE_TOPIC, ros_msgs.POSE_STAMPED, ros_msgs.type_hash(ros_msgs.POSE_STAMPED),
+                                        DEFAULT_QOS)
+                assert wait(lambda: poses.matched)
+                poses.publish(ros_msgs.serialize(ros_msgs.pose_stamped((0, 0, 0, 0, 0, 0), STAMP_NS, "map")))
+                assert wait(lambda: feed.rejected["type"] == 1)
+            newer = IMAGE[::-1].copy()
+            images.publish(ros_msgs.serialize(image_message(newer, STAMP_NS + 1)))
+            assert wait(lambda: np.array_equal(feed.newest(), newer))
+        finally:
+            feed.close()
+    assert dict(feed.rejected) == {"step": 1, "cdr": 1, "encoding": 1, "oversized": 1, "pixels": 1, "type": 1}
+    assert sorted(reason for _, reason in refused) == ["ros2 cdr", "ros2 encoding", "ros2 oversized", "ros2 pixels",
+                                                       "ros2 step", "ros2 type"]
+    assert {label for label, _ in refused} == {"ros2:" + IMAGE_TOPIC}
+    assert feed.valid == 2 and feed.received == 8
+
+
+# -- real processes: an agent on ROS topics publishes the renderer's poses -----------------------------------------
+
+def start_agent(fleet, name: str, *args: str, lead_s: float = LEAD_S):
+    epoch = time.time_ns() + int(lead_s * 1e9)
+    agent = fleet.start("agent", "--fleet", name, "--vehicle", "H1", "--scenario", "exp2", "--share", "features",
+                        "--fps", str(FPS), "--epoch-ns", str(epoch), "--frames", str(FRAMES), "--json", *args)
+    return agent, epoch
+
+
+def finish(agent, timeout: float = 30.0) -> tuple[int, list[dict], str]:
+    code = agent.wait(timeout)
+    return code, agent.all_records(), agent.popen.stderr.read()
+
+
+def frames_of(records: list[dict]) -> dict[int, dict]:
+    return {r["frame"]: r for r in records if r.get("event") == "frame"}
+
+
+@pytest.fixture(scope="module")
+def renderer_run(fleet):
+    agent, _ = start_agent(fleet, "render-h1")
+    code, records, stderr = finish(agent)
+    assert code == 0, stderr
+    return records
+
+
+@pytest.fixture(scope="module")
+def h1_frames():
+    scenario = load_scenario("exp2")
+    return [render_frame(scenario, k, "H1") for k in range(FRAMES)]
+
+
+def publish_camera(fleet, agent, epoch: int, frames, compressed: bool) -> None:
+    """H1's camera as a ROS 2 driver would publish it: per frame, just before its tick, CameraInfo, the optical
+    frame's pose in map and the image (each with the frame's stamp)."""
+    topic, msgtype = (COMPRESSED_TOPIC, ros_msgs.COMPRESSED_IMAGE) if compressed else (IMAGE_TOPIC, ros_msgs.IMAGE)
+    with client_session(fleet.endpoint) as session, Ros2Node(session, Node("camera", "/h1")) as node:
+        images = node.publisher(topic, msgtype, ros_msgs.type_hash(msgtype), SENSOR_QOS)
+        infos = node.publisher(INFO_TOPIC, ros_msgs.CAMERA_INFO, ros_msgs.type_hash(ros_msgs.CAMERA_INFO),
+                               DEFAULT_QOS)
+        poses = node.publisher(POSE_TOPIC, ros_msgs.POSE_STAMPED, ros_msgs.type_hash(ros_msgs.POSE_STAMPED),
+                               DEFAULT_QOS)
+        # the agent follows the topics once it joined its fleet, before its frame 0
+        assert wait(lambda: images.matched and infos.matched and poses.matched, LEAD_S), agent.stderr_now()
+        for n, frame in enumerate(frames):
+            stamp = epoch + round(n * 1e9 / FPS)
+            delay = (stamp - time.time_ns()) / 1e9 - PUBLISH_AHEAD_S
+            assert delay > 0, f"frame {n} would be published late ({delay:.3f} s)"
+            time.sleep(delay)
+            camera = frame.camera
+            infos.publish(ros_msgs.serialize(ros_msgs.camera_info(ros_camera(camera), stamp, OPTICAL)))
+            pose = pose_from_matrix(camera.world_from_camera)
+            poses.publish(ros_msgs.serialize(ros_msgs.pose_stamped(pose, stamp, "map")))
+            image = compressed_message(frame.image, stamp) if compressed else image_message(frame.image, stamp)
+            images.publish(ros_msgs.serialize(image))
+
+
+def assert_renderers_poses(records: list[dict], renderer_records: list[dict]) -> dict:
+    """Same frames, same marks, the same poses within float64 round-off of the camera pose; the largest
+    differences (m, rad)."""
+    ros, rendered = frames_of(records), frames_of(renderer_records)
+    summary = next(r for r in records if r.get("event") == "summary")
+    assert summary["late_frames"] == 0 and sorted(ros) == sorted(rendered) == list(range(FRAMES))
+    worst = {"position_m": 0.0, "angle_rad": 0.0}
+    for n in range(FRAMES):
+        assert ros[n]["scene_frame"] == n and ros[n]["points"] == rendered[n]["points"]
+        assert ros[n]["good"] == rendered[n]["good"] and "error" not in ros[n]
+        a, b = ros[n]["pose"], rendered[n]["pose"]
+        worst["position_m"] = max(worst["position_m"], *(abs(a[k] - b[k]) for k in "xyz"))
+        worst["angle_rad"] = max(worst["angle_rad"], *(abs(a[k] - b[k]) for k in ("roll", "pitch", "yaw")))
+    assert worst["position_m"] <= POSITION_TOLERANCE_M and worst["angle_rad"] <= ANGLE_TOLERANCE_RAD, worst
+    assert summary["good"] > 0
+    return worst
+
+
+@pytest.mark.parametrize("compressed", [False, True], ids=["image", "compressed-png"])
+def test_an_agent_on_ros_topics_publishes_the_renderers_poses(fleet, renderer_run, h1_frames, compressed):
+    topic = COMPRESSED_TOPIC if compressed else IMAGE_TOPIC
+    agent, epoch = start_agent(fleet, f"ros-h1-{int(compressed)}", "--source", "ros2:" + topic,
+                               "--camera-info", "ros2:" + INFO_TOPIC, "--camera-pose", "ros2:" + POSE_TOPIC)
+    try:
+        publish_camera(fleet, agent, epoch, h1_frames, compressed)
+        code, records, stderr = finish(agent)
+    finally:
+        agent.kill()
+    assert code == 0 and "Traceback" not in stderr, stderr
+    worst = assert_renderers_poses(records, renderer_run)
+    print(f"ROS {'CompressedImage' if compressed else 'Image'} vs renderer: {worst}")
+    traffic = next(r for r in records if r.get("event") == "summary")["traffic"]
+    assert traffic["received"]["ros2:" + topic] == FRAMES and traffic["received"]["ros2:" + POSE_TOPIC] == FRAMES
+    assert not traffic["rejected"]
+
+
+def test_no_frame_on_the_topic_is_one_line_and_exit_2(fleet):
+    started = time.monotonic()
+    agent, _ = start_agent(fleet, "ros-silent", "--source", "ros2:/nobody/image_raw", "--ros-domain", "7",
+                           lead_s=0.0)  # the agent takes the next tick after it joined
+    code, _, stderr = finish(agent)
+    lines = stderr.strip().splitlines()
+    assert code == 2 and len(lines) == 1 and "Traceback" not in stderr, stderr
+    assert lines[0].startswith("error: --source ros2:/nobody/image_raw: no valid sensor_msgs/msg/Image or "
+                               "CompressedImage within 5 s on ROS domain 7: nothing received"), lines[0]
+    assert time.monotonic() - started < 15
+
+
+def agent_error(capfd, *args: str) -> str:
+    code = main(["agent", "--fleet", "bad", "--vehicle", "H1", "--no-multicast", "--listen",
+                 f"tcp/127.0.0.1:{free_port()}", "--frames", "1", *args])
+    err = capfd.readouterr().err
+    lines = err.splitlines()
+    assert code == 2 and len(lines) == 1 and "Traceback" not in err, err
+    return lines[0]
+
+
+def test_bad_ros_inputs_are_one_line_and_exit_2_before_joining(capfd, tmp_path):
+    assert "--source ros2:/cam-1: '/cam-1' is not a ROS 2 topic name" in agent_error(capfd, "--source", "ros2:/cam-1")
+    assert "--camera-pose ros2:/a__b: " in agent_error(capfd, "--source", "ros2:/cam", "--camera-pose", "ros2:/a__b")
+    missing = tmp_path / "none.yaml"  # a file among ROS inputs is still read before joining
+    assert f"{missing}: cannot read" in agent_error(capfd, "--source", "ros2:/cam", "--camera-info", str(missing))
+    assert "--ros-domain" in agent_error(capfd, "--source", "ros2:/cam", "--ros-domain", "300")
+
+
+if __name__ == "__main__":
+    for file_name, golden_message in golden_messages().items():
+        (GOLDEN / file_name).write_bytes(ros_msgs.serialize(golden_message))
+        print(f"wrote {GOLDEN / file_name}", file=sys.stderr)
