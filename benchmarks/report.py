@@ -17,7 +17,7 @@ from pathlib import Path
 RESULTS = Path(__file__).resolve().parent / "results"
 ROOT = Path(__file__).resolve().parents[1]
 #: Order of the sections in BENCHMARKS.md (others follow alphabetically).
-ORDER = ("solvers", "confidence", "weights", "kernels", "features", "fleet", "latency", "footprint")
+ORDER = ("solvers", "confidence", "weights", "kernels", "features", "fleet", "latency", "capacity", "footprint")
 
 INTRO = """# Benchmarks
 
