@@ -20,6 +20,8 @@ from types import SimpleNamespace
 import cv2
 import numpy as np
 import pytest
+from hypothesis import example, given, settings
+from hypothesis import strategies as st
 
 from agents.bridges import ros_msgs
 from agents.bridges.rmw_zenoh import DEFAULT_QOS, SENSOR_QOS, Node
@@ -154,6 +156,35 @@ def test_each_hostile_image_is_refused_with_its_reason(msgtype, message, reason)
     with pytest.raises(Rejected) as err:
         decode_image(msgtype, roundtrip(message), max_pixels=MAX_DECODED_PIXELS)
     assert err.value.reason == reason and "\n" not in str(err.value)
+
+
+@settings(max_examples=300, deadline=None, derandomize=True)
+@example(width=7, height=3, step=24, encoding="bgr8", size=None)  # valid frames (one padded) go through too
+@example(width=7, height=3, step=21, encoding="rgb8", size=None)
+@example(width=7, height=3, step=9, encoding="mono8", size=None)
+@given(width=st.integers(-2, 40), height=st.integers(-2, 40), step=st.integers(-1, 130),
+       encoding=st.sampled_from(["bgr8", "rgb8", "mono8", "rgba8", "", "bgr8\x00"]),
+       size=st.one_of(st.none(), st.integers(0, 2000)))  # None: height x step, as a sane publisher sends
+def test_any_raw_image_fields_give_an_image_of_their_size_or_a_rejection(width, height, step, encoding, size):
+    """Whatever a publisher puts in the fields (uint32 on the wire), the decoder returns the frame they describe or
+    refuses it; it never raises anything else."""
+    message = hostile({"width": max(width, 0), "height": max(height, 0), "step": max(step, 0), "encoding": encoding,
+                       "data": np.zeros(max(height, 0) * max(step, 0) if size is None else size, np.uint8)})
+    try:
+        image = decode_image(ros_msgs.IMAGE, roundtrip(message), max_pixels=1024)
+    except Rejected:
+        return
+    assert image.shape[:2] == (height, width) and image.dtype == np.uint8
+
+
+@settings(max_examples=200, deadline=None, derandomize=True)
+@given(data=st.binary(max_size=400), fmt=st.sampled_from(["png", "jpeg", "bgr8; jpeg compressed bgr8"]))
+def test_any_compressed_bytes_give_an_image_or_a_rejection(data, fmt):
+    message = hostile({"format": fmt, "data": np.frombuffer(data, np.uint8)}, compressed_message(IMAGE, STAMP_NS))
+    try:
+        decode_image(ros_msgs.COMPRESSED_IMAGE, roundtrip(message), max_pixels=1024)
+    except Rejected:
+        pass
 
 
 def test_an_uncalibrated_or_foreign_camera_info_is_one_line_naming_the_field():
