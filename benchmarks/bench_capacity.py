@@ -447,7 +447,24 @@ def summary_lines(rows: list[dict]) -> list[str]:
                  f"{100 * bad['router_cpu']:.0f} % of a core, workers {100 * bad['workers_cpu']:.0f} %"
                  if bad else "; not saturated in the range tried")
         lines.append(f"- **{mode}** ({mine[0]['variant']}): {held}{broke}.")
+    fit = ingress_and_fanout_cost([r for r in rows if r["mode"] in ("hints", "hints-2-subscribers")])
+    if fit:
+        lines.append(f"- Router CPU of express hints, least squares over the {fit['points']} points of `hints` and "
+                     f"`hints-2-subscribers` that held: ~{fit['in_us']:.0f} us per message in plus "
+                     f"~{fit['out_us']:.1f} us per delivery (residual up to {fit['max_residual']:.0f} % of a core).")
     return lines
+
+
+def ingress_and_fanout_cost(rows: list[dict]) -> dict | None:
+    """Router CPU ~ a x messages in + b x deliveries, fitted over unsaturated points (the two variants tell a from b)."""
+    good = [r for r in rows if not r["saturated"]]
+    if len({r["variant"] for r in good}) < 2:
+        return None
+    a = np.array([[r["offered_per_s"], r["delivered_per_s"]] for r in good])
+    y = np.array([r["router_cpu"] for r in good])
+    (cost_in, cost_out), *_ = np.linalg.lstsq(a, y, rcond=None)
+    return {"points": len(good), "in_us": 1e6 * cost_in, "out_us": 1e6 * cost_out,
+            "max_residual": 100 * float(np.max(np.abs(a @ [cost_in, cost_out] - y)))}
 
 
 INTRO = """One `evopose router`; N synthetic vehicles (one Zenoh client session each, no rendering, no estimation) in
