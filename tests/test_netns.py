@@ -130,3 +130,54 @@ def test_b_a_partition_leaves_each_alone_and_both_rejoin_when_the_link_returns(h
         report[vehicle] = {"stale_after_s": (stale_ns - cut_ns) / 1e9, "rejoined_after_s": rejoined[vehicle]}
     print(f"partition of {PARTITION_S:g} s: {report}")
     assert max(rejoined.values()) <= REJOIN_S, report
+
+
+#: A partition longer than the Zenoh lease (10 s): the sessions between the hosts close.
+LONG_PARTITION_S = 12.0
+#: Zenoh's default lease, s (transport/link/tx/lease, 10000 ms).
+LEASE_S = 10.0
+#: Longest time from the link's return until both helicopters use both views again after a long cut, s: B's router
+#: connects to A's again (retry every 0.25-1 s, agents/transport/session.py) and the agents see each other join.
+REJOIN_LONG_S = 15.0
+
+
+def test_c_a_partition_longer_than_the_lease_ends_in_leave_then_join_and_both_views_again(hosts):
+    fleet = FleetOnHosts(hosts, "longcut")
+    start_team(fleet)
+    h1, h2 = fleet.agents["H1"], fleet.agents["H2"]
+    for agent in (h1, h2):
+        agent.next_record(60, both_views)
+    hosts.partition()
+    cut_ns = time.time_ns()
+    time.sleep(LONG_PARTITION_S)
+    hosts.heal()
+    healed_ns = time.time_ns()
+    rejoined = {}
+    for vehicle, agent in (("H1", h1), ("H2", h2)):
+        back = agent.next_record(REJOIN_LONG_S + 5, lambda r: both_views(r) and r["stamp_ns"] >= healed_ns)
+        rejoined[vehicle] = (back["stamp_ns"] - healed_ns) / 1e9
+    time.sleep(0.5)
+    stopped_ns = time.time_ns()
+    for agent in (h1, h2):
+        agent.stop()
+    report = {}
+    for vehicle, mate, agent in (("H1", "H2", h1), ("H2", "H1", h2)):
+        records = [r for r in agent.all_records() if r.get("_rx_ns", 0) < stopped_ns]
+        events = {kind: [r for r in records if r.get("event") == kind and r.get("vehicle") == mate]
+                  for kind in ("stale", "leave", "join")}
+        # past the lease the session between the hosts closed: the team-mate left during the cut, and joined
+        # again after the link returned (its first join, at start, came before the cut)
+        left = [r for r in events["leave"] if cut_ns < r["_rx_ns"] < healed_ns]
+        joined = [r for r in events["join"] if r["_rx_ns"] > healed_ns]
+        assert len(left) == 1 and len(joined) == 1, (vehicle, events)
+        assert [r for r in events["stale"] if cut_ns < frame_time_ns(agent, r) < left[0]["_rx_ns"]], (vehicle, events)
+        # alone but estimating all the while: frames on its own view between the leave and the link's return
+        alone = [r for r in records if r.get("event") == "frame" and left[0]["_rx_ns"] <= r["stamp_ns"] < healed_ns
+                 and r["views"] == [vehicle] and r["pose"]]
+        assert alone, vehicle
+        report[vehicle] = {"left_after_s": round((left[0]["_rx_ns"] - cut_ns) / 1e9, 2),
+                           "joined_after_heal_s": round((joined[0]["_rx_ns"] - healed_ns) / 1e9, 2),
+                           "both_views_after_heal_s": round(rejoined[vehicle], 2), "frames_alone": len(alone)}
+        assert LEASE_S - 1 <= report[vehicle]["left_after_s"] <= LONG_PARTITION_S, report
+    print(f"partition of {LONG_PARTITION_S:g} s: {report}")
+    assert max(rejoined.values()) <= REJOIN_LONG_S, report
