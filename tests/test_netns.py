@@ -1,6 +1,7 @@
 """Two hosts (network namespaces joined by a veth pair), one `evopose router` each, the routers joined: H1 and the
 target (pioneer) on host A, H2 on host B, sharing feature sets (exp2). Faults on the link between the hosts:
-(a) 20 % of B's inbound packets dropped for the whole run; (b) a partition of 5 s, then the link back.
+(a) 20 % of B's inbound packets dropped for the whole run; (b) a partition of 5 s, then the link back; (c) a
+partition of 12 s, longer than the Zenoh lease: the team-mate leaves, then joins again.
 Real processes, real Zenoh, real packets dropped by iptables (docs/scaling.md, "Faults")."""
 
 from __future__ import annotations
