@@ -58,6 +58,17 @@ def test_minimal_file_loads_with_defaults(tmp_path):
     assert options == SearchOptions() and seed is None
 
 
+def test_labels_type_the_points(tmp_path):
+    """Colour classes of the model's marks and of a view's points (our extension of eq. 1) load and round-trip."""
+    document = minimal_document()
+    document["model"]["labels"] = [0, 1, 2, 3]
+    document["views"][0]["labels"] = [0, 1, 2, 3]
+    problem, _, _ = load_problem(write_yaml(tmp_path, document))
+    assert problem.model.labels.tolist() == [0, 1, 2, 3] and problem.views[0].labels.tolist() == [0, 1, 2, 3]
+    assert problem_to_dict(problem)["views"][0]["labels"] == [0, 1, 2, 3]
+    assert problem_to_dict(problem)["model"]["labels"] == [0, 1, 2, 3]
+
+
 def test_json_file_loads_like_yaml(tmp_path):
     document = minimal_document() | {"seed": 7}
     path = tmp_path / "problem.json"
@@ -194,6 +205,9 @@ MALFORMED = [
     ("partial extrinsic", _set("views.0.camera.world_from_camera", {"x": 1}),
      "views[0].camera.world_from_camera.y: required field missing"),
     ("normals count", _set("model.normals", [[0, 0, 1]]), "model.normals: expected one normal per point (4), got 1"),
+    ("labels count", _set("model.labels", [0, 1]), "model.labels: expected one label per point (4), got 2"),
+    ("negative label", _set("views.0.labels", [0, -1, 0, 0]), "views[0].labels[1]: must be >= 0"),
+    ("view labels count", _set("views.0.labels", [0]), "views[0]: labels: expected one per point (4), got 1"),
     ("zero normal", _set("model.normals", [[0, 0, 1], [0, 0, 0], [0, 0, 1], [0, 0, 1]]),
      "model.normals[1]: a normal must be a non-zero vector"),
     ("negative tolerance", _set("constraints", {"roll": {"value": 0.1, "tolerance": -0.01}}),

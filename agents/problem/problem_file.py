@@ -79,6 +79,8 @@ def _moderate(value: list[float]) -> list[float]:
 
 Point2 = Annotated[list[float], _fixed_length(2, "[u, v]"), AfterValidator(_moderate)]
 Point3 = Annotated[list[float], _fixed_length(3, "[x, y, z]"), AfterValidator(_moderate)]
+#: A point's class (its mark colour), our extension of eq. (1): a point matches only marks of its label.
+Label = Annotated[int, Field(ge=0, le=255)]
 Normal = Annotated[Point3, AfterValidator(_non_zero)]
 Range = Annotated[list[float], _fixed_length(2, "[lo, hi]"), AfterValidator(_moderate), AfterValidator(_ordered)]
 Distortion = Annotated[list[float], _fixed_length(5, "[k1, k2, p1, p2, k3]")]
@@ -120,27 +122,28 @@ class ModelSpec(Spec):
 
     points: Annotated[list[Point3], Field(min_length=1, max_length=MAX_MODEL_POINTS)] | None = None
     normals: Annotated[list[Normal], Field(max_length=MAX_MODEL_POINTS)] | None = None
+    labels: Annotated[list[Label], Field(max_length=MAX_MODEL_POINTS)] | None = None
     file: str | None = None
 
-    @field_validator("normals")
+    @field_validator("normals", "labels")
     @classmethod
-    def _one_normal_per_point(cls, normals: list[list[float]] | None,
-                              info: ValidationInfo) -> list[list[float]] | None:
+    def _one_per_point(cls, values: list | None, info: ValidationInfo) -> list | None:
         points = info.data.get("points")
-        if normals is not None and points is not None and len(normals) != len(points):
-            raise ValueError(f"expected one normal per point ({len(points)}), got {len(normals)}")
-        return normals
+        if values is not None and points is not None and len(values) != len(points):
+            raise ValueError(f"expected one {info.field_name[:-1]} per point ({len(points)}), got {len(values)}")
+        return values
 
     @model_validator(mode="after")
     def _points_or_file(self) -> "ModelSpec":
         if (self.points is None) == (self.file is None):
             raise ValueError("give either points or file")
-        if self.file is not None and self.normals is not None:
-            raise ValueError("normals come from the model file; leave them out")
+        if self.file is not None and (self.normals is not None or self.labels is not None):
+            raise ValueError("normals and labels come from the model file; leave them out")
         return self
 
     def to_model(self) -> Model:
-        return Model(np.array(self.points), None if self.normals is None else np.array(self.normals))
+        return Model(np.array(self.points), None if self.normals is None else np.array(self.normals),
+                     None if self.labels is None else np.array(self.labels, np.int64))
 
 
 class CameraSpec(Spec):
@@ -166,6 +169,7 @@ class ViewSpec(Spec):
 
     camera: CameraSpec
     points: Annotated[list[Point2], Field(min_length=1, max_length=MAX_IMAGE_POINTS)] | None = None
+    labels: Annotated[list[Label], Field(max_length=MAX_IMAGE_POINTS)] | None = None
     image: str | None = None
     weight: Annotated[float, Field(ge=0)] = 1.0
 
@@ -173,10 +177,14 @@ class ViewSpec(Spec):
     def _points_or_image(self) -> "ViewSpec":
         if (self.points is None) == (self.image is None):
             raise ValueError("give either points or image")
+        if self.labels is not None and (self.points is None or len(self.labels) != len(self.points)):
+            raise ValueError(f"labels: expected one per point ({0 if self.points is None else len(self.points)}), "
+                             f"got {len(self.labels)}")
         return self
 
     def to_view(self) -> View:
-        return View(self.camera.to_camera(), np.array(self.points), self.weight)
+        return View(self.camera.to_camera(), np.array(self.points), self.weight,
+                    None if self.labels is None else np.array(self.labels, np.int64))
 
 
 class SearchSpec(Spec):
@@ -303,10 +311,11 @@ def _views(spec: ProblemSpec, base: Path | None, target: TargetModel | None):
         if image.shape[:2] != (camera.height, camera.width):
             raise ProblemFileError(f"views[{i}].image: {path} is {image.shape[1]}x{image.shape[0]}, "
                                    f"the camera is {camera.width}x{camera.height}")
-        points = detect_marks(image, None if target is None else target.palette).points
-        if len(points) == 0:
+        marks = detect_marks(image, None if target is None else target.palette)
+        if len(marks) == 0:
             raise ProblemFileError(f"views[{i}].image: no marks found in {path}")
-        views.append(View(camera, points, view.weight))
+        # with the model file's palette, a mark's label is its colour's index there: the model's own labels
+        views.append(View(camera, marks.points, view.weight, None if target is None else marks.labels))
         images.append(image)
     return tuple(views), images
 
@@ -385,6 +394,8 @@ def problem_to_dict(problem: PoseProblem, constraints: dict[str, tuple[float, fl
     model: dict[str, Any] = {"points": problem.model.points.tolist()}
     if problem.model.normals is not None:
         model["normals"] = problem.model.normals.tolist()
+    if problem.model.labels is not None:
+        model["labels"] = problem.model.labels.tolist()
     views = []
     for view in problem.views:
         cam = view.camera
@@ -395,6 +406,8 @@ def problem_to_dict(problem: PoseProblem, constraints: dict[str, tuple[float, fl
         if not np.array_equal(cam.world_from_camera, np.eye(4)):
             camera["world_from_camera"] = _pose_dict(pose_from_matrix(cam.world_from_camera))
         entry: dict[str, Any] = {"camera": camera, "points": view.points.tolist()}
+        if view.labels is not None:
+            entry["labels"] = view.labels.tolist()
         if view.weight != 1.0:
             entry["weight"] = float(view.weight)
         views.append(entry)

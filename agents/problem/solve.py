@@ -11,7 +11,7 @@ from evopose import PoseProblem, SearchOptions, View, solve
 from evopose.fitness import FitnessKind
 
 from agents.problem.camera_info import read_camera_file
-from agents.problem.extract import FEATURE_KINDS, point_extractor
+from agents.problem.extract import FEATURE_KINDS, feature_extractor
 from agents.problem.problem_file import ProblemFileError, ProblemInputs, read_problem, solution_to_dict
 
 
@@ -54,11 +54,11 @@ def solve_image(image: str | Path, model: str | Path, camera: str | Path, *, see
                          f"the camera is {cam.width}x{cam.height}")
     if features not in FEATURE_KINDS:
         raise ProblemFileError(f"--features must be one of {', '.join(FEATURE_KINDS)}, got {features!r}")
-    points = point_extractor(features, target.palette)(picture)
+    points, labels = feature_extractor(features, target.palette)(picture)
     if len(points) < 3:
         raise WorldError(f"{image}: {len(points)} {features} found; at least 3 are needed")
     evo_model = target.evopose_model()
-    problem = PoseProblem(evo_model, (View(cam, points),), frustum_bounds(cam, evo_model, points))
+    problem = PoseProblem(evo_model, (View(cam, points, labels=labels),), frustum_bounds(cam, evo_model, points))
     inputs = ProblemInputs(problem, SearchOptions(), None, [picture], target)
     return _solve_inputs(inputs, seed, time_budget, fitness, overlay)
 
