@@ -78,6 +78,9 @@ class Frame:
         With its ``world_from_camera`` at acquisition.
     points : array (N, 2)
         Extracted feature points (mark centres), pixels.
+    labels : int array (N,) or None
+        Each point's colour class (its index in the model's palette: the label it is matched by, our extension
+        of eq. 1); None for untyped points (corners).
     truth : array (6,) or None
         ``world_from_target`` ground truth, for evaluation only; None from a real source (no ground truth).
     render_s : float
@@ -93,14 +96,15 @@ class Frame:
     points: np.ndarray
     truth: np.ndarray | None
     render_s: float = 0.0
+    labels: np.ndarray | None = None
 
 
 class SimulatedCamera:
-    """A vehicle's camera in a scenario: renders the frame, extracts the target's colour marks (or the points
-    ``extract`` gives: ``image (H, W, 3) -> (N, 2)``)."""
+    """A vehicle's camera in a scenario: renders the frame, extracts the target's colour marks with their colours
+    (or what ``extract`` gives: ``image (H, W, 3) -> (points (N, 2), labels (N,) or None)``)."""
 
     def __init__(self, scenario: Scenario, vehicle: str,
-                 extract: Callable[[np.ndarray], np.ndarray] | None = None) -> None:
+                 extract: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray | None]] | None = None) -> None:
         self.scenario = scenario
         self.vehicle = scenario.vehicle(vehicle).name
         self.ranges = colour_ranges(scenario.model.palette)
@@ -115,12 +119,15 @@ class SimulatedCamera:
         t0 = time.perf_counter()
         rendered = render_frame(self.scenario, scene, self.vehicle)
         render_s = time.perf_counter() - t0
-        return Frame(index, scene, stamp_ns, rendered.image, rendered.camera, self.extract(rendered.image),
-                     self.scenario.target_pose(scene), render_s)
+        points, labels = self.extract(rendered.image)
+        return Frame(index, scene, stamp_ns, rendered.image, rendered.camera, points,
+                     self.scenario.target_pose(scene), render_s, labels)
 
-    def extract(self, image: np.ndarray) -> np.ndarray:
-        """The target's colour marks in a BGR image (own or a team-mate's raw frame), shape (N, 2)."""
-        return detect_colour_marks(image, self.ranges).points
+    def extract(self, image: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The target's colour marks in a BGR image (own or a team-mate's raw frame), shape (N, 2), and each one's
+        colour index in the model's palette (N,)."""
+        marks = detect_colour_marks(image, self.ranges)
+        return marks.points, marks.labels
 
     def close(self) -> None:
         """Nothing to release (a real source closes its device or file)."""

@@ -180,7 +180,7 @@ class CameraVehicle(Vehicle):
             raise SourceError(f"--source {config.source}: no frames") from None
         finally:
             camera.close()
-        views, _ = build_views([own_view(config.vehicle, 0, frame.camera, frame.points)])
+        views, _ = build_views([own_view(config.vehicle, 0, frame.camera, frame.points, frame.labels)])
         if views:  # every path a frame may take compiles here: a search, tracking (eq. 2), a team-mate's best
             estimator = CooperativeEstimator(scenario.model.evopose_model(), scenario.bounds(),
                                              SearchOptions(max_generations=1, min_starts=1))
@@ -298,7 +298,7 @@ class CameraVehicle(Vehicle):
         frame = self.camera.acquire(n, stamp)
         if self._image_ready is None:
             self._image_ready = t_acquire + frame.render_s
-        mine = own_view(self.config.vehicle, stamp, frame.camera, frame.points)
+        mine = own_view(self.config.vehicle, stamp, frame.camera, frame.points, frame.labels)
         with self._estimator_lock:
             best = self.estimator.current_best
         shared = share(self.config.share, self.config.image_encoding, frame, mine, best)

@@ -25,7 +25,7 @@ from evopose.pose import matrix_from_pose
 from scenarios.world import Scenario
 
 from agents.problem.camera_info import camera_from_camera_info_message
-from agents.problem.extract import Extractor
+from agents.problem.extract import FeatureExtractor
 from agents.transport.bus import FleetBus
 from agents.vehicle.config import AgentConfig
 from agents.vehicle.sources import (FIRST_FRAME_TIMEOUT_S, ROS_SCHEME, SourceCamera, SourceError, is_ros,
@@ -129,7 +129,7 @@ def check_ros_topics(config: AgentConfig) -> None:
                 raise SourceError(f"{option} {err}") from None
 
 
-def open_ros_camera(config: AgentConfig, scenario: Scenario, bus: FleetBus, extract: Extractor,
+def open_ros_camera(config: AgentConfig, scenario: Scenario, bus: FleetBus, extract: FeatureExtractor,
                     intrinsics: Camera | None, world_from_camera: np.ndarray | None) -> SourceCamera:
     """The camera of a source with ROS inputs; ``intrinsics`` and ``world_from_camera`` are those read from files
     (None: from a ROS topic, or the scenario's). A file ``--source`` is opened here too."""

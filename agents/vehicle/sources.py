@@ -47,7 +47,7 @@ from scenarios.world import Scenario
 
 from agents.errors import FleetError
 from agents.problem.camera_info import read_camera_info, read_camera_pose
-from agents.problem.extract import Extractor, point_extractor
+from agents.problem.extract import FeatureExtractor, feature_extractor
 from agents.problem.images import read_image
 from agents.transport.bus import FleetBus
 from agents.vehicle.config import AgentConfig
@@ -227,7 +227,7 @@ class SourceCamera:
     inputs to close with the camera (the ROS topics followed).
     """
 
-    def __init__(self, reader, scenario: Scenario, vehicle: str, extract: Extractor, *,
+    def __init__(self, reader, scenario: Scenario, vehicle: str, extract: FeatureExtractor, *,
                  intrinsics: Callable[[], Camera] | None = None,
                  world_from_camera: Callable[[], np.ndarray] | None = None,
                  intrinsics_from: str | None = None, closing: tuple = ()) -> None:
@@ -257,7 +257,8 @@ class SourceCamera:
         if image.shape[:2] != (camera.height, camera.width):
             raise SourceError(f"--source {self.reader.name}: frame {k} is {image.shape[1]}x{image.shape[0]}, "
                               f"the camera ({self.intrinsics_from}) is {camera.width}x{camera.height}")
-        return Frame(index, k, stamp_ns, image, camera, self.extract(image), None, read_s)
+        points, labels = self.extract(image)
+        return Frame(index, k, stamp_ns, image, camera, points, None, read_s, labels)
 
     def close(self) -> None:
         self.reader.close()
@@ -278,7 +279,7 @@ def open_camera(config: AgentConfig, scenario: Scenario, bus: FleetBus | None = 
     camera with a ROS input is checked (topic names, files) and is then the renderer: its first frame compiles the
     same kernels, and no ROS message can arrive before the session is open.
     """
-    extract = point_extractor(config.features, scenario.model.palette)
+    extract = feature_extractor(config.features, scenario.model.palette)
     if config.source is None:
         return SimulatedCamera(scenario, config.vehicle, extract)
     ros_inputs = any(is_ros(spec) for spec in (config.source, config.camera_info, config.camera_pose))

@@ -46,6 +46,8 @@ def share(mode: str, encoding: str, frame: Frame, own: MateView, best: np.ndarra
     (``features``), or the image (``raw``)."""
     if mode == "features":
         fields = {"camera": own.camera, "points": own.points.astype("<f4").tobytes()}
+        if own.labels is not None:
+            fields["labels"] = own.labels.astype(np.uint8).tobytes()
         if best is not None:
             fields["best"] = tuple(float(v) for v in best)
         return Outgoing("features", own.stamp_ns, fields)

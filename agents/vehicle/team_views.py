@@ -89,22 +89,29 @@ class MateView:
     camera: CameraInfo
     points: np.ndarray  #: (N, 2) float32 pixels
     best: np.ndarray | None = None  #: (6,) the sender's best pose when it took the frame (feature sets)
+    labels: np.ndarray | None = None  #: (N,) int64 colour classes of the points; None: untyped
 
 
-def mate_view(vehicle: str, message: FeatureSet | ImageFrame, extract: Callable[[np.ndarray], np.ndarray]) -> MateView:
-    """A team-mate's view from its feature set, or from its raw frame (marks extracted with ``extract``)."""
+def mate_view(vehicle: str, message: FeatureSet | ImageFrame,
+              extract: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray | None]]) -> MateView:
+    """A team-mate's view from its feature set, or from its raw frame (marks and their colours extracted with
+    ``extract``)."""
     if isinstance(message, FeatureSet):
         best = None if message.best is None else np.array(message.best, float)
-        return MateView(vehicle, message.stamp_ns, message.camera, message.points_uv, best)
-    points = np.asarray(extract(image_of(message)), np.float32).reshape(-1, 2)
-    return MateView(vehicle, message.stamp_ns, message.camera, points)
+        return MateView(vehicle, message.stamp_ns, message.camera, message.points_uv, best, message.labels_array)
+    points, labels = extract(image_of(message))
+    return own_view(vehicle, message.stamp_ns, message.camera, points, labels)
 
 
-def own_view(vehicle: str, stamp_ns: int, camera: Camera, points: np.ndarray) -> MateView:
-    """The own frame in the same form as a team-mate's (float32 points, the wire camera), so that every vehicle
-    that pairs the same frames builds exactly the same problem."""
+def own_view(vehicle: str, stamp_ns: int, camera: Camera | CameraInfo, points: np.ndarray,
+             labels: np.ndarray | None = None) -> MateView:
+    """The own frame in the same form as a team-mate's (float32 points, uint8 labels, the wire camera), so that
+    every vehicle that pairs the same frames builds exactly the same problem."""
     points = np.asarray(points, float).reshape(-1, 2).astype(np.float32)
-    return MateView(vehicle, stamp_ns, camera_info(camera), points)
+    if labels is not None:  # as the wire carries them
+        labels = np.asarray(labels, np.int64).clip(0, 255)
+    info = camera if isinstance(camera, CameraInfo) else camera_info(camera)
+    return MateView(vehicle, stamp_ns, info, points, labels=labels)
 
 
 def build_views(views: Iterable[MateView]) -> tuple[list[View], list[str]]:
@@ -114,7 +121,7 @@ def build_views(views: Iterable[MateView]) -> tuple[list[View], list[str]]:
     """
     usable = sorted((v for v in views if len(v.points) >= MIN_VIEW_POINTS), key=lambda v: v.vehicle)
     w = 1.0 / max(len(usable), 1)
-    return ([View(camera_from_info(v.camera), v.points.astype(float), weight=w) for v in usable],
+    return ([View(camera_from_info(v.camera), v.points.astype(float), weight=w, labels=v.labels) for v in usable],
             [v.vehicle for v in usable])
 
 
