@@ -33,7 +33,13 @@ GROUPS = {
     "paper H2": ("paper", "Pioneer, exp2-paper-scale H2 (f 1150 px, 20 m)"),
     "paper H1+H2": ("paper", "Pioneer, both helicopters (eq. 4)"),
     "telephoto": ("telephoto", "box, airship, random points, grid; 150-350 px wide"),
+    # the same problems as the paper groups, with each point's colour (our extension of eq. 1)
+    "paper H1 colours": ("colours", "as paper H1, points typed by colour"),
+    "paper H2 colours": ("colours", "as paper H2, points typed by colour"),
+    "paper H1+H2 colours": ("colours", "as paper H1+H2, points typed by colour"),
 }
+#: Absent targets per scale: which group's cameras (and labels) they borrow.
+ABSENT_BASE = {"paper": "paper H1", "telephoto": "telephoto", "colours": "paper H1 colours"}
 ABSENT_MODES = ("clutter", "noise")
 
 
@@ -43,13 +49,15 @@ def make(group: str, seed: int, index: int):
 
     if " absent " in group:
         scale, _, mode = group.split(" ")
-        base = make("paper H1" if scale == "paper" else "telephoto", seed + 1, index)
+        base = make(ABSENT_BASE[scale], seed + 1, index)
         return absent_target(base, np.random.default_rng([seed, 99, index]), mode)
+    labelled = group.endswith(" colours")
+    group = group.removesuffix(" colours")
     rng = np.random.default_rng([seed, list(GROUPS).index(group), index])
     if group == "telephoto":
         return make_problem(KINDS[index % len(KINDS)], rng)
     cameras = {"paper H1": ("H1",), "paper H2": ("H2",), "paper H1+H2": ("H1", "H2")}[group]
-    return make_paper_scale_problem(rng, cameras=cameras)
+    return make_paper_scale_problem(rng, cameras=cameras, labelled=labelled)
 
 
 def parameter_errors(sp, pose: np.ndarray) -> np.ndarray:
@@ -137,7 +145,7 @@ def _taus(sp) -> list[float]:
 
 def tasks(per_group: int, absent: int, seed: int) -> list[tuple[str, int, int]]:
     out = [(g, seed, i) for g in GROUPS for i in range(per_group)]
-    out += [(f"{scale} absent {mode}", seed, i) for scale in ("paper", "telephoto") for mode in ABSENT_MODES
+    out += [(f"{scale} absent {mode}", seed, i) for scale in ABSENT_BASE for mode in ABSENT_MODES
             for i in range(absent)]
     return out
 
@@ -172,7 +180,7 @@ def scale_rows(records: list[dict], scale: str) -> list[list]:
     present = [r for r in records if not r["absent"] and GROUPS[r["group"]][0] == scale]
     rows = []
     for name, recs in [(g, [r for r in present if r["group"] == g]) for g in GROUPS if GROUPS[g][0] == scale] + \
-            ([("all", present)] if scale == "paper" else []):
+            ([("all", present)] if scale != "telephoto" else []):
         if not recs:
             continue
         conf = [r for r in recs if r["confident"]]
@@ -214,10 +222,11 @@ def markdown(records: list[dict], args: argparse.Namespace, seconds: float) -> s
              "however good its search, so \"right basin where it does\" measures the search and the oracle's "
              "columns measure the information that correspondence-free points lose.", ""]
     for scale, title in (("paper", "Paper's image scale (Pioneer ~25 px wide)"),
+                         ("colours", "Paper's image scale, points typed by colour (the same problems)"),
                          ("telephoto", "Telephoto scale (targets 150-350 px wide)")):
         lines += [f"### {title}", ""] + md_table(HEADER, scale_rows(records, scale)) + [""]
     rows = []
-    for scale in ("paper", "telephoto"):
+    for scale in ABSENT_BASE:
         for mode in ABSENT_MODES:
             recs = [r for r in records if r["group"] == f"{scale} absent {mode}"]
             if recs:
@@ -229,7 +238,7 @@ def markdown(records: list[dict], args: argparse.Namespace, seconds: float) -> s
     lines += md_table(["scale", "points", "problems", "confident", "converged", "median CPU ms"], rows) + [""]
     rows = []
     for lo, hi in ((0.5, 1.0), (1.0, 1.5), (1.5, 2.0)):
-        for scale in ("paper", "telephoto"):
+        for scale in ABSENT_BASE:
             recs = [r for r in records if not r["absent"] and GROUPS[r["group"]][0] == scale and lo <= r["noise"] < hi]
             conf = [r for r in recs if r["confident"]]
             rows.append([f"{lo}-{hi} px", scale, len(recs), _pct(sum(r["right"] for r in recs), len(recs)),

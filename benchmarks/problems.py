@@ -295,6 +295,7 @@ def absent_target(sp: SyntheticProblem, rng: np.random.Generator, mode: str) -> 
 
     ``mode`` "clutter": as many points as ``sp`` has, uniform over the region the target and its clutter
     covered (marks-like density where the target would be); "noise": 10-40 points uniform over each image.
+    Labelled views stay labelled: each false point gets one of the model's colours at random.
     """
     views = []
     for view in sp.problem.views:
@@ -306,7 +307,8 @@ def absent_target(sp: SyntheticProblem, rng: np.random.Generator, mode: str) -> 
             pts = rng.uniform([0, 0], [cam.width, cam.height], (int(rng.integers(10, 41)), 2))
         else:
             raise ValueError(f"absent-target mode must be 'clutter' or 'noise', got {mode!r}")
-        views.append(View(view.camera, pts))
+        labels = None if view.labels is None else rng.choice(np.unique(sp.problem.model.labels), len(pts))
+        views.append(View(view.camera, pts, labels=labels))
     problem = PoseProblem(sp.problem.model, tuple(views), sp.problem.bounds)
     return SyntheticProblem(sp.kind, problem, sp.true_pose, [(np.zeros(0, int), np.zeros((0, 2)))] * len(views),
                             sp.symmetries, sp.distance, sp.noise, 1.0, 1.0, {**sp.meta, "absent": mode})
