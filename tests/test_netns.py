@@ -17,7 +17,7 @@ pytestmark = pytest.mark.skipif(unavailable() is not None, reason=f"netns fault 
 
 BOTH = ["H1", "H2"]
 #: Frames of the lossy run (10 frames/s).
-LOSSY_FRAMES = 100
+LOSSY_FRAMES = 60
 #: Partition length, s.
 PARTITION_S = 5.0
 #: Longest time from the link's return until both helicopters use both views again, s. TCP retransmits
