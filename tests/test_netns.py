@@ -92,25 +92,33 @@ def test_a_lossy_link_between_the_hosts_keeps_both_views_and_agreement(hosts):
         assert np.linalg.norm(d[:3]) <= 0.01 and np.degrees(np.abs(d[3:])).max() <= 0.1, (n, d)
 
 
-def test_b_a_partition_leaves_each_alone_and_both_rejoin_when_the_link_returns(hosts):
-    fleet = FleetOnHosts(hosts, "partition")
+def cut_and_heal(hosts, name: str, cut_s: float, rejoin_s: float):
+    """A team on both hosts, both views in use; every packet between the hosts dropped for ``cut_s``, then the
+    link back; both views again (waited up to ``rejoin_s`` + 5 s), then stopped. The agents, the cut's, the
+    link's return's and the stop's times (ns) and per vehicle the seconds from the return to both views."""
+    fleet = FleetOnHosts(hosts, name)
     start_team(fleet)
     h1, h2 = fleet.agents["H1"], fleet.agents["H2"]
     for agent in (h1, h2):
         agent.next_record(60, both_views)
     hosts.partition()
     cut_ns = time.time_ns()
-    time.sleep(PARTITION_S)
+    time.sleep(cut_s)
     hosts.heal()
     healed_ns = time.time_ns()
     rejoined = {}
     for vehicle, agent in (("H1", h1), ("H2", h2)):
-        back = agent.next_record(REJOIN_S + 5, lambda r: both_views(r) and r["stamp_ns"] >= healed_ns)
+        back = agent.next_record(rejoin_s + 5, lambda r: both_views(r) and r["stamp_ns"] >= healed_ns)
         rejoined[vehicle] = (back["stamp_ns"] - healed_ns) / 1e9
     time.sleep(0.5)
     stopped_ns = time.time_ns()
     for agent in (h1, h2):
         agent.stop()
+    return h1, h2, cut_ns, healed_ns, stopped_ns, rejoined
+
+
+def test_b_a_partition_leaves_each_alone_and_both_rejoin_when_the_link_returns(hosts):
+    h1, h2, cut_ns, healed_ns, stopped_ns, rejoined = cut_and_heal(hosts, "partition", PARTITION_S, REJOIN_S)
     report = {}
     for vehicle, mate, agent in (("H1", "H2", h1), ("H2", "H1", h2)):
         records = agent.all_records()
@@ -143,24 +151,8 @@ REJOIN_LONG_S = 15.0
 
 
 def test_c_a_partition_longer_than_the_lease_ends_in_leave_then_join_and_both_views_again(hosts):
-    fleet = FleetOnHosts(hosts, "longcut")
-    start_team(fleet)
-    h1, h2 = fleet.agents["H1"], fleet.agents["H2"]
-    for agent in (h1, h2):
-        agent.next_record(60, both_views)
-    hosts.partition()
-    cut_ns = time.time_ns()
-    time.sleep(LONG_PARTITION_S)
-    hosts.heal()
-    healed_ns = time.time_ns()
-    rejoined = {}
-    for vehicle, agent in (("H1", h1), ("H2", h2)):
-        back = agent.next_record(REJOIN_LONG_S + 5, lambda r: both_views(r) and r["stamp_ns"] >= healed_ns)
-        rejoined[vehicle] = (back["stamp_ns"] - healed_ns) / 1e9
-    time.sleep(0.5)
-    stopped_ns = time.time_ns()
-    for agent in (h1, h2):
-        agent.stop()
+    h1, h2, cut_ns, healed_ns, stopped_ns, rejoined = cut_and_heal(hosts, "longcut", LONG_PARTITION_S,
+                                                                   REJOIN_LONG_S)
     report = {}
     for vehicle, mate, agent in (("H1", "H2", h1), ("H2", "H1", h2)):
         records = [r for r in agent.all_records() if r.get("_rx_ns", 0) < stopped_ns]
