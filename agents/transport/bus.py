@@ -4,11 +4,15 @@ Sending: one publisher per topic with the topic's QoS (``protocol.QOS``): BLOCK 
 features, attitude and poses (hints also ``express``), DROP for images; every message gets the
 vehicle as ``sender`` and a per-topic ``seq``.
 
-Receiving: the Zenoh callback does only cheap work — drop DELETE samples and our own echoes,
-reject payloads over the size limit without copying them, copy the bytes into a bounded inbox
-(images into a ring of the newest few); what does not fit is dropped and counted (``overflow``).
-One worker thread decodes, checks the sender against the key, drops stale data (``stamp_ns`` older
-than ``max_age_s``), counts lost messages by ``seq``, keeps the newest message per team-mate and
+Receiving (``agents.transport.receiver``): per subscribed topic, samples land in Zenoh's ring channels (Rust, no
+GIL): one ring shared by every sender and one per present team-mate. One thread per topic pulls from them only as
+fast as each sender's budget allows (``agents.transport.inbox.SenderBudget``), so the excess of a flood is
+overwritten inside Zenoh and never costs Python time, and a flooding sender overwrites only its own ring. A pulled
+sample is checked cheaply (our own echoes dropped, size limit before any copy, the sender's budget) and its bytes
+handed to a bounded inbox (images into a ring of the newest few); what does not fit is dropped and counted
+(``overflow``). One worker thread decodes, checks the sender against the key, drops stale data (``stamp_ns`` older
+than ``max_age_s``), counts lost messages by ``seq`` (as ``rate-limited`` when the sender was over its budget
+since its previous message: they were overwritten in its ring), keeps the newest message per team-mate and
 hands messages to :meth:`recv` (a bounded queue: the oldest unread one is pushed out and counted
 as ``unread``) and to handlers. At close, what was already received is still handled.
 A bad payload is counted under its reason, logged (rate-limited), and never stops the receiver.
@@ -41,11 +45,11 @@ from dataclasses import dataclass
 import numpy as np
 import zenoh
 
-from protocol import (QOS, SIZE_LIMITS, Message, Payload, ProtocolError, Stats, Topic, alive_key,
-                      alive_selector, check_name, check_topic, decode_sample, encode, encode_hint,
-                      parse_alive_key, topic_key, topic_selector)
+from protocol import (QOS, Message, Payload, ProtocolError, Stats, Topic, alive_key, alive_selector, check_name,
+                      check_topic, decode_sample, encode, encode_hint, parse_alive_key, topic_key)
 
 from agents.transport.inbox import BoundedSenders, Inbox, SenderBudget
+from agents.transport.receiver import TopicReceiver
 from agents.transport.traffic import RateLimitedLog, TrafficCounters
 from agents.transport.session import SessionOptions, open_session
 
@@ -53,8 +57,6 @@ log = logging.getLogger("evopose.bus")
 
 #: Time given to queued outgoing messages to leave at close, s.
 FLUSH_S = 0.2
-#: The budget key shared by every sender without a presence token (not a team-mate that announced itself).
-UNKNOWN_SENDER = "@unknown"
 #: Longest time close() spends handing already received messages to the worker, s.
 DRAIN_S = 2.0
 
@@ -138,10 +140,10 @@ class FleetBus:
         self._last_seq: dict[tuple[Topic, str], int] = {}
         self._seq: dict[Topic, int] = {topic: 0 for topic in Topic}
         self._publishers: dict[Topic, zenoh.Publisher] = {}
-        self._subscribers: dict[Topic, zenoh.Subscriber] = {}
-        self._callbacks_done: list[threading.Event] = []
+        self._receivers: dict[Topic, TopicReceiver] = {}
         self._rejections = RateLimitedLog()
         self._closed = threading.Event()
+        self._closing = False
         self._token: zenoh.LivelinessToken | None = None
         if announce:
             self.announce()
@@ -201,6 +203,9 @@ class FleetBus:
                 self._alive.discard(vehicle)
                 for by_vehicle in self._latest.values():
                     by_vehicle.pop(vehicle, None)
+            receivers = list(self._receivers.values())
+        for receiver in receivers:  # a ring of its own for a team-mate, on each subscribed topic
+            receiver.request("join" if joined else "leave", vehicle)
         self._inbox.put(("join" if joined else "leave", vehicle), force=True)
 
     # -- sending ----------------------------------------------------------------------------
@@ -280,36 +285,15 @@ class FleetBus:
         with self._lock:
             if handler is not None:
                 self._handlers.setdefault(topic, []).append(handler)
-            if topic in self._subscribers:
+            if topic in self._receivers or self._closing:
                 return
             self._delivery[topic] = deque(maxlen=self._image_ring if QOS[topic].ring else self._queue_size)
-        ring, limit = QOS[topic].ring, SIZE_LIMITS[topic]
-        own_prefix = None if include_self else topic_key(self.fleet, self.vehicle, topic)
-
-        def on_sample(sample: zenoh.Sample) -> None:  # Zenoh thread: size check and copy, nothing more
-            if sample.kind != zenoh.SampleKind.PUT:
-                return
-            key = str(sample.key_expr)
-            if key == own_prefix:
-                return
-            size = len(sample.payload)
-            if size > limit:
-                self._reject(topic, "oversized", f"{key}: payload of {size} bytes exceeds the {limit}-byte limit")
-                return
-            parts = key.split("/")
-            # senders without a presence token share one small budget: a flood under new names each time is one flood
-            sender = key if len(parts) > 2 and parts[2] in self._alive else UNKNOWN_SENDER
-            if not self._budget.admit(topic, sender, time.monotonic()):  # a flood: dropped before any decoding
-                self._reject(topic, "rate-limited", f"{key}: over {self._budget.rate(topic):g} messages/s")
-                return
-            if not self._inbox.put(("sample", topic, key, sample.payload.to_bytes(), time.time_ns()), ring=ring):
-                self._reject(topic, "overflow", f"{key}: receiver queue full, {'oldest frame' if ring else 'sample'} "
-                                                "dropped")
-
-        done = threading.Event()  # set by Zenoh once no more on_sample calls can come (after undeclare)
-        self._callbacks_done.append(done)
-        self._subscribers[topic] = self.session.declare_subscriber(
-            topic_selector(self.fleet, topic), zenoh.handlers.Callback(on_sample, done.set))
+            receiver = self._receivers[topic] = TopicReceiver(
+                self.session, self.fleet, self.vehicle, topic, include_self=include_self, budget=self._budget,
+                inbox=self._inbox, alive=self._alive.__contains__, reject=self._reject, image_ring=self._image_ring)
+            present = sorted(self._alive)
+        for vehicle in present:  # team-mates present already; later ones come through _on_presence
+            receiver.request("join", vehicle)
 
     def recv(self, topic: Topic | str, timeout: float | None = None) -> Received | None:
         """The oldest undelivered message of a subscribed ``topic``, waiting up to ``timeout`` s; None if none."""
@@ -367,7 +351,7 @@ class FleetBus:
             if handler is not None:
                 handler(item[1])
             return
-        _, topic, key, payload, received_ns = item
+        _, topic, key, payload, received_ns, throttled = item
         try:
             key_parts, message = decode_sample(key, payload)
         except ProtocolError as err:
@@ -381,7 +365,10 @@ class FleetBus:
                 return
             last = self._last_seq.get((topic, rx.vehicle))
             if last is not None and message.seq > last + 1:
-                self.counters.count_lost(topic.value, message.seq - last - 1)
+                if throttled:  # overwritten in its ring while it sent over its budget: a flood, not the network
+                    self.counters.count_rejected(topic.value, "rate-limited", message.seq - last - 1)
+                else:
+                    self.counters.count_lost(topic.value, message.seq - last - 1)
             self._last_seq[(topic, rx.vehicle)] = message.seq
         self.counters.count_received(topic.value, rx.size)
         with self._delivered:
@@ -417,11 +404,15 @@ class FleetBus:
                 log.debug("final stats not published: %s", err)
         if self._publishers:
             time.sleep(FLUSH_S)  # Zenoh has no flush: let the last messages leave before undeclaring
-        self._undeclare(*self._subscribers.values(), self._presence)
-        self._subscribers.clear()
+        self._undeclare(self._presence)
         deadline = time.monotonic() + DRAIN_S
-        for done in self._callbacks_done:  # the subscribers' last samples are in the inbox
-            done.wait(max(deadline - time.monotonic(), 0.0))
+        with self._lock:
+            receivers = list(self._receivers.values())
+            self._closing = True  # no more subscriptions
+        for receiver in receivers:  # each hands what it holds to the inbox and undeclares its subscribers
+            receiver.request("close")
+        for receiver in receivers:
+            receiver.join(max(deadline - time.monotonic(), 0.0))
         self._closed.set()  # the worker stops once the inbox is empty
         self._inbox.wake()
         with self._delivered:

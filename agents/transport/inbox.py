@@ -1,5 +1,5 @@
-"""What the fleet bus admits, in bounded memory: the hand-off queue from Zenoh callbacks to the worker, a
-per-sender rate budget that drops floods before they are decoded, and a bounded set of senders.
+"""What the fleet bus admits, in bounded memory: the hand-off queue from the receivers to the worker, a per-sender
+rate budget that drops floods before they are decoded, and a bounded set of senders.
 
 Anything received is untrusted (DESIGN.md §4): a flood of valid messages from one sender, or messages under a
 new sender name each time, must cost a counter, not the vehicle's frame rate or its memory.
@@ -23,7 +23,8 @@ MAX_SENDERS = 128
 
 
 class Inbox:
-    """Bounded hand-off from Zenoh callbacks to the worker: a FIFO, plus a ring for images."""
+    """Bounded hand-off from the receivers (``agents.transport.receiver``) and the presence callback to the worker: a
+    FIFO, plus a ring for images."""
 
     def __init__(self, fifo_size: int, ring_size: int) -> None:
         self.fifo: deque = deque()
@@ -70,6 +71,16 @@ class SenderBudget:
 
     def rate(self, topic: Topic) -> float:
         return self._rates.get(topic, 100.0)
+
+    def wait_s(self, topic: Topic, key: str, now_s: float) -> float:
+        """Seconds until a message on ``key`` may pass (0 if now); spends nothing."""
+        rate = self.rate(topic)
+        with self._lock:
+            bucket = self._buckets.get(topic, {}).get(key)
+            if bucket is None:
+                return 0.0
+            tokens = min(rate * BURST_S, bucket[0] + (now_s - bucket[1]) * rate)
+        return 0.0 if tokens >= 1.0 else (1.0 - tokens) / rate
 
     def admit(self, topic: Topic, key: str, now_s: float) -> bool:
         """Whether a message on ``key`` may pass now (one token spent), or is over its sender's rate."""

@@ -35,10 +35,10 @@ class TrafficCounters:
             self.received[topic] += 1
             self.bytes_received[topic] += size
 
-    def count_rejected(self, topic: str, reason: str) -> None:
+    def count_rejected(self, topic: str, reason: str, count: int = 1) -> None:
         with self._lock:
-            self.rejected[reason] += 1
-            self.rejected_by_topic[topic] += 1
+            self.rejected[reason] += count
+            self.rejected_by_topic[topic] += count
 
     def count_lost(self, topic: str, missing: int) -> None:
         with self._lock:
