@@ -95,3 +95,11 @@ def test_a_compressed_image_is_decoded_only_within_the_pixel_budget():
     lying = frame.model_copy(update={"width": 32, "height": 32})
     with pytest.raises(ValueError, match="header says 64x64"):
         image_of(lying)
+    # a header claiming 20000 x 20000 (Pillow's decompression-bomb limit) in a frame that says 64 x 64
+    import struct
+    import zlib
+
+    ihdr = b"IHDR" + struct.pack(">II", 20000, 20000) + png.tobytes()[24:29]
+    bomb = png.tobytes()[:12] + ihdr + struct.pack(">I", zlib.crc32(ihdr)) + png.tobytes()[33:]
+    with pytest.raises(ValueError, match="no readable header"):
+        image_of(frame.model_copy(update={"data": bomb}))

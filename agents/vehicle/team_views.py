@@ -61,7 +61,7 @@ def image_of(frame: ImageFrame) -> np.ndarray:
     try:
         with Image.open(io.BytesIO(frame.data)) as header:  # reads the header only
             size = header.size
-    except (UnidentifiedImageError, OSError, ValueError) as err:
+    except (UnidentifiedImageError, OSError, ValueError, Image.DecompressionBombError) as err:  # a bomb's header
         raise ValueError(f"{frame.encoding} data has no readable header: {err}") from None
     if size != (frame.width, frame.height):
         raise ValueError(f"{frame.encoding} header says {size[0]}x{size[1]}, the frame {frame.width}x{frame.height}")
