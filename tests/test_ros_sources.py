@@ -30,6 +30,8 @@ from agents.bridges.ros_sources import Rejected, TopicFeed, camera_pose, decode_
 from agents.cli.main import main
 from agents.problem.camera_info import camera_from_camera_info_message
 from agents.problem.problem_file import ProblemFileError
+from agents.vehicle.ros_camera import TopicReader, TopicValue
+from agents.vehicle.sources import FrameSkipped, SourceCamera, SourceError
 from agents.vehicle.team_views import MAX_DECODED_PIXELS
 from evopose.pose import matrix_from_pose, pose_from_matrix
 from scenarios.render import render_frame
@@ -232,6 +234,95 @@ def test_topic_names_are_checked():
     for bad in ("ros2:", "ros2:/a//b", "ros2:/2nd", "ros2:/a__b", "ros2:/a-b", "ros2:/cam era"):
         with pytest.raises(ValueError, match="is not a ROS 2 topic name"):
             ros_topic(bad)
+
+
+# -- staleness: an image or pose that arrived longer ago than --source-max-age is not used ------------------------
+
+class FakeFeed:
+    """A feed whose newest value has a given age (s since its sample arrived)."""
+
+    label = "ros2:/cam"
+
+    def __init__(self, value, age_s: float | None) -> None:
+        self.value, self.age_s = value, age_s
+
+    def newest_with_age(self, timeout: float = 0.0):
+        return None if self.age_s is None else (self.value, self.age_s)
+
+    def describe(self) -> str:
+        return "nothing received"
+
+    def close(self) -> None:
+        pass
+
+
+def test_the_staleness_rule_counts_and_skips_an_old_image_or_pose():
+    stale: list[tuple[str, str]] = []
+    reader = TopicReader(FakeFeed(IMAGE, 0.999), "ros2:/cam", 0, max_age_s=1.0, on_stale=lambda *a: stale.append(a))
+    assert reader.read() is IMAGE and not stale
+    reader.feed.age_s = 1.001
+    with pytest.raises(FrameSkipped) as err:
+        reader.read()
+    assert err.value.reason == "ros2 stale" and "1.001 s ago" in str(err.value) and stale == [("ros2:/cam",
+                                                                                                "ros2 stale")]
+    pose = TopicValue(FakeFeed(np.eye(4), 2.0), "--camera-pose", "pose", 0, keep_first=False, max_age_s=1.0,
+                      on_stale=lambda *a: stale.append(a))
+    with pytest.raises(FrameSkipped):
+        pose()
+    pose.feed.age_s = 0.5
+    assert np.array_equal(pose(), np.eye(4)) and len(stale) == 2
+    info = TopicValue(FakeFeed("intrinsics", 100.0), "--camera-info", "info", 0, keep_first=True, max_age_s=1.0)
+    assert info() == "intrinsics"  # the CameraInfo is taken once: it does not go stale
+    with pytest.raises(SourceError, match="within 0 s on ROS domain 0: nothing received"):
+        TopicReader(FakeFeed(None, None), "ros2:/cam", 0, first_timeout_s=0.0).read()
+
+
+class TicksReader:
+    """Images, or FrameSkipped where the list holds None."""
+
+    name = "ros2:/cam"
+
+    def __init__(self, images) -> None:
+        self.images = list(images)
+
+    def read(self):
+        image = self.images.pop(0)
+        if image is None:
+            raise FrameSkipped("ros2 stale", "old")
+        return image
+
+    def close(self) -> None:
+        pass
+
+
+def test_a_skipped_tick_gives_a_frame_without_points_and_no_estimate():
+    from agents.problem.extract import feature_extractor
+    from agents.vehicle.step import FrameInputs, step
+    from agents.vehicle.team_views import own_view
+    from evopose.cooperative import CooperativeEstimator
+
+    scenario = load_scenario("exp2")
+    image = render_frame(scenario, 0, "H1").image
+    poses = [np.eye(4), None, np.eye(4) * 2]
+
+    def world_from_camera():
+        pose = poses.pop(0)
+        if pose is None:
+            raise FrameSkipped("ros2 stale", "old pose")
+        return pose
+
+    camera = SourceCamera(TicksReader([image, None, image, image]), scenario, "H1",
+                          feature_extractor("marks", scenario.model.palette), world_from_camera=world_from_camera)
+    frames = [camera.acquire(n, n) for n in range(4)]  # image, stale image, stale pose, image
+    assert [len(f.points) > 0 for f in frames] == [True, False, False, True] and camera.skipped == 2
+    assert [f.scene_frame for f in frames] == [0, 1, 1, 1] and camera.frames == 2
+    for skipped in frames[1:3]:
+        assert not skipped.image.any() and skipped.image.shape == image.shape
+        assert np.array_equal(skipped.camera.world_from_camera, np.eye(4))  # the last frame's camera
+    estimator = CooperativeEstimator(scenario.model.evopose_model(), scenario.bounds())
+    own = own_view("H1", 1, frames[1].camera, frames[1].points, frames[1].labels)
+    result = step(estimator, FrameInputs(1, own), vehicle="H1", target="pioneer", share_mode="none")
+    assert result.estimate is None and result.event["event"] == "no-estimate" and result.event["points"] == 0
 
 
 # -- golden CDR --------------------------------------------------------------------------------------------------

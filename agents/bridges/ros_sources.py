@@ -23,8 +23,9 @@ from __future__ import annotations
 
 import io
 import threading
+import time
 import warnings
-from collections import Counter
+from collections import Counter, deque
 from collections.abc import Callable
 from typing import Generic, TypeVar
 
@@ -194,28 +195,44 @@ class TopicFeed(Generic[T]):
     on_received, on_rejected : callable, optional
         ``(label, size)`` per sample taken, ``(label, reason)`` per sample refused, in Zenoh's or the worker thread
         (the agent's traffic counters).
+    keep : int
+        Samples waiting for the worker: 1 (the default) keeps only the newest (a camera's frames); more for a topic
+        whose every message counts (``/tf`` carries different frames in different messages). When the queue is full
+        the oldest waiting sample is dropped (counted ``superseded``).
+    sink : callable, optional
+        ``(value, received_at)`` for every valid value, in the worker thread (``received_at``: ``time.monotonic()``
+        when its sample arrived); an exception it raises is counted as ``invalid``.
+
+    The age of a value is measured from its sample's *arrival* (``time.monotonic()`` in Zenoh's callback), not from
+    its header stamp: stamps come from the publisher's clock.
     """
 
     def __init__(self, session: zenoh.Session, domain: int, topic: str, msgtypes: tuple[str, ...],
                  decode: Callable[[str, object], T], *, max_bytes: int,
                  on_received: Callable[[str, int], None] | None = None,
-                 on_rejected: Callable[[str, str], None] | None = None) -> None:
+                 on_rejected: Callable[[str, str], None] | None = None, keep: int = 1,
+                 sink: Callable[[T, float], None] | None = None) -> None:
         self.topic, self.msgtypes, self.decode, self.max_bytes = topic, tuple(msgtypes), decode, int(max_bytes)
         self.label = SCHEME + topic
         self.key = f"{int(domain)}/{topic.strip('/')}/*/*"
-        self._on_received, self._on_rejected = on_received, on_rejected
+        self._on_received, self._on_rejected, self._sink = on_received, on_rejected, sink
         self.received = 0       #: samples on the topic
         self.valid = 0          #: of those, decoded and kept as the newest
         self.superseded = 0     #: replaced in the slot by a newer one before the worker came to them
         self.rejected: Counter[str] = Counter()
         self.last_rejection: str | None = None
         self._newest: T | None = None
-        self._slot: tuple[str, bytes] | None = None
+        self._newest_at = 0.0   # time.monotonic() when the newest valid value's sample arrived
+        self._slot: deque[tuple[str, bytes, float]] = deque(maxlen=max(1, int(keep)))
         self._lock = threading.Condition()
         self._closed = False
         self._worker = threading.Thread(target=self._work, name=f"ros2 {topic}", daemon=True)
         self._worker.start()
         self._subscriber = session.declare_subscriber(self.key, self._on_sample)
+
+    def reject(self, reason: str, detail: str) -> None:
+        """Count one refusal (also for the parts of a message a ``sink`` refuses)."""
+        self._reject(reason, detail)
 
     def _reject(self, reason: str, detail: str) -> None:
         with self._lock:
@@ -225,7 +242,7 @@ class TopicFeed(Generic[T]):
             self._on_rejected(self.label, f"ros2 {reason}")
 
     def _on_sample(self, sample: zenoh.Sample) -> None:  # Zenoh's thread: the key and the size only, never blocks
-        size = len(sample.payload)
+        size, arrived = len(sample.payload), time.monotonic()
         with self._lock:
             self.received += 1
         if self._on_received is not None:
@@ -242,18 +259,18 @@ class TopicFeed(Generic[T]):
             self._reject("oversized", f"{size} bytes, at most {self.max_bytes}")
             return
         with self._lock:
-            if self._slot is not None:
+            if len(self._slot) == self._slot.maxlen:
                 self.superseded += 1
-            self._slot = (msgtype, sample.payload.to_bytes())
+            self._slot.append((msgtype, sample.payload.to_bytes(), arrived))
             self._lock.notify_all()
 
     def _work(self) -> None:
         while True:
             with self._lock:
-                self._lock.wait_for(lambda: self._slot is not None or self._closed)
+                self._lock.wait_for(lambda: self._slot or self._closed)
                 if self._closed:
                     return
-                (msgtype, payload), self._slot = self._slot, None
+                msgtype, payload, arrived = self._slot.popleft()
             try:
                 message = ros_msgs.deserialize(payload, msgtype)
             except Exception as err:  # noqa: BLE001 - hostile CDR may raise anything; counted, never fatal
@@ -264,8 +281,14 @@ class TopicFeed(Generic[T]):
             except Exception as err:  # noqa: BLE001 - the decoder's refusal, or its failure on hostile fields
                 self._reject(getattr(err, "reason", "invalid"), " ".join(getattr(err, "detail", str(err)).split()))
                 continue
+            if self._sink is not None:
+                try:
+                    self._sink(value, arrived)
+                except Exception as err:  # noqa: BLE001 - counted, never fatal
+                    self._reject("invalid", f"{type(err).__name__}: {err}")
+                    continue
             with self._lock:
-                self._newest, self.valid = value, self.valid + 1
+                self._newest, self._newest_at, self.valid = value, arrived, self.valid + 1
                 self._lock.notify_all()
 
     def newest(self, timeout: float = 0.0) -> T | None:
@@ -273,6 +296,15 @@ class TopicFeed(Generic[T]):
         with self._lock:
             self._lock.wait_for(lambda: self._newest is not None or self._closed, timeout)
             return self._newest
+
+    def newest_with_age(self, timeout: float = 0.0) -> tuple[T, float] | None:
+        """The newest valid value and its age in s (since its sample arrived), waiting up to ``timeout`` s for the
+        first; None if there is none yet."""
+        with self._lock:
+            self._lock.wait_for(lambda: self._newest is not None or self._closed, timeout)
+            if self._newest is None:
+                return None
+            return self._newest, time.monotonic() - self._newest_at
 
     def describe(self) -> str:
         """What arrived, for an error line: ``3 received, 3 rejected (step 3; last: step: ...)``."""

@@ -92,6 +92,12 @@ def register(app: typer.Typer) -> None:
                  "ros2:/TOPIC (the newest geometry_msgs/msg/PoseStamped of the optical frame in map at each frame); "
                  "default: the scenario vehicle's pose.")] = None,
         ros_domain: Annotated[int, typer.Option(min=0, max=232, help="ROS_DOMAIN_ID of the ros2: inputs.")] = 0,
+        source_max_age: Annotated[float, typer.Option(
+            help="A ros2: image or camera pose received longer ago than S seconds is stale: the frame is skipped "
+                 "(no estimate; counted 'ros2 stale').")] = 1.0,
+        camera_frame: Annotated[str | None, typer.Option(
+            help="With --camera-pose ros2:/tf: the camera's optical frame, composed from map through /tf and "
+                 "/tf_static (e.g. H1/camera_optical).")] = None,
         features: Annotated[str, typer.Option(help=f"Feature points: {', '.join(FEATURES)} (colour marks, or a "
                                                    "chessboard's inner corners).")] = "marks",
         as_json: Annotated[bool, typer.Option("--json", help="One JSON object per event on stdout.")] = False,
@@ -108,7 +114,7 @@ def register(app: typer.Typer) -> None:
             wait_for=tuple(v.strip() for v in wait_for.split(",") if v.strip()), wait_timeout_s=wait_timeout,
             time_budget_s=time_budget, operating_radius_m=operating_radius, max_clock_offset_s=max_clock_offset,
             source=source, camera_info=camera_info, camera_pose=camera_pose, ros_domain=ros_domain, features=features,
-            view_weights=view_weights)
+            view_weights=view_weights, source_max_age_s=source_max_age, camera_frame=camera_frame)
         console = Console(stderr=True)
 
         def emit(record: dict) -> None:

@@ -59,6 +59,10 @@ class AgentConfig:
     camera_pose: str | Path | None = None
     #: ROS_DOMAIN_ID of the ``ros2:`` inputs (--source, --camera-info, --camera-pose)
     ros_domain: int = 0
+    #: a ROS image or camera pose whose sample arrived longer ago than this (s) is stale: the frame is skipped
+    source_max_age_s: float = 1.0
+    #: with ``camera_pose`` a ros2: TFMessage topic (``/tf``): the camera's optical frame, composed from ``map``
+    camera_frame: str | None = None
     features: str = "marks"
     view_weights: str = "step"
 
@@ -81,13 +85,15 @@ class AgentConfig:
             raise FleetError("--camera-info and --camera-pose describe a real camera: they need --source")
         if self.source is not None and not str(self.source).strip():
             raise FleetError("--source must not be empty")
+        if self.camera_frame is not None and not str(self.camera_pose or "").startswith("ros2:"):
+            raise FleetError("--camera-frame names a frame of /tf: it needs --camera-pose ros2:/tf")
         if not 0 <= self.ros_domain <= MAX_ROS_DOMAIN:
             raise FleetError(f"--ros-domain must be a ROS_DOMAIN_ID from 0 to {MAX_ROS_DOMAIN}, got {self.ros_domain}")
         if self.image_encoding not in ENCODINGS:
             raise FleetError(f"--image-encoding must be one of {', '.join(ENCODINGS)}, got {self.image_encoding!r}")
         for name, option in (("fps", "--fps"), ("hint_rate_hz", "--hint-rate"), ("max_age_s", "--max-age"),
                              ("attitude_sigmas", "--imu-sigmas"), ("operating_radius_m", "--operating-radius"),
-                             ("max_clock_offset_s", "--max-clock-offset")):
+                             ("max_clock_offset_s", "--max-clock-offset"), ("source_max_age_s", "--source-max-age")):
             value = getattr(self, name)
             if value is not None and not (math.isfinite(value) and value > 0):
                 raise FleetError(f"{option} must be a number > 0, got {value}")

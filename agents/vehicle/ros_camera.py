@@ -7,6 +7,11 @@ the fleet bus's Zenoh session.
   calibration file is (:func:`agents.problem.camera_info.camera_from_camera_info_message`), then the topic is left;
 - the pose topic gives ``world_from_camera``: the newest ``geometry_msgs/msg/PoseStamped`` when a frame is taken.
 
+Staleness (``--source-max-age``, 1 s): an image or a pose whose sample *arrived* longer ago than that (measured on
+this process's monotonic clock, not from the header stamp, which comes from the publisher's clock) is not used:
+the tick gives a skipped frame (:class:`~agents.vehicle.sources.FrameSkipped`: no points, no estimate), counted in
+the traffic as ``rejected["ros2 stale"]`` and ``rejected_by_topic["ros2:<topic>"]``.
+
 Frames are refused over the pixel budget of team-mates' images (:data:`~agents.vehicle.team_views.MAX_DECODED_PIXELS`)
 or of another size than the camera's. What each topic received and refused is counted in the bus's traffic counters
 under ``ros2:<topic>`` (reasons ``ros2 step``, ``ros2 pixels``, ...). The vehicle room does not import
@@ -28,23 +33,42 @@ from agents.problem.camera_info import camera_from_camera_info_message
 from agents.problem.extract import FeatureExtractor
 from agents.transport.bus import FleetBus
 from agents.vehicle.config import AgentConfig
-from agents.vehicle.sources import (FIRST_FRAME_TIMEOUT_S, ROS_SCHEME, SourceCamera, SourceError, is_ros,
-                                    open_reader)
+from agents.vehicle.sources import (FIRST_FRAME_TIMEOUT_S, ROS_SCHEME, FrameSkipped, SourceCamera, SourceError,
+                                    is_ros, open_reader)
 from agents.vehicle.team_views import MAX_DECODED_PIXELS
+
+
+STALE = "ros2 stale"
+
+
+def check_age(feed, age_s: float, max_age_s: float | None, on_stale: Callable[[str, str], None] | None,
+              what: str) -> None:
+    """The staleness rule: a value whose sample arrived more than ``max_age_s`` ago (None: no bound) is not used;
+    counted ``(label, "ros2 stale")`` and raised as :class:`FrameSkipped`."""
+    if max_age_s is not None and age_s > max_age_s:
+        if on_stale is not None:
+            on_stale(feed.label, STALE)
+        raise FrameSkipped(STALE, f"the newest {what} of {feed.label} arrived {age_s:.3f} s ago, over "
+                                  f"--source-max-age {max_age_s:g} s")
 
 
 class TopicReader:
     """A ROS 2 image topic as a live source: each read gives the newest valid frame (the first one waited for up to
-    ``first_timeout_s``); never ends by itself."""
+    ``first_timeout_s``), or :class:`FrameSkipped` when it arrived more than ``max_age_s`` ago; never ends by
+    itself."""
 
-    def __init__(self, feed, name: str, domain: int, first_timeout_s: float = FIRST_FRAME_TIMEOUT_S) -> None:
+    def __init__(self, feed, name: str, domain: int, first_timeout_s: float = FIRST_FRAME_TIMEOUT_S, *,
+                 max_age_s: float | None = None, on_stale: Callable[[str, str], None] | None = None) -> None:
         self.feed, self.name, self.domain, self.first_timeout_s = feed, name, domain, first_timeout_s
+        self.max_age_s, self.on_stale = max_age_s, on_stale
 
     def read(self) -> np.ndarray:
-        image = self.feed.newest(self.first_timeout_s)
-        if image is None:
+        newest = self.feed.newest_with_age(self.first_timeout_s)
+        if newest is None:
             raise SourceError(f"--source {self.name}: no valid sensor_msgs/msg/Image or CompressedImage within "
                               f"{self.first_timeout_s:g} s on ROS domain {self.domain}: {self.feed.describe()}")
+        image, age_s = newest
+        check_age(self.feed, age_s, self.max_age_s, self.on_stale, "image")
         return image
 
     def close(self) -> None:
@@ -53,21 +77,27 @@ class TopicReader:
 
 class TopicValue:
     """A ROS 2 topic as a camera's intrinsics or pose: its first valid value (``keep_first``: CameraInfo, then the
-    topic is left) or its newest at each call (the pose), the first one waited for up to ``first_timeout_s``."""
+    topic is left) or its newest at each call (the pose: :class:`FrameSkipped` when it arrived more than
+    ``max_age_s`` ago), the first one waited for up to ``first_timeout_s``."""
 
     def __init__(self, feed, option: str, what: str, domain: int, *, keep_first: bool,
-                 first_timeout_s: float = FIRST_FRAME_TIMEOUT_S) -> None:
+                 first_timeout_s: float = FIRST_FRAME_TIMEOUT_S, max_age_s: float | None = None,
+                 on_stale: Callable[[str, str], None] | None = None) -> None:
         self.feed, self.option, self.what, self.domain = feed, option, what, domain
         self.keep_first, self.first_timeout_s = keep_first, first_timeout_s
+        self.max_age_s, self.on_stale = max_age_s, on_stale
         self._kept = None
 
     def __call__(self):
         if self._kept is not None:
             return self._kept
-        value = self.feed.newest(self.first_timeout_s)
-        if value is None:
-            raise SourceError(f"{self.option} {self.feed.label}: no valid {self.what} within {self.first_timeout_s:g} s "
-                              f"on ROS domain {self.domain}: {self.feed.describe()}")
+        newest = self.feed.newest_with_age(self.first_timeout_s)
+        if newest is None:
+            raise SourceError(f"{self.option} {self.feed.label}: no valid {self.what} within "
+                              f"{self.first_timeout_s:g} s on ROS domain {self.domain}: {self.feed.describe()}")
+        value, age_s = newest
+        if not self.keep_first:
+            check_age(self.feed, age_s, self.max_age_s, self.on_stale, "pose")
         if self.keep_first:
             self._kept = value
             self.feed.close()
@@ -90,6 +120,7 @@ def open_ros_inputs(config: AgentConfig, bus: FleetBus, size_of_camera: Callable
 
     domain, session, counters = config.ros_domain, bus.session, bus.counters
     common = dict(on_received=counters.count_received, on_rejected=counters.count_rejected)
+    stale = dict(max_age_s=config.source_max_age_s, on_stale=counters.count_rejected)
     reader = intrinsics = pose = None
     if is_ros(config.source):
         def image_of(msgtype: str, message) -> np.ndarray:
@@ -101,7 +132,7 @@ def open_ros_inputs(config: AgentConfig, bus: FleetBus, size_of_camera: Callable
 
         feed = TopicFeed(session, domain, ros_topic(config.source), IMAGE_TYPES, image_of,
                          max_bytes=3 * MAX_DECODED_PIXELS + HEADER_BYTES, **common)
-        reader = TopicReader(feed, str(config.source), domain)
+        reader = TopicReader(feed, str(config.source), domain, **stale)
     if is_ros(config.camera_info):
         topic = ros_topic(config.camera_info)
         feed = TopicFeed(session, domain, topic, (ros_msgs.CAMERA_INFO,),
@@ -112,7 +143,7 @@ def open_ros_inputs(config: AgentConfig, bus: FleetBus, size_of_camera: Callable
         feed = TopicFeed(session, domain, ros_topic(config.camera_pose), (ros_msgs.POSE_STAMPED,),
                          lambda msgtype, message: matrix_from_pose(camera_pose(msgtype, message)),
                          max_bytes=SMALL_MESSAGE_BYTES, **common)
-        pose = TopicValue(feed, "--camera-pose", ros_msgs.POSE_STAMPED, domain, keep_first=False)
+        pose = TopicValue(feed, "--camera-pose", ros_msgs.POSE_STAMPED, domain, keep_first=False, **stale)
     return reader, intrinsics, pose
 
 
@@ -166,4 +197,4 @@ def open_ros_camera(config: AgentConfig, scenario: Scenario, bus: FleetBus, extr
                         intrinsics_from=None if config.camera_info is None else f"--camera-info {config.camera_info}")
 
 
-__all__ = ["TopicReader", "TopicValue", "check_ros_topics", "open_ros_camera", "open_ros_inputs"]
+__all__ = ["STALE", "TopicReader", "check_age", "TopicValue", "check_ros_topics", "open_ros_camera", "open_ros_inputs"]

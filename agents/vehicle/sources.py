@@ -70,6 +70,15 @@ class SourceEnded(Exception):
     """A file source has no more frames: the vehicle stops and reports its summary."""
 
 
+class FrameSkipped(Exception):
+    """A live input has nothing usable at this tick (a ROS image or camera pose older than ``--source-max-age``):
+    the frame is taken without points, so no estimate is made from it; ``reason`` names its counter."""
+
+    def __init__(self, reason: str, detail: str) -> None:
+        super().__init__(f"{reason}: {detail}")
+        self.reason, self.detail = reason, detail
+
+
 _quiet_lock = threading.Lock()
 
 
@@ -225,6 +234,10 @@ class SourceCamera:
     ``intrinsics`` and ``world_from_camera`` are asked when each frame is taken (after its image was read): a file's
     are constant, a ROS topic's are its first valid CameraInfo and its newest pose. ``closing`` are further
     inputs to close with the camera (the ROS topics followed).
+
+    A ROS input may raise :class:`FrameSkipped` (its newest image or pose is stale): the tick then gives a *skipped*
+    frame: no points (so no own view and no estimate from it), a black image (nothing stale is shared with
+    team-mates) and the camera of the last frame taken; ``skipped`` counts them.
     """
 
     def __init__(self, reader, scenario: Scenario, vehicle: str, extract: FeatureExtractor, *,
@@ -237,6 +250,8 @@ class SourceCamera:
         self.intrinsics_from = intrinsics_from or f"scenario {scenario.name!r} vehicle {self.vehicle}"
         self.closing = closing
         self.frames = 0  # frames taken from the source
+        self.skipped = 0  # ticks without a usable frame (FrameSkipped)
+        self._last_camera: Camera | None = None
 
     def camera(self, k: int) -> Camera:
         """The camera of the source's frame ``k``."""
@@ -248,17 +263,34 @@ class SourceCamera:
     def acquire(self, index: int, stamp_ns: int) -> Frame:
         """The source's next frame as fleet frame ``index`` (``Frame.scene_frame``: its number in the source)."""
         t0 = time.perf_counter()
-        image = self.reader.read()
-        read_s = time.perf_counter() - t0
+        try:
+            image = self.reader.read()
+            read_s = time.perf_counter() - t0
+            camera = self.camera(self.frames)
+        except FrameSkipped:
+            return self._skipped(index, stamp_ns, time.perf_counter() - t0)
         k, self.frames = self.frames, self.frames + 1
         if image.ndim == 2:
             image = cv2.cvtColor(image, cv2.COLOR_GRAY2BGR)
-        camera = self.camera(k)
         if image.shape[:2] != (camera.height, camera.width):
             raise SourceError(f"--source {self.reader.name}: frame {k} is {image.shape[1]}x{image.shape[0]}, "
                               f"the camera ({self.intrinsics_from}) is {camera.width}x{camera.height}")
+        self._last_camera = camera
         points, labels = self.extract(image)
         return Frame(index, k, stamp_ns, image, camera, points, None, read_s, labels)
+
+    def _skipped(self, index: int, stamp_ns: int, read_s: float) -> Frame:
+        """A tick without a usable frame: no points, a black image, the last camera (before any: the intrinsics
+        with the scenario's pose)."""
+        self.skipped += 1
+        camera = self._last_camera
+        if camera is None:
+            scene = self.scenario.camera(self.vehicle, self.frames % self.scenario.frames)
+            k_cam = scene if self.intrinsics is None else self.intrinsics()
+            camera = Camera(k_cam.fx, k_cam.fy, k_cam.cx, k_cam.cy, k_cam.width, k_cam.height, k_cam.distortion,
+                            scene.world_from_camera)
+        image = np.zeros((camera.height, camera.width, 3), np.uint8)
+        return Frame(index, self.frames, stamp_ns, image, camera, np.zeros((0, 2)), None, read_s, None)
 
     def close(self) -> None:
         self.reader.close()
@@ -302,5 +334,5 @@ def open_camera(config: AgentConfig, scenario: Scenario, bus: FleetBus | None = 
                         intrinsics_from=None if config.camera_info is None else f"--camera-info {config.camera_info}")
 
 
-__all__ = ["CaptureReader", "FileListReader", "LatestFrameReader", "SourceCamera", "SourceEnded", "SourceError",
-           "is_ros", "open_camera", "open_reader", "quiet_native_stderr"]
+__all__ = ["CaptureReader", "FileListReader", "FrameSkipped", "LatestFrameReader", "SourceCamera", "SourceEnded",
+           "SourceError", "is_ros", "open_camera", "open_reader", "quiet_native_stderr"]
