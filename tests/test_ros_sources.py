@@ -27,12 +27,14 @@ from agents.bridges import ros_msgs
 from agents.bridges.rmw_zenoh import DEFAULT_QOS, SENSOR_QOS, Node
 from agents.bridges.ros2_node import Ros2Node
 from agents.bridges.ros_sources import Rejected, TopicFeed, camera_pose, decode_image, ros_topic
+from agents.bridges.ros_tf import TfTree, parse_transforms
 from agents.cli.main import main
 from agents.problem.camera_info import camera_from_camera_info_message
 from agents.problem.problem_file import ProblemFileError
 from agents.vehicle.ros_camera import TopicReader, TopicValue
 from agents.vehicle.sources import FrameSkipped, SourceCamera, SourceError
 from agents.vehicle.team_views import MAX_DECODED_PIXELS
+from evopose import Camera
 from evopose.pose import matrix_from_pose, pose_from_matrix
 from scenarios.render import render_frame
 from scenarios.world import load_scenario
@@ -325,6 +327,87 @@ def test_a_skipped_tick_gives_a_frame_without_points_and_no_estimate():
     assert result.estimate is None and result.event["event"] == "no-estimate" and result.event["points"] == 0
 
 
+# -- /tf: map -> ... -> the camera's optical frame, composed from the newest transforms ---------------------------
+
+def mirror_tf(vehicle: str, camera, stamp_ns: int):
+    """The /tf message the mirror publishes for ``vehicle``'s camera (``translate.camera_messages`` of a feature
+    set it shares), as a subscriber gets it."""
+    from agents.bridges.translate import camera_messages
+    from agents.vehicle.team_views import camera_info
+    from protocol.messages import FeatureSet
+
+    shared = FeatureSet(sender=vehicle, seq=1, stamp_ns=stamp_ns, camera=camera_info(camera),
+                        points=np.zeros((0, 2), "<f4").tobytes())
+    (tf,) = [m for m in camera_messages("fleet", vehicle, shared) if m.topic == "/tf"]
+    return roundtrip(tf.message)
+
+
+def test_the_mirrors_tf_chain_read_back_is_the_vehicles_camera_pose():
+    """The round trip of issue 14: a vehicle's camera -> the mirror's /tf map -> <V>/base_link -> <V>/camera_optical
+    -> the agent's TF input composes world_from_camera to 1e-9 (scenario cameras and random poses)."""
+    scenario = load_scenario("exp2")
+    cameras = [scenario.camera(v, k) for v in ("H1", "H2") for k in range(3)]
+    rng = np.random.default_rng(3)
+    c = cameras[0]
+    cameras += [Camera(c.fx, c.fy, c.cx, c.cy, c.width, c.height, c.distortion, matrix_from_pose(pose))
+                for pose in rng.uniform(-3, 3, (20, 6))]
+    for vehicle in ("H1", "uav.1"):
+        for camera in cameras:
+            tree = TfTree()
+            good, bad = parse_transforms(mirror_tf(vehicle, camera, STAMP_NS))
+            assert not bad and not tree.add(good, 5.0)
+            frame = "uav_1/camera_optical" if vehicle == "uav.1" else "H1/camera_optical"
+            matrix, arrived = tree.lookup("/" + frame)
+            assert arrived == 5.0
+            expected = matrix_from_pose(pose_from_matrix(camera.world_from_camera))  # as the wire carries it
+            assert np.abs(matrix - expected).max() <= 1e-9
+            assert np.abs(matrix - camera.world_from_camera).max() <= 1e-9
+
+
+def transform(parent: str, child: str, translation=(0.0, 0.0, 0.0), quaternion=(0.0, 0.0, 0.0, 1.0)):
+    return ros_msgs.transform_stamped(parent, child, STAMP_NS, translation, quaternion)
+
+
+def test_tf_composes_in_order_keeps_the_newest_and_counts_untrusted_transforms():
+    q90z = (0.0, 0.0, np.sqrt(0.5), np.sqrt(0.5))  # 90 degrees about z
+    message = roundtrip(ros_msgs.tf_message([
+        transform("map", "odom", (1, 0, 0), q90z), transform("odom", "base", (0, 2, 0)),
+        transform("base", "cam", (0, 0, 3)),
+        transform("map", "x", (np.nan, 0, 0)), transform("map", "y", quaternion=(0, 0, 0, 1.1)),
+        transform("", "z"), transform("z", "z"), transform("map", "n" * 300)]))
+    good, bad = parse_transforms(message)
+    assert [reason for reason, _ in bad] == ["non-finite", "quaternion", "frame", "frame", "frame"]
+    tree = TfTree()
+    tree.add(good, 1.0)
+    tree.add(parse_transforms(roundtrip(ros_msgs.tf_message([transform("base", "cam", (0, 0, 4))])))[0], 2.0,
+             static=True)
+    matrix, oldest = tree.lookup("cam")
+    # map_from_cam = T(1,0,0) Rz(90) T(0,2,0) T(0,0,4): (0, 2) turned by 90 degrees is (-2, 0)
+    assert np.allclose(matrix[:3, 3], (1 - 2, 0, 4), atol=1e-12) and oldest == 1.0  # the static link does not age
+    assert np.allclose(matrix[:3, :3], [[0, -1, 0], [1, 0, 0], [0, 0, 1]], atol=1e-12)
+    with pytest.raises(LookupError, match="no transform to 'nowhere'"):
+        tree.lookup("nowhere")
+    tree.add([("b", "a", np.eye(4)), ("a", "b", np.eye(4))], 3.0)  # a loop
+    with pytest.raises(LookupError, match="over 32 links"):
+        tree.lookup("a")
+    small = TfTree(max_frames=2)
+    assert not small.add([("map", "a", np.eye(4)), ("map", "b", np.eye(4))], 0.0)
+    assert [r for r, _ in small.add([("map", "c", np.eye(4)), ("map", "a", np.eye(4) * 2)], 1.0)] == ["frames"]
+    assert len(small) == 2 and small.lookup("a")[0][0, 0] == 2  # a known frame is still updated
+
+
+@settings(max_examples=100, deadline=None, derandomize=True)
+@given(values=st.lists(st.floats(allow_nan=True, allow_infinity=True, width=64), min_size=7, max_size=7),
+       parent=st.text(max_size=8), child=st.text(max_size=8))
+def test_any_transform_fields_give_a_rigid_transform_or_a_rejection(values, parent, child):
+    message = roundtrip(ros_msgs.tf_message([transform(parent.replace("\x00", ""), child.replace("\x00", ""),
+                                                       values[:3], values[3:])]))
+    good, bad = parse_transforms(message)
+    assert len(good) + len(bad) == 1
+    for _, _, matrix in good:
+        assert np.all(np.isfinite(matrix)) and np.allclose(matrix[:3, :3] @ matrix[:3, :3].T, np.eye(3), atol=1e-9)
+
+
 # -- golden CDR --------------------------------------------------------------------------------------------------
 
 def golden_messages() -> dict[str, object]:
@@ -520,6 +603,54 @@ def test_an_agent_on_ros_topics_publishes_the_renderers_poses(fleet, renderer_ru
     assert not traffic["rejected"]
 
 
+STALE_TOPIC = "/h1s/camera/image_raw"
+STALE_INFO = "/h1s/camera/camera_info"
+STALE_FRAMES = 6
+SOURCE_MAX_AGE_S = 0.6
+
+
+def test_an_agent_on_tf_skips_stale_images_and_poses(fleet, renderer_run, h1_frames):
+    """The camera pose from the mirror's /tf chain (``--camera-pose ros2:/tf --camera-frame H1/camera_optical``):
+    frames 0-1 give the renderer's poses; then the images stop (frames 2-3) and then /tf stops (frames 4-5): each of
+    those ticks is skipped (no estimate), counted ``ros2 stale`` by topic."""
+    from agents.bridges.rmw_zenoh import TF_QOS
+
+    agent, epoch = start_agent(fleet, "ros-stale", "--frames", str(STALE_FRAMES), "--source", "ros2:" + STALE_TOPIC,
+                               "--camera-info", "ros2:" + STALE_INFO, "--camera-pose", "ros2:/tf",
+                               "--camera-frame", "H1/camera_optical", "--source-max-age", str(SOURCE_MAX_AGE_S))
+    try:
+        with client_session(fleet.endpoint) as session, Ros2Node(session, Node("camera", "/h1s")) as node:
+            images = node.publisher(STALE_TOPIC, ros_msgs.IMAGE, ros_msgs.type_hash(ros_msgs.IMAGE), SENSOR_QOS)
+            infos = node.publisher(STALE_INFO, ros_msgs.CAMERA_INFO, ros_msgs.type_hash(ros_msgs.CAMERA_INFO))
+            tf = node.publisher("/tf", ros_msgs.TF_MESSAGE, ros_msgs.type_hash(ros_msgs.TF_MESSAGE), TF_QOS)
+            assert wait(lambda: images.matched and infos.matched and tf.matched, LEAD_S), agent.stderr_now()
+            for n, frame in enumerate(h1_frames[:STALE_FRAMES]):
+                stamp = epoch + round(n * 1e9 / FPS)
+                delay = (stamp - time.time_ns()) / 1e9 - PUBLISH_AHEAD_S
+                assert delay > 0, f"frame {n} would be published late ({delay:.3f} s)"
+                time.sleep(delay)
+                infos.publish(ros_msgs.serialize(ros_msgs.camera_info(ros_camera(frame.camera), stamp, OPTICAL)))
+                if n < 4:
+                    tf.publish(ros_msgs.serialize(mirror_tf("H1", frame.camera, stamp)))
+                if n < 2 or n >= 4:
+                    images.publish(ros_msgs.serialize(image_message(frame.image, stamp)))
+        code, records, stderr = finish(agent)
+    finally:
+        agent.kill()
+    assert code == 0 and "Traceback" not in stderr, stderr
+    by_frame = {r["frame"]: r for r in records if r.get("event") in ("frame", "no-estimate")}
+    rendered = frames_of(renderer_run)
+    for n in (0, 1):
+        a, b = by_frame[n]["pose"], rendered[n]["pose"]
+        assert by_frame[n]["event"] == "frame" and by_frame[n]["points"] == rendered[n]["points"]
+        assert max(abs(a[k] - b[k]) for k in a) <= POSITION_TOLERANCE_M, (a, b)
+    assert [by_frame[n]["event"] for n in range(2, 6)] == ["no-estimate"] * 4
+    assert all(by_frame[n]["points"] == 0 for n in range(2, 6))
+    traffic = next(r for r in records if r.get("event") == "summary")["traffic"]
+    assert traffic["rejected"] == {"ros2 stale": 4}, traffic
+    assert traffic["rejected_by_topic"] == {"ros2:" + STALE_TOPIC: 2, "ros2:/tf": 2}, traffic
+
+
 def test_no_frame_on_the_topic_is_one_line_and_exit_2(fleet):
     started = time.monotonic()
     agent, _ = start_agent(fleet, "ros-silent", "--source", "ros2:/nobody/image_raw", "--ros-domain", "7",
@@ -547,6 +678,14 @@ def test_bad_ros_inputs_are_one_line_and_exit_2_before_joining(capfd, tmp_path):
     missing = tmp_path / "none.yaml"  # a file among ROS inputs is still read before joining
     assert f"{missing}: cannot read" in agent_error(capfd, "--source", "ros2:/cam", "--camera-info", str(missing))
     assert "--ros-domain" in agent_error(capfd, "--source", "ros2:/cam", "--ros-domain", "300")
+    assert "a tf2_msgs/msg/TFMessage topic needs --camera-frame" in agent_error(
+        capfd, "--source", "ros2:/cam", "--camera-pose", "ros2:/tf")
+    assert "--camera-frame names a frame of /tf: it needs --camera-pose ros2:/tf" in agent_error(
+        capfd, "--source", "ros2:/cam", "--camera-frame", "H1/camera_optical")
+    assert "--camera-frame '/': not a frame id" in agent_error(
+        capfd, "--source", "ros2:/cam", "--camera-pose", "ros2:/tf", "--camera-frame", "/")
+    assert "--source-max-age must be a number > 0" in agent_error(capfd, "--source", "ros2:/cam",
+                                                                  "--source-max-age", "0")
 
 
 if __name__ == "__main__":

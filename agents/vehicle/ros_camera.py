@@ -5,7 +5,9 @@ the fleet bus's Zenoh session.
   the first one waited for up to :data:`~agents.vehicle.sources.FIRST_FRAME_TIMEOUT_S`;
 - the camera_info topic gives the intrinsics: its first valid ``sensor_msgs/msg/CameraInfo``, checked as a
   calibration file is (:func:`agents.problem.camera_info.camera_from_camera_info_message`), then the topic is left;
-- the pose topic gives ``world_from_camera``: the newest ``geometry_msgs/msg/PoseStamped`` when a frame is taken.
+- the pose topic gives ``world_from_camera``: the newest ``geometry_msgs/msg/PoseStamped`` when a frame is taken;
+  or, with ``--camera-frame``, ``map -> ... -> <frame>`` composed from ``/tf`` and ``/tf_static``
+  (:mod:`agents.bridges.ros_tf`).
 
 Staleness (``--source-max-age``, 1 s): an image or a pose whose sample *arrived* longer ago than that (measured on
 this process's monotonic clock, not from the header stamp, which comes from the publisher's clock) is not used:
@@ -21,6 +23,7 @@ the functions that need them, when an input is a ROS topic.
 
 from __future__ import annotations
 
+import time
 from collections.abc import Callable
 
 import numpy as np
@@ -107,6 +110,37 @@ class TopicValue:
         self.feed.close()
 
 
+class TfPose:
+    """``world_from_camera`` from ``/tf``: ``map -> ... -> frame`` composed from the newest transforms at each call
+    (the first complete chain waited for up to ``first_timeout_s``); :class:`FrameSkipped` when its oldest dynamic
+    link arrived more than ``max_age_s`` ago, or when the chain broke (counted ``ros2 tf chain``)."""
+
+    def __init__(self, tf, frame: str, domain: int, *, first_timeout_s: float = FIRST_FRAME_TIMEOUT_S,
+                 max_age_s: float | None = None, on_stale: Callable[[str, str], None] | None = None) -> None:
+        self.tf, self.label, self.frame, self.domain = tf, tf.label, frame, domain
+        self.first_timeout_s, self.max_age_s, self.on_stale = first_timeout_s, max_age_s, on_stale
+        self._found = False
+
+    def __call__(self) -> np.ndarray:
+        try:
+            matrix, arrived = self.tf.tree.lookup(self.frame, timeout=0.0 if self._found else self.first_timeout_s)
+        except LookupError as err:
+            if not self._found:
+                raise SourceError(f"--camera-pose {self.label}: no transform chain map -> {self.frame} within "
+                                  f"{self.first_timeout_s:g} s on ROS domain {self.domain}: {err} "
+                                  f"({self.tf.describe()})") from None
+            if self.on_stale is not None:
+                self.on_stale(self.label, "ros2 tf chain")
+            raise FrameSkipped("ros2 tf chain", str(err)) from None
+        self._found = True
+        check_age(self, 0.0 if arrived is None else time.monotonic() - arrived, self.max_age_s, self.on_stale,
+                  f"transform chain map -> {self.frame}")
+        return matrix
+
+    def close(self) -> None:
+        self.tf.close()
+
+
 def open_ros_inputs(config: AgentConfig, bus: FleetBus, size_of_camera: Callable[[], tuple[int, int] | None]):
     """The ROS 2 topics among ``config``'s inputs, followed on ``bus``'s session: ``(reader or None, intrinsics or
     None, world_from_camera or None)``; received and refused messages are counted in ``bus.counters``.
@@ -139,7 +173,12 @@ def open_ros_inputs(config: AgentConfig, bus: FleetBus, size_of_camera: Callable
                          lambda _, message: camera_from_camera_info_message(message, ROS_SCHEME + topic),
                          max_bytes=SMALL_MESSAGE_BYTES, **common)
         intrinsics = TopicValue(feed, "--camera-info", ros_msgs.CAMERA_INFO, domain, keep_first=True)
-    if is_ros(config.camera_pose):
+    if is_ros(config.camera_pose) and config.camera_frame is not None:
+        from agents.bridges.ros_tf import TfFeed
+
+        tf = TfFeed(session, domain, ros_topic(config.camera_pose), **common)
+        pose = TfPose(tf, config.camera_frame, domain, **stale)
+    elif is_ros(config.camera_pose):
         feed = TopicFeed(session, domain, ros_topic(config.camera_pose), (ros_msgs.POSE_STAMPED,),
                          lambda msgtype, message: matrix_from_pose(camera_pose(msgtype, message)),
                          max_bytes=SMALL_MESSAGE_BYTES, **common)
@@ -155,9 +194,16 @@ def check_ros_topics(config: AgentConfig) -> None:
                          ("--camera-pose", config.camera_pose)):
         if is_ros(spec):
             try:
-                ros_topic(str(spec))
+                topic = ros_topic(str(spec))
             except ValueError as err:
                 raise SourceError(f"{option} {err}") from None
+            if option == "--camera-pose" and topic.rsplit("/", 1)[-1] in ("tf", "tf_static") \
+                    and config.camera_frame is None:
+                raise SourceError(f"--camera-pose {spec}: a tf2_msgs/msg/TFMessage topic needs --camera-frame (the "
+                                  "camera's optical frame, e.g. H1/camera_optical)")
+    frame = config.camera_frame
+    if frame is not None and (not frame.strip("/") or len(frame) > 256 or not frame.isprintable()):
+        raise SourceError(f"--camera-frame {frame!r}: not a frame id (1-256 printable characters)")
 
 
 def open_ros_camera(config: AgentConfig, scenario: Scenario, bus: FleetBus, extract: FeatureExtractor,
@@ -197,4 +243,5 @@ def open_ros_camera(config: AgentConfig, scenario: Scenario, bus: FleetBus, extr
                         intrinsics_from=None if config.camera_info is None else f"--camera-info {config.camera_info}")
 
 
-__all__ = ["STALE", "TopicReader", "check_age", "TopicValue", "check_ros_topics", "open_ros_camera", "open_ros_inputs"]
+__all__ = ["STALE", "TfPose", "TopicReader", "TopicValue", "check_age", "check_ros_topics", "open_ros_camera",
+           "open_ros_inputs"]
