@@ -24,7 +24,8 @@ from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from agents.bridges import ros_msgs
-from agents.bridges.rmw_zenoh import DEFAULT_QOS, SENSOR_QOS, Node
+from agents.bridges.listener import Ros2Listener
+from agents.bridges.rmw_zenoh import DEFAULT_QOS, SENSOR_QOS, EntityKind, Node, Reliability
 from agents.bridges.ros2_node import Ros2Node
 from agents.bridges.ros_sources import Rejected, TopicFeed, camera_pose, decode_image, ros_topic
 from agents.bridges.ros_tf import TfTree, parse_transforms
@@ -510,6 +511,19 @@ def test_a_feed_counts_hostile_samples_and_keeps_the_newest_valid_frame(fleet):
     assert feed.valid == 2 and feed.received == 8
 
 
+def test_a_subscription_token_is_a_publishers_with_ms(fleet):
+    """rmw_zenoh's Entity key: the same chunks for a subscription as for a publisher, ``MS`` for ``MP``."""
+    with client_session(fleet.endpoint) as session:
+        with Ros2Node(session, Node("a", "/ns")) as node:
+            publisher = node.publisher(POSE_TOPIC, ros_msgs.POSE_STAMPED, ros_msgs.type_hash(ros_msgs.POSE_STAMPED))
+        with Ros2Node(session, Node("a", "/ns")) as node:
+            subscription = node.subscription(POSE_TOPIC, ros_msgs.POSE_STAMPED,
+                                             ros_msgs.type_hash(ros_msgs.POSE_STAMPED))
+            assert [s.token_key for s in node.subscriptions()] == [subscription.token_key]
+    assert subscription.token_key == publisher.token_key.replace("/1/MP/", "/1/MS/")
+    assert subscription.key == publisher.key and subscription.gid != publisher.gid
+
+
 # -- real processes: an agent on ROS topics publishes the renderer's poses -----------------------------------------
 
 def start_agent(fleet, name: str, *args: str, lead_s: float = LEAD_S):
@@ -609,6 +623,14 @@ STALE_FRAMES = 6
 SOURCE_MAX_AGE_S = 0.6
 
 
+#: The ROS 2 node of the agent ``H1`` of fleet ``ros-stale``.
+AGENT = Node("evopose_agent", "/ros_stale/H1")
+
+
+def agent_subscriptions(graph) -> list:
+    return [e for e in graph.entities(EntityKind.SUBSCRIPTION) if e.node == AGENT]
+
+
 def test_an_agent_on_tf_skips_stale_images_and_poses(fleet, renderer_run, h1_frames):
     """The camera pose from the mirror's /tf chain (``--camera-pose ros2:/tf --camera-frame H1/camera_optical``):
     frames 0-1 give the renderer's poses; then the images stop (frames 2-3) and then /tf stops (frames 4-5): each of
@@ -619,7 +641,20 @@ def test_an_agent_on_tf_skips_stale_images_and_poses(fleet, renderer_run, h1_fra
                                "--camera-info", "ros2:" + STALE_INFO, "--camera-pose", "ros2:/tf",
                                "--camera-frame", "H1/camera_optical", "--source-max-age", str(SOURCE_MAX_AGE_S))
     try:
-        with client_session(fleet.endpoint) as session, Ros2Node(session, Node("camera", "/h1s")) as node:
+        with client_session(fleet.endpoint) as session, Ros2Node(session, Node("camera", "/h1s")) as node, \
+                Ros2Listener(session, topics=[], keep_samples=0) as graph:
+            # the agent announces what it follows, as rmw_zenoh's subscriptions do (ros2 topic info lists it)
+            assert graph.wait_for(lambda g: len(agent_subscriptions(g)) == 4, LEAD_S), graph.entities()
+            subscriptions = agent_subscriptions(graph)
+            assert {(e.topic, e.msgtype, e.qos.depth, e.qos.reliability) for e in subscriptions} == {
+                (STALE_TOPIC, ros_msgs.IMAGE, 5, Reliability.BEST_EFFORT),
+                (STALE_INFO, ros_msgs.CAMERA_INFO, 10, Reliability.RELIABLE),
+                ("/tf", ros_msgs.TF_MESSAGE, 100, Reliability.RELIABLE),
+                ("/tf_static", ros_msgs.TF_MESSAGE, 1, Reliability.RELIABLE)}
+            (agent_node,) = [e for e in graph.entities(EntityKind.NODE) if e.node == AGENT]
+            assert {e.zid for e in subscriptions} == {agent_node.zid} and len({e.entity_id for e in subscriptions}) == 4
+            assert all(e.key.split("/")[5] == "MS" and e.type_hash == ros_msgs.type_hash(e.msgtype)
+                       for e in subscriptions)
             images = node.publisher(STALE_TOPIC, ros_msgs.IMAGE, ros_msgs.type_hash(ros_msgs.IMAGE), SENSOR_QOS)
             infos = node.publisher(STALE_INFO, ros_msgs.CAMERA_INFO, ros_msgs.type_hash(ros_msgs.CAMERA_INFO))
             tf = node.publisher("/tf", ros_msgs.TF_MESSAGE, ros_msgs.type_hash(ros_msgs.TF_MESSAGE), TF_QOS)
@@ -634,7 +669,10 @@ def test_an_agent_on_tf_skips_stale_images_and_poses(fleet, renderer_run, h1_fra
                     tf.publish(ros_msgs.serialize(mirror_tf("H1", frame.camera, stamp)))
                 if n < 2 or n >= 4:
                     images.publish(ros_msgs.serialize(image_message(frame.image, stamp)))
-        code, records, stderr = finish(agent)
+            code, records, stderr = finish(agent)
+            # the camera info's token went when its topic was left; the others when the agent stopped
+            assert graph.wait_for(lambda g: not agent_subscriptions(g) and AGENT not in
+                                  {e.node for e in g.entities(EntityKind.NODE)}, 5.0), graph.entities()
     finally:
         agent.kill()
     assert code == 0 and "Traceback" not in stderr, stderr

@@ -1,5 +1,7 @@
 """A minimal ROS 2 node in the rmw_zenoh format over an open Zenoh session: its liveliness token, and publishers
-that announce themselves with theirs and attach sequence number, timestamp and GID to every sample.
+that announce themselves with theirs and attach sequence number, timestamp and GID to every sample; and the
+liveliness tokens of subscriptions (``MS``: the data themselves are received elsewhere, e.g. by
+:class:`~agents.bridges.ros_sources.TopicFeed`), so that ``ros2 topic info`` lists the node as a subscriber.
 
 As rmw_zenoh_cpp does (rmw_publisher_data.cpp): the Zenoh publisher is declared before its token, the token is
 undeclared before the publisher; sequence numbers start at 1; a RELIABLE publisher puts reliably with congestion
@@ -57,6 +59,26 @@ class Ros2Publisher:
         self._publisher.undeclare()
 
 
+class Ros2Subscription:
+    """The liveliness token of one ROS 2 subscription (``MS``): the same key as a publisher's with ``MS`` for
+    ``MP`` (liveliness_utils.cpp); declared on creation, undeclared by :meth:`close`."""
+
+    def __init__(self, session: zenoh.Session, owner: "Ros2Node", entity_id: int, topic: str, msgtype: str,
+                 type_hash: str, qos: QoS) -> None:
+        self.topic, self.msgtype, self.type_hash, self.qos = topic, msgtype, type_hash, qos
+        self.key = topic_key(owner.domain, topic, msgtype, type_hash)
+        self.token_key = endpoint_token(EntityKind.SUBSCRIPTION, owner.domain, owner.zid, owner.node_id, entity_id,
+                                        owner.node, topic, msgtype, type_hash, qos)
+        self.gid = gid(self.token_key)
+        self._token = session.liveliness().declare_token(self.token_key)
+        self._closed = False
+
+    def close(self) -> None:
+        if not self._closed:
+            self._closed = True
+            self._token.undeclare()
+
+
 class Ros2Node:
     """A ROS 2 node on ``session``; publishers are made (once per topic) by :meth:`publisher`.
 
@@ -83,6 +105,7 @@ class Ros2Node:
         self._token = session.liveliness().declare_token(self.token_key)
         self._next_entity_id = node_id + 1
         self._publishers: dict[str, Ros2Publisher] = {}
+        self._subscriptions: list[Ros2Subscription] = []
         self._lock = threading.Lock()
 
     def publisher(self, topic: str, msgtype: str, type_hash: str, qos: QoS = DEFAULT_QOS) -> Ros2Publisher:
@@ -99,16 +122,30 @@ class Ros2Node:
                                                            qos)
             return made
 
+    def subscription(self, topic: str, msgtype: str, type_hash: str, qos: QoS = DEFAULT_QOS) -> Ros2Subscription:
+        """Announce a subscription of ``topic`` (its ``MS`` token, with the next entity id)."""
+        with self._lock:
+            entity_id = self._next_entity_id
+            self._next_entity_id += 1
+            made = Ros2Subscription(self.session, self, entity_id, topic, msgtype, type_hash, qos)
+            self._subscriptions.append(made)
+            return made
+
+    def subscriptions(self) -> list[Ros2Subscription]:
+        with self._lock:
+            return list(self._subscriptions)
+
     def publishers(self) -> list[Ros2Publisher]:
         with self._lock:
             return list(self._publishers.values())
 
     def close(self) -> None:
-        """Undeclare every publisher, then the node's token (the session stays open)."""
+        """Undeclare every publisher and subscription token, then the node's token (the session stays open)."""
         with self._lock:
             publishers, self._publishers = list(self._publishers.values()), {}
-        for publisher in publishers:
-            publisher.close()
+            subscriptions, self._subscriptions = self._subscriptions, []
+        for endpoint in [*publishers, *subscriptions]:
+            endpoint.close()
         self._token.undeclare()
 
     def __enter__(self) -> "Ros2Node":

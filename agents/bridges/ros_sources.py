@@ -226,6 +226,8 @@ class TopicFeed(Generic[T]):
         self._slot: deque[tuple[str, bytes, float]] = deque(maxlen=max(1, int(keep)))
         self._lock = threading.Condition()
         self._closed = False
+        #: further things to close with the feed (its subscription's liveliness token)
+        self.closing: list = []
         self._worker = threading.Thread(target=self._work, name=f"ros2 {topic}", daemon=True)
         self._worker.start()
         self._subscriber = session.declare_subscriber(self.key, self._on_sample)
@@ -323,6 +325,8 @@ class TopicFeed(Generic[T]):
                 return
             self._closed = True
             self._lock.notify_all()
+        for item in self.closing:
+            item.close()
         self._subscriber.undeclare()
         self._worker.join(2.0)
 

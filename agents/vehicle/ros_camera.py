@@ -42,6 +42,8 @@ from agents.vehicle.team_views import MAX_DECODED_PIXELS
 
 
 STALE = "ros2 stale"
+#: The agent's ROS 2 node name (namespace ``/<fleet>/<vehicle>``): it announces the subscriptions.
+AGENT_NODE = "evopose_agent"
 
 
 def check_age(feed, age_s: float, max_age_s: float | None, on_stale: Callable[[str, str], None] | None,
@@ -143,16 +145,28 @@ class TfPose:
 
 def open_ros_inputs(config: AgentConfig, bus: FleetBus, size_of_camera: Callable[[], tuple[int, int] | None]):
     """The ROS 2 topics among ``config``'s inputs, followed on ``bus``'s session: ``(reader or None, intrinsics or
-    None, world_from_camera or None)``; received and refused messages are counted in ``bus.counters``.
+    None, world_from_camera or None, node)``; received and refused messages are counted in ``bus.counters``.
+
+    ``node`` is the ROS 2 node ``/<fleet>/<vehicle>/evopose_agent`` (names mapped as the mirror maps them) that
+    announces each topic followed with a subscription's liveliness token (``MS``: ``ros2 topic info`` lists it);
+    each token is undeclared when its topic is left, the node's with ``node.close()``.
 
     ``size_of_camera()`` is the camera's ``(width, height)`` when known: a frame of another size is refused (counted
     ``ros2 size``), not fatal.
     """
     from agents.bridges import ros_msgs
+    from agents.bridges.names import ros_name
+    from agents.bridges.rmw_zenoh import DEFAULT_QOS, SENSOR_QOS, TF_QOS, Node, QoS
+    from agents.bridges.ros2_node import Ros2Node
     from agents.bridges.ros_sources import (HEADER_BYTES, IMAGE_TYPES, SMALL_MESSAGE_BYTES, Rejected, TopicFeed,
                                             camera_pose, decode_image, ros_topic)
 
     domain, session, counters = config.ros_domain, bus.session, bus.counters
+    node = Ros2Node(session, Node(AGENT_NODE, f"/{ros_name(config.fleet)}/{ros_name(config.vehicle)}"),
+                    domain=domain)
+
+    def announce(feed, msgtype: str, qos: QoS) -> None:
+        feed.closing.append(node.subscription(feed.topic, msgtype, ros_msgs.type_hash(msgtype), qos))
     common = dict(on_received=counters.count_received, on_rejected=counters.count_rejected)
     stale = dict(max_age_s=config.source_max_age_s, on_stale=counters.count_rejected)
     reader = intrinsics = pose = None
@@ -166,24 +180,32 @@ def open_ros_inputs(config: AgentConfig, bus: FleetBus, size_of_camera: Callable
 
         feed = TopicFeed(session, domain, ros_topic(config.source), IMAGE_TYPES, image_of,
                          max_bytes=3 * MAX_DECODED_PIXELS + HEADER_BYTES, **common)
+        # one type per subscription: image_transport's naming says which (a .../compressed topic is compressed)
+        announce(feed, ros_msgs.COMPRESSED_IMAGE if feed.topic.endswith("/compressed") else ros_msgs.IMAGE,
+                 SENSOR_QOS)
         reader = TopicReader(feed, str(config.source), domain, **stale)
     if is_ros(config.camera_info):
         topic = ros_topic(config.camera_info)
         feed = TopicFeed(session, domain, topic, (ros_msgs.CAMERA_INFO,),
                          lambda _, message: camera_from_camera_info_message(message, ROS_SCHEME + topic),
                          max_bytes=SMALL_MESSAGE_BYTES, **common)
+        announce(feed, ros_msgs.CAMERA_INFO, DEFAULT_QOS)
         intrinsics = TopicValue(feed, "--camera-info", ros_msgs.CAMERA_INFO, domain, keep_first=True)
     if is_ros(config.camera_pose) and config.camera_frame is not None:
         from agents.bridges.ros_tf import TfFeed
 
         tf = TfFeed(session, domain, ros_topic(config.camera_pose), **common)
+        # tf2's listener QoS: /tf keep last 100; /tf_static keep last 1 (announced volatile: no history is queried)
+        announce(tf.feeds[0], ros_msgs.TF_MESSAGE, TF_QOS)
+        announce(tf.feeds[1], ros_msgs.TF_MESSAGE, QoS(depth=1))
         pose = TfPose(tf, config.camera_frame, domain, **stale)
     elif is_ros(config.camera_pose):
         feed = TopicFeed(session, domain, ros_topic(config.camera_pose), (ros_msgs.POSE_STAMPED,),
                          lambda msgtype, message: matrix_from_pose(camera_pose(msgtype, message)),
                          max_bytes=SMALL_MESSAGE_BYTES, **common)
+        announce(feed, ros_msgs.POSE_STAMPED, DEFAULT_QOS)
         pose = TopicValue(feed, "--camera-pose", ros_msgs.POSE_STAMPED, domain, keep_first=False, **stale)
-    return reader, intrinsics, pose
+    return reader, intrinsics, pose, node
 
 
 def check_ros_topics(config: AgentConfig) -> None:
@@ -220,8 +242,8 @@ def open_ros_camera(config: AgentConfig, scenario: Scenario, bus: FleetBus, extr
             return scene.width, scene.height
         return (taken[0].width, taken[0].height) if taken else None
 
-    reader, ros_intrinsics, ros_pose = open_ros_inputs(config, bus, size_of_camera)
-    closing = tuple(item for item in (ros_intrinsics, ros_pose) if item is not None)
+    reader, ros_intrinsics, ros_pose, node = open_ros_inputs(config, bus, size_of_camera)
+    closing = tuple(item for item in (ros_intrinsics, ros_pose, node) if item is not None)
     try:
         if reader is None:
             reader = open_reader(str(config.source))
@@ -243,5 +265,5 @@ def open_ros_camera(config: AgentConfig, scenario: Scenario, bus: FleetBus, extr
                         intrinsics_from=None if config.camera_info is None else f"--camera-info {config.camera_info}")
 
 
-__all__ = ["STALE", "TfPose", "TopicReader", "TopicValue", "check_age", "check_ros_topics", "open_ros_camera",
-           "open_ros_inputs"]
+__all__ = ["AGENT_NODE", "STALE", "TfPose", "TopicReader", "TopicValue", "check_age", "check_ros_topics",
+           "open_ros_camera", "open_ros_inputs"]
