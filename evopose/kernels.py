@@ -29,10 +29,24 @@ PAPER, ROBUST, MUTUAL = 0, 1, 2
 
 
 @nb.njit(cache=True, fastmath=_FASTMATH, nogil=True, inline="always")
-def _nearest(um, vm, zm, px, py, pz, row):  # pragma: no cover - compiled
-    """The squared distance from the model point ``(um, vm, zm)`` to its nearest image point ``(px, py, pz)``;
-    ``row`` (>= P,) keeps, per image point, its nearest squared distance to the model points seen so far (one pass
-    serves both matching directions of eq. 1)."""
+def _nearest(um, vm, px, py, row):  # pragma: no cover - compiled
+    """The squared distance from the model point ``(um, vm)`` to its nearest image point ``(px, py)``; ``row``
+    (>= P,) keeps, per image point, its nearest squared distance to the model points seen so far (one pass
+    serves both matching directions of eq. 1). Untyped points: the paper's eq. (1)."""
+    best = NO_MATCH_D2
+    for p in range(px.shape[0]):
+        dx = px[p] - um
+        dy = py[p] - vm
+        d2 = dx * dx + dy * dy
+        best = min(best, d2)
+        row[p] = min(row[p], d2)
+    return best
+
+
+@nb.njit(cache=True, fastmath=_FASTMATH, nogil=True, inline="always")
+def _nearest_typed(um, vm, zm, px, py, pz, row):  # pragma: no cover - compiled
+    """:func:`_nearest` in (u, v, label) space, for typed points (a separate loop: the label axis would slow
+    the untyped one by a half)."""
     best = NO_MATCH_D2
     for p in range(px.shape[0]):
         dx = px[p] - um
@@ -45,7 +59,20 @@ def _nearest(um, vm, zm, px, py, pz, row):  # pragma: no cover - compiled
 
 
 @nb.njit(cache=True, fastmath=_FASTMATH, nogil=True)
-def chamfer_row(u, v, mz, usable, px, py, pz, tau, robust, row):  # pragma: no cover - compiled
+def is_typed(mz, pz):  # pragma: no cover - compiled
+    """Whether any label coordinate is non-zero; else the points are untyped (the paper's eq. 1). Computed once
+    per view and population, not per pose."""
+    for m in range(mz.shape[0]):
+        if mz[m] != 0.0:
+            return True
+    for p in range(pz.shape[0]):
+        if pz[p] != 0.0:
+            return True
+    return False
+
+
+@nb.njit(cache=True, fastmath=_FASTMATH, nogil=True)
+def chamfer_row(u, v, mz, usable, px, py, pz, typed, tau, robust, row):  # pragma: no cover - compiled
     """Both matching directions of one pose in one view.
 
     Parameters
@@ -57,6 +84,8 @@ def chamfer_row(u, v, mz, usable, px, py, pz, tau, robust, row):  # pragma: no c
     usable : bool array, shape (M,)
     px, py, pz : float64 arrays, shape (P,)
         Image points and their label coordinates.
+    typed : bool
+        :func:`is_typed` of ``mz``, ``pz`` (False: the label coordinates are ignored).
     tau : float
         Truncation of the per-point distance (pixels) when ``robust``.
     robust : bool
@@ -78,7 +107,7 @@ def chamfer_row(u, v, mz, usable, px, py, pz, tau, robust, row):  # pragma: no c
     for m in range(u.shape[0]):
         if not usable[m]:
             continue
-        best = _nearest(u[m], v[m], mz[m], px, py, pz, row)
+        best = _nearest_typed(u[m], v[m], mz[m], px, py, pz, row) if typed else _nearest(u[m], v[m], px, py, row)
         cnt += 1
         s_mod += np.sqrt(min(best, tau2))
     s_img = 0.0
@@ -92,7 +121,7 @@ def chamfer_row(u, v, mz, usable, px, py, pz, tau, robust, row):  # pragma: no c
 
 
 @nb.njit(cache=True, fastmath=_FASTMATH, nogil=True)
-def mutual_row(u, v, mz, usable, px, py, pz, tau, row, col):  # pragma: no cover - compiled
+def mutual_row(u, v, mz, usable, px, py, pz, typed, tau, row, col):  # pragma: no cover - compiled
     """One-to-one matching of one pose in one view: mutual nearest neighbours closer than ``tau``.
 
     ``row`` (>= P,) and ``col`` (M,) are scratch: one branch-free pass gives every image point's and every
@@ -115,7 +144,7 @@ def mutual_row(u, v, mz, usable, px, py, pz, tau, row, col):  # pragma: no cover
         col[m] = NO_MATCH_D2
         if not usable[m]:
             continue
-        col[m] = _nearest(u[m], v[m], mz[m], px, py, pz, row)
+        col[m] = _nearest_typed(u[m], v[m], mz[m], px, py, pz, row) if typed else _nearest(u[m], v[m], px, py, row)
     tau2 = tau * tau
     s = 0.0
     n_usable = 0
@@ -133,7 +162,7 @@ def mutual_row(u, v, mz, usable, px, py, pz, tau, row, col):  # pragma: no cover
         for p in range(P):  # the nearest image point (recomputed: equal up to rounding, first one wins)
             dx = px[p] - um
             dy = py[p] - vm
-            dz = pz[p] - zm
+            dz = pz[p] - zm if typed else 0.0
             if dx * dx + dy * dy + dz * dz <= best * (1.0 + 1e-9):
                 if best <= row[p]:  # and this model point is the image point's nearest: a mutual pair
                     s += 2.0 * best
@@ -144,7 +173,7 @@ def mutual_row(u, v, mz, usable, px, py, pz, tau, row, col):  # pragma: no cover
 
 
 @nb.njit(cache=True, fastmath=_FASTMATH, nogil=True)
-def view_term_row(u, v, mz, usable, px, py, pz, tau, mode, row, col):  # pragma: no cover - compiled
+def view_term_row(u, v, mz, usable, px, py, pz, typed, tau, mode, row, col):  # pragma: no cover - compiled
     """The view's term ``d^(k)`` for one pose (pixels); ``row`` (>= P,) and ``col`` (M,) are scratch.
 
     ``mode`` :data:`PAPER`: the paper's eq. (1) ``sum_i min_j |p_i - m_j(s)|``;
@@ -153,9 +182,9 @@ def view_term_row(u, v, mz, usable, px, py, pz, tau, mode, row, col):  # pragma:
     nearest partner, ``tau`` for a point without one within ``tau`` (:func:`mutual_row`).
     """
     if mode == MUTUAL:
-        s, n_usable, _ = mutual_row(u, v, mz, usable, px, py, pz, tau, row, col)
+        s, n_usable, _ = mutual_row(u, v, mz, usable, px, py, pz, typed, tau, row, col)
         return np.sqrt(s / (px.shape[0] + n_usable))
-    s_img, s_mod, cnt = chamfer_row(u, v, mz, usable, px, py, pz, tau, mode == ROBUST, row)
+    s_img, s_mod, cnt = chamfer_row(u, v, mz, usable, px, py, pz, typed, tau, mode == ROBUST, row)
     if mode == ROBUST:
         return (s_img + s_mod) / (px.shape[0] + cnt)
     return s_img
@@ -168,8 +197,9 @@ def view_terms(u, v, mz, usable, px, py, pz, tau, mode):  # pragma: no cover - c
     out = np.empty(N)
     row = np.empty(px.shape[0])
     col = np.empty(M)
+    typed = is_typed(mz, pz)
     for n in range(N):
-        out[n] = view_term_row(u[n], v[n], mz, usable[n], px, py, pz, tau, mode, row, col)
+        out[n] = view_term_row(u[n], v[n], mz, usable[n], px, py, pz, typed, tau, mode, row, col)
     return out
 
 
@@ -181,8 +211,9 @@ def chamfer_sums(u, v, mz, usable, px, py, pz, tau, robust):  # pragma: no cover
     mod_sum = np.zeros(N)
     n_usable = np.zeros(N)
     row = np.empty(px.shape[0])
+    typed = is_typed(mz, pz)
     for n in range(N):
-        s_img, s_mod, cnt = chamfer_row(u[n], v[n], mz, usable[n], px, py, pz, tau, robust, row)
+        s_img, s_mod, cnt = chamfer_row(u[n], v[n], mz, usable[n], px, py, pz, typed, tau, robust, row)
         img_sum[n] = s_img
         mod_sum[n] = s_mod
         n_usable[n] = cnt
@@ -190,7 +221,7 @@ def chamfer_sums(u, v, mz, usable, px, py, pz, tau, robust):  # pragma: no cover
 
 
 @nb.njit(cache=True, fastmath=_FASTMATH, nogil=True)
-def nearest_row(u, v, mz, usable, px, py, pz, img_nn, img_d2, mod_nn, mod_d2):  # pragma: no cover - compiled
+def nearest_row(u, v, mz, usable, px, py, pz, typed, img_nn, img_d2, mod_nn, mod_d2):  # pragma: no cover - compiled
     """Nearest neighbours in both directions for one pose in one view, with indices.
 
     Fills ``img_nn`` / ``img_d2`` (P,): the nearest usable model point to each image point (-1 and
@@ -213,7 +244,7 @@ def nearest_row(u, v, mz, usable, px, py, pz, img_nn, img_d2, mod_nn, mod_d2):  
         for p in range(px.shape[0]):
             dx = px[p] - um
             dy = py[p] - vm
-            dz = pz[p] - zm
+            dz = pz[p] - zm if typed else 0.0
             d2 = dx * dx + dy * dy + dz * dz
             if d2 < best:
                 best = d2
@@ -242,6 +273,7 @@ def chamfer_matches(u, v, mz, usable, px, py, pz):  # pragma: no cover - compile
     img_d2 = np.empty((N, P))
     mod_nn = np.empty((N, M), np.int64)
     mod_d2 = np.empty((N, M))
+    typed = is_typed(mz, pz)
     for n in range(N):
-        nearest_row(u[n], v[n], mz, usable[n], px, py, pz, img_nn[n], img_d2[n], mod_nn[n], mod_d2[n])
+        nearest_row(u[n], v[n], mz, usable[n], px, py, pz, typed, img_nn[n], img_d2[n], mod_nn[n], mod_d2[n])
     return img_nn, img_d2, mod_nn, mod_d2

@@ -18,7 +18,7 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
-from .kernels import MUTUAL, nearest_row, view_term_row
+from .kernels import MUTUAL, is_typed, nearest_row, view_term_row
 from .projection import FASTMATH as _FASTMATH
 from .projection import project_pose
 
@@ -85,14 +85,14 @@ def _soft_accumulate(u, v, mz, J, usable, px, py, pz, sigma, outlier, w_img, w_m
 
 
 @nb.njit(cache=True, fastmath=_FASTMATH, nogil=True)
-def _hard_accumulate(u, v, mz, J, usable, px, py, pz, gate2, w_img, w_mod, H, g, img_nn, img_d2, mod_nn,
+def _hard_accumulate(u, v, mz, J, usable, px, py, pz, typed, gate2, w_img, w_mod, H, g, img_nn, img_d2, mod_nn,
                      mod_d2, mutual):  # pragma: no cover - compiled
     """Nearest-neighbour normal equations of one pose in one view, both directions within a gate.
 
     With ``mutual`` only mutual nearest pairs count (the pairs of the mutual fitness, :func:`mutual_row`).
     """
     P = px.shape[0]
-    nearest_row(u, v, mz, usable, px, py, pz, img_nn, img_d2, mod_nn, mod_d2)
+    nearest_row(u, v, mz, usable, px, py, pz, typed, img_nn, img_d2, mod_nn, mod_d2)
     n_usable = 0
     for m in range(u.shape[0]):
         if usable[m]:
@@ -141,8 +141,8 @@ def fitness_one(s, model, normals, use_normals, intr, cfw, weights, taus, pts, p
             continue
         project_pose(s, model, normals, use_normals, intr[k], cfw[k], u, v, usable, R, Rc)
         a, b = offsets[k], offsets[k + 1]
-        total += weights[k] * view_term_row(u, v, mz[k], usable, pts[a:b, 0], pts[a:b, 1], pz[a:b], taus[k], mode,
-                                            row, col)
+        total += weights[k] * view_term_row(u, v, mz[k], usable, pts[a:b, 0], pts[a:b, 1], pz[a:b],
+                                            is_typed(mz[k], pz[a:b]), taus[k], mode, row, col)
     return total
 
 
@@ -268,7 +268,7 @@ def refine_population(poses, fitness, lo, hi, periodic, free, model, normals, us
                                      w_pair, row)
                 else:
                     gate = scales[step] * taus[k]
-                    _hard_accumulate(u, v, mz[k], J, usable, px, py, pz_k, gate * gate, w_k, w_k, H, g, img_nn, row,
+                    _hard_accumulate(u, v, mz[k], J, usable, px, py, pz_k, is_typed(mz[k], pz_k), gate * gate, w_k, w_k, H, g, img_nn, row,
                                      mod_nn, mod_d2, mode == MUTUAL)
             # damped step (Levenberg–Marquardt), fixed parameters held
             for i in range(6):

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from benchmarks.problems import in_right_basin, make_paper_scale_problem
-from evopose import Camera, Model, PoseObjective, PoseProblem, View, solve
+from evopose import Camera, Model, PoseObjective, PoseProblem, View, refine, solve
 from evopose.fitness import matches
 from evopose.problem import Bounds, label_coordinates
 
@@ -61,3 +61,17 @@ def test_colours_resolve_the_paper_scale_ambiguity():
             right[labelled] += bool(in_right_basin(sp, solve(sp.problem, seed=i).pose))
     assert right[True] == 6
     assert right[False] < 6
+
+
+def test_one_class_everywhere_is_the_untyped_fitness():
+    """The typed kernels (label axis) and the untyped ones (the paper's plane) agree when every point and mark is of
+    one class: the label axis adds nothing between points of one class."""
+    sp = make_paper_scale_problem(np.random.default_rng(5), cameras=("H1", "H2"))
+    one_class = PoseProblem(Model(sp.problem.model.points, sp.problem.model.normals, np.full(18, 2)),
+                            tuple(View(v.camera, v.points, v.weight, np.full(len(v.points), 2))
+                                  for v in sp.problem.views), sp.problem.bounds)
+    poses = sp.true_pose + np.random.default_rng(6).normal(0, 0.05, (64, 6))
+    typed, untyped = PoseObjective(one_class), PoseObjective(sp.problem)
+    assert typed.labels(0)[0].any()  # the typed path runs
+    np.testing.assert_allclose(typed(poses), untyped(poses), rtol=1e-12)
+    np.testing.assert_allclose(refine(typed, poses[:8])[1], refine(untyped, poses[:8])[1], rtol=1e-9)
