@@ -39,6 +39,8 @@ bench: $(STAMP)
 	NUMBA_NUM_THREADS=1 $(PY) -m benchmarks.bench_weights
 	NUMBA_NUM_THREADS=1 $(PY) -m benchmarks.bench_image_only
 	NUMBA_NUM_THREADS=1 $(PY) -m benchmarks.bench_time_budget
+	$(PY) -m benchmarks.bench_capacity
+	$(PY) -m benchmarks.bench_flood
 	$(PY) -m benchmarks.report
 
 # Three agent pairs for 10 minutes each (30 min): memory and CPU over time.
