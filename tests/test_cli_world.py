@@ -123,27 +123,33 @@ def test_solve_from_image_at_paper_scale_finds_the_range_despite_clutter(tmp_pat
 
 def test_bad_inputs_exit_2_with_one_line(h1_frame, tmp_path):
     folder, _, truth = h1_frame
-    assert_usage_error(evopose("render", "exp2", "--frame", 50, "--out", tmp_path / "f.png"),
-                       "frame 50 out of range")
-    assert_usage_error(evopose("render", "exp2", "--vehicle", "H7", "--out", tmp_path / "f.png"), "no vehicle 'H7'")
-    assert_usage_error(evopose("render", tmp_path / "missing.yaml", "--out", tmp_path / "f.png"),
-                       "missing.yaml: cannot read")
     bad = tmp_path / "bad.yaml"
     bad.write_text((ROOT / "scenarios" / "exp2.yaml").read_text(encoding="utf-8").replace("fps: 10", "fps: -1"),
                    encoding="utf-8")
-    assert_usage_error(evopose("render", bad, "--out", tmp_path / "f.png"), "fps")
-    assert_usage_error(evopose("features", tmp_path / "none.png"), "none.png: cannot read")
     text = tmp_path / "text.png"
     text.write_text("not an image", encoding="utf-8")
-    assert_usage_error(evopose("features", text), "not an image")
-    assert_usage_error(evopose("features", folder / "frame.png", "--model", tmp_path / "nomodel.yaml"),
-                       "nomodel.yaml: cannot read")
     problem = {"model": {"file": "pioneer"}, "views": [{"camera": truth["camera"], "image": "absent.png",
                                                         "points": [[1, 2]]}], "search": {"x": [0, 1], "y": [0, 1], "z": [0, 1]}}
-    path = tmp_path / "p.yaml"
-    path.write_text(yaml.safe_dump(problem), encoding="utf-8")
-    assert_usage_error(evopose("solve", path), "views[0]: give either points or image")
+    both = tmp_path / "both.yaml"
+    both.write_text(yaml.safe_dump(problem), encoding="utf-8")
     del problem["views"][0]["points"]
-    path.write_text(yaml.safe_dump(problem), encoding="utf-8")
-    assert_usage_error(evopose("solve", path), "views[0].image:")
-    assert_usage_error(evopose("solve", "--image", folder / "frame.png"), "--model and --camera")
+    absent = tmp_path / "absent.yaml"
+    absent.write_text(yaml.safe_dump(problem), encoding="utf-8")
+    cases = [
+        (("render", "exp2", "--frame", 50, "--out", tmp_path / "f.png"), "frame 50 out of range"),
+        (("render", "exp2", "--vehicle", "H7", "--out", tmp_path / "f.png"), "no vehicle 'H7'"),
+        (("render", tmp_path / "missing.yaml", "--out", tmp_path / "f.png"), "missing.yaml: cannot read"),
+        (("render", bad, "--out", tmp_path / "f.png"), "fps"),
+        (("features", tmp_path / "none.png"), "none.png: cannot read"),
+        (("features", text), "not an image"),
+        (("features", folder / "frame.png", "--model", tmp_path / "nomodel.yaml"), "nomodel.yaml: cannot read"),
+        (("solve", both), "views[0]: give either points or image"),
+        (("solve", absent), "views[0].image:"),
+        (("solve", "--image", folder / "frame.png"), "--model and --camera"),
+    ]
+    # independent commands, run side by side (each is a fresh process: its exit code and stderr are its own)
+    procs = [subprocess.Popen([sys.executable, "-m", "agents.cli", *map(str, args)], cwd=ROOT, stdout=subprocess.PIPE,
+                              stderr=subprocess.PIPE, text=True) for args, _ in cases]
+    for proc, (args, expected) in zip(procs, cases):
+        out, err = proc.communicate(timeout=120)
+        assert_usage_error(subprocess.CompletedProcess(proc.args, proc.returncode, out, err), expected)

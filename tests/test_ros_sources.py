@@ -684,6 +684,8 @@ def test_an_agent_on_tf_skips_stale_images_and_poses(fleet, renderer_run, h1_fra
         assert max(abs(a[k] - b[k]) for k in a) <= POSITION_TOLERANCE_M, (a, b)
     assert [by_frame[n]["event"] for n in range(2, 6)] == ["no-estimate"] * 4
     assert all(by_frame[n]["points"] == 0 for n in range(2, 6))
+    assert all(by_frame[n]["reason"].startswith("no usable frame: the newest") and "skipped" in by_frame[n]
+               for n in range(2, 6)), [by_frame[n] for n in range(2, 6)]
     traffic = next(r for r in records if r.get("event") == "summary")["traffic"]
     assert traffic["rejected"] == {"ros2 stale": 4}, traffic
     assert traffic["rejected_by_topic"] == {"ros2:" + STALE_TOPIC: 2, "ros2:/tf": 2}, traffic

@@ -81,6 +81,8 @@ class Frame:
     labels : int array (N,) or None
         Each point's colour class (its index in the model's palette: the label it is matched by, our extension
         of eq. 1); None for untyped points (corners).
+    skipped : str or None
+        Why a live source gave no usable image at this tick (e.g. its newest image is stale): no points then.
     truth : array (6,) or None
         ``world_from_target`` ground truth, for evaluation only; None from a real source (no ground truth).
     render_s : float
@@ -97,6 +99,7 @@ class Frame:
     truth: np.ndarray | None
     render_s: float = 0.0
     labels: np.ndarray | None = None
+    skipped: str | None = None
 
 
 class SimulatedCamera:

@@ -267,8 +267,8 @@ class SourceCamera:
             image = self.reader.read()
             read_s = time.perf_counter() - t0
             camera = self.camera(self.frames)
-        except FrameSkipped:
-            return self._skipped(index, stamp_ns, time.perf_counter() - t0)
+        except FrameSkipped as skip:
+            return self._skipped(index, stamp_ns, time.perf_counter() - t0, skip.detail)
         k, self.frames = self.frames, self.frames + 1
         if image.ndim == 2:
             image = cv2.cvtColor(image, cv2.COLOR_GRAY2BGR)
@@ -279,7 +279,7 @@ class SourceCamera:
         points, labels = self.extract(image)
         return Frame(index, k, stamp_ns, image, camera, points, None, read_s, labels)
 
-    def _skipped(self, index: int, stamp_ns: int, read_s: float) -> Frame:
+    def _skipped(self, index: int, stamp_ns: int, read_s: float, why: str) -> Frame:
         """A tick without a usable frame: no points, a black image, the last camera (before any: the intrinsics
         with the scenario's pose)."""
         self.skipped += 1
@@ -290,7 +290,7 @@ class SourceCamera:
             camera = Camera(k_cam.fx, k_cam.fy, k_cam.cx, k_cam.cy, k_cam.width, k_cam.height, k_cam.distortion,
                             scene.world_from_camera)
         image = np.zeros((camera.height, camera.width, 3), np.uint8)
-        return Frame(index, self.frames, stamp_ns, image, camera, np.zeros((0, 2)), None, read_s, None)
+        return Frame(index, self.frames, stamp_ns, image, camera, np.zeros((0, 2)), None, read_s, None, why)
 
     def close(self) -> None:
         self.reader.close()
