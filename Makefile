@@ -17,8 +17,10 @@ install: $(STAMP)
 demo: $(STAMP)
 	$(VENV)/bin/evopose scenario run exp2a-features
 
+# Two passes (tests/conftest.py): everything but the real-time tests on two workers, then those one at a time.
 test: $(STAMP)
-	$(PY) -m pytest -q
+	$(PY) -m pytest -q -n 2 -m "not realtime"
+	$(PY) -m pytest -q -m realtime
 
 # The fuzz tests with many more (and random) examples than `make test` runs (a few minutes).
 fuzz: $(STAMP)

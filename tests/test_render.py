@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import dataclasses
 
-import cv2
 import numpy as np
 import pytest
 
@@ -110,12 +109,3 @@ def test_nuisances_add_distractors_noise_and_lighting(exp2):
     assert len(found) >= 1  # distractors look like marks to the detector
     gains = [render_frame(exp2, k, "H2").image.mean() for k in (0, 15, 30)]
     assert np.ptp(gains) > 3  # the lighting changes over time
-
-
-def test_render_speed(exp2):
-    import time
-    render_frame(exp2, 0, "H1")
-    t0 = time.perf_counter()
-    for k in range(10):
-        render_frame(exp2, k, "H1")
-    assert (time.perf_counter() - t0) / 10 < 0.2
