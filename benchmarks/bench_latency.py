@@ -18,7 +18,6 @@ import argparse
 import os
 import shutil
 import socket
-import statistics
 import subprocess
 import sys
 import threading
@@ -27,6 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .bench_capacity import stop
 from .report import md_table, provenance, write_section
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -143,12 +143,7 @@ def measure(topology: str, hints: int, rate_hz: float, netns: tuple[str, str] | 
         for proc in procs:
             if proc.stdin:
                 proc.stdin.close()
-            proc.terminate()
-        for proc in procs:
-            try:
-                proc.wait(10)
-            except subprocess.TimeoutExpired:
-                proc.kill()
+        stop(procs)
     one_way = np.array(rtts) / 2 * 1e3
     return {"topology": topology, "sent": hints, "received": len(rtts),
             "p50_ms": float(np.percentile(one_way, 50)) if len(one_way) else float("nan"),

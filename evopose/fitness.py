@@ -243,6 +243,8 @@ class PoseObjective:
 
     Attributes
     ----------
+    label_coordinates : tuple of V pairs (pz (P_k,), mz (M,)), read-only
+        Each view's and the model's label coordinates (:func:`label_coordinates`).
     taus, spreads, base_weights, weights : arrays (V,), read-only
         Per view: truncation distance, robust image spread of its points (pixels), its own weight and the
         weight in force.
@@ -262,6 +264,9 @@ class PoseObjective:
         taus = [auto_tau(v.points) if self.tau is None else float(self.tau) for v in views]
         object.__setattr__(self, "taus", _read_only(self.tau_scale * np.array(taus)))
         object.__setattr__(self, "spreads", _read_only([image_spread(v.points) for v in views]))
+        object.__setattr__(self, "label_coordinates",
+                           tuple((_read_only(pz), _read_only(mz))
+                                 for pz, mz in (label_coordinates(self.problem.model, v) for v in views)))
         base = _read_only([v.weight for v in views])
         if not np.any(base > 0):
             raise ValueError("at least one view needs a weight > 0")
@@ -325,8 +330,9 @@ class PoseObjective:
             use_normals=use_normals)
 
     def labels(self, k: int) -> tuple[np.ndarray, np.ndarray]:
-        """View ``k``'s and the model's label coordinates, (P_k,) and (M,) (:func:`label_coordinates`)."""
-        return label_coordinates(self.problem.model, self.problem.views[k])
+        """View ``k``'s and the model's label coordinates, (P_k,) and (M,) (:func:`label_coordinates`; made once,
+        with the objective)."""
+        return self.label_coordinates[k]
 
     def project(self, k: int, poses: np.ndarray) -> ViewProjection:
         return project_into_view(self.problem.model, self.problem.views[k], poses,

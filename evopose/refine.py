@@ -23,7 +23,7 @@ from typing import Sequence
 import numpy as np
 
 from .fitness import PoseObjective
-from .kernels import nearest_row
+from .kernels import is_typed, nearest_row
 from .projection import project_pose
 from .refine_kernel import refine_population
 
@@ -125,7 +125,7 @@ def match_residuals(objective: PoseObjective, pose: np.ndarray) -> list[tuple[np
         mod_nn, mod_d2 = np.empty(M, np.int64), np.empty(M)
         pz = packed.pz[packed.offsets[k]:packed.offsets[k + 1]]
         nearest_row(u, v, packed.mz[k], usable, np.ascontiguousarray(pts[:, 0]), np.ascontiguousarray(pts[:, 1]),
-                    np.ascontiguousarray(pz), bool(np.any(pz) or np.any(packed.mz[k])), img_nn, img_d2, mod_nn,
+                    np.ascontiguousarray(pz), is_typed(packed.mz[k], np.ascontiguousarray(pz)), img_nn, img_d2, mod_nn,
                     mod_d2)
         image = np.where(img_nn >= 0, np.sqrt(img_d2), np.inf)
         out.append((image, np.sqrt(mod_d2[usable])))

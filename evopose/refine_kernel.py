@@ -132,7 +132,7 @@ def _to_bounds(s, lo, hi, periodic):  # pragma: no cover - compiled
 
 
 @nb.njit(cache=True, fastmath=_FASTMATH, nogil=True)
-def fitness_one(s, model, normals, use_normals, intr, cfw, weights, taus, pts, pz, mz, offsets, mode,
+def fitness_one(s, model, normals, use_normals, intr, cfw, weights, taus, pts, pz, mz, typed, offsets, mode,
                 u, v, usable, row, col, R, Rc):  # pragma: no cover - compiled
     """Eq. (4) for one pose: ``sum_k W_k d^(k)``, with the fitness's own view term (``mode``: :mod:`evopose.kernels`)."""
     total = 0.0
@@ -142,7 +142,7 @@ def fitness_one(s, model, normals, use_normals, intr, cfw, weights, taus, pts, p
         project_pose(s, model, normals, use_normals, intr[k], cfw[k], u, v, usable, R, Rc)
         a, b = offsets[k], offsets[k + 1]
         total += weights[k] * view_term_row(u, v, mz[k], usable, pts[a:b, 0], pts[a:b, 1], pz[a:b],
-                                            is_typed(mz[k], pz[a:b]), taus[k], mode, row, col)
+                                            typed[k], taus[k], mode, row, col)
     return total
 
 
@@ -207,8 +207,10 @@ def refine_population(poses, fitness, lo, hi, periodic, free, model, normals, us
     M = model.shape[0]
     V = intr.shape[0]
     P_max = 1
+    typed = np.empty(V, np.bool_)  # per view, once: whether its points are typed (kernels.is_typed)
     for k in range(V):
         P_max = max(P_max, offsets[k + 1] - offsets[k])
+        typed[k] = is_typed(mz[k], pz[offsets[k]:offsets[k + 1]])
     u = np.empty(M)
     v = np.empty(M)
     u_d = np.empty(M)
@@ -268,8 +270,8 @@ def refine_population(poses, fitness, lo, hi, periodic, free, model, normals, us
                                      w_pair, row)
                 else:
                     gate = scales[step] * taus[k]
-                    _hard_accumulate(u, v, mz[k], J, usable, px, py, pz_k, is_typed(mz[k], pz_k), gate * gate, w_k, w_k, H, g, img_nn, row,
-                                     mod_nn, mod_d2, mode == MUTUAL)
+                    _hard_accumulate(u, v, mz[k], J, usable, px, py, pz_k, typed[k], gate * gate, w_k, w_k, H, g,
+                                     img_nn, row, mod_nn, mod_d2, mode == MUTUAL)
             # damped step (Levenberg–Marquardt), fixed parameters held
             for i in range(6):
                 for j in range(i):
@@ -284,10 +286,10 @@ def refine_population(poses, fitness, lo, hi, periodic, free, model, normals, us
                 f_cur = np.inf  # unknown until the next hard step or the end
                 continue
             if not np.isfinite(f_cur):
-                f_cur = fitness_one(s, model, normals, use_normals, intr, cfw, weights, taus, pts, pz, mz, offsets,
-                                    mode, u, v, usable, row, mod_d2, R, Rc)
-            f_try = fitness_one(s_try, model, normals, use_normals, intr, cfw, weights, taus, pts, pz, mz, offsets,
-                                mode, u, v, usable, row, mod_d2, R, Rc)
+                f_cur = fitness_one(s, model, normals, use_normals, intr, cfw, weights, taus, pts, pz, mz, typed,
+                                    offsets, mode, u, v, usable, row, mod_d2, R, Rc)
+            f_try = fitness_one(s_try, model, normals, use_normals, intr, cfw, weights, taus, pts, pz, mz, typed,
+                                offsets, mode, u, v, usable, row, mod_d2, R, Rc)
             if f_try <= f_cur:
                 for d in range(6):
                     s[d] = s_try[d]
@@ -296,8 +298,8 @@ def refine_population(poses, fitness, lo, hi, periodic, free, model, normals, us
             else:
                 lam = min(lam * 10.0, 1e4)
         if not np.isfinite(f_cur):
-            f_cur = fitness_one(s, model, normals, use_normals, intr, cfw, weights, taus, pts, pz, mz, offsets,
-                                mode, u, v, usable, row, mod_d2, R, Rc)
+            f_cur = fitness_one(s, model, normals, use_normals, intr, cfw, weights, taus, pts, pz, mz, typed,
+                                offsets, mode, u, v, usable, row, mod_d2, R, Rc)
         if f_cur <= f_start:  # never worse than the input
             for d in range(6):
                 poses[n, d] = s[d]

@@ -124,11 +124,20 @@ def test_a_narrow_attitude_box_still_lets_the_position_converge():
     assert _position_error(estimate.pose, frame.truth) < 0.02
 
 
+def _copy(value):
+    """A copy of an attribute's numbers: an array, or nested tuples of arrays (the label coordinates) as one flat
+    array."""
+    if isinstance(value, np.ndarray):
+        return np.array(value)
+    if isinstance(value, tuple) and value and all(isinstance(v, (tuple, np.ndarray)) for v in value):
+        return np.concatenate([np.ravel(_copy(v)) for v in value])
+    return value
+
+
 def _snapshot(objective: PoseObjective) -> dict:
     """An objective's state: every attribute but its evaluation counter (a meter, mutable by design) and its
     packed arrays (a cached property the objective computes itself)."""
-    return {k: np.array(v) if isinstance(v, np.ndarray) else v for k, v in vars(objective).items()
-            if k not in ("counter", "packed")}
+    return {k: _copy(v) for k, v in vars(objective).items() if k not in ("counter", "packed")}
 
 
 def test_the_estimator_never_mutates_an_objective(exp2, monkeypatch):

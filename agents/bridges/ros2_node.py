@@ -19,16 +19,23 @@ from agents.bridges.rmw_zenoh import (DEFAULT_QOS, Attachment, EntityKind, Histo
                                       encode_attachment, endpoint_token, gid, node_token, topic_key)
 
 
+def _endpoint(entity, kind: EntityKind, owner: "Ros2Node", entity_id: int, topic: str, msgtype: str,
+              type_hash: str, qos: QoS) -> None:
+    """What a publisher and a subscription both are: a topic's data key, its liveliness token key (``MP`` or
+    ``MS``) and the GID derived from it."""
+    entity.topic, entity.msgtype, entity.type_hash, entity.qos = topic, msgtype, type_hash, qos
+    entity.key = topic_key(owner.domain, topic, msgtype, type_hash)
+    entity.token_key = endpoint_token(kind, owner.domain, owner.zid, owner.node_id, entity_id, owner.node, topic,
+                                      msgtype, type_hash, qos)
+    entity.gid = gid(entity.token_key)
+
+
 class Ros2Publisher:
     """One ROS 2 publisher: ``publish`` puts CDR bytes on the data key with the attachment."""
 
     def __init__(self, session: zenoh.Session, owner: "Ros2Node", entity_id: int, topic: str, msgtype: str,
                  type_hash: str, qos: QoS) -> None:
-        self.topic, self.msgtype, self.type_hash, self.qos = topic, msgtype, type_hash, qos
-        self.key = topic_key(owner.domain, topic, msgtype, type_hash)
-        self.token_key = endpoint_token(EntityKind.PUBLISHER, owner.domain, owner.zid, owner.node_id, entity_id,
-                                        owner.node, topic, msgtype, type_hash, qos)
-        self.gid = gid(self.token_key)
+        _endpoint(self, EntityKind.PUBLISHER, owner, entity_id, topic, msgtype, type_hash, qos)
         self._legacy = owner.legacy_attachment
         self._lock = threading.Lock()
         self._sequence_number = 1
@@ -65,11 +72,7 @@ class Ros2Subscription:
 
     def __init__(self, session: zenoh.Session, owner: "Ros2Node", entity_id: int, topic: str, msgtype: str,
                  type_hash: str, qos: QoS) -> None:
-        self.topic, self.msgtype, self.type_hash, self.qos = topic, msgtype, type_hash, qos
-        self.key = topic_key(owner.domain, topic, msgtype, type_hash)
-        self.token_key = endpoint_token(EntityKind.SUBSCRIPTION, owner.domain, owner.zid, owner.node_id, entity_id,
-                                        owner.node, topic, msgtype, type_hash, qos)
-        self.gid = gid(self.token_key)
+        _endpoint(self, EntityKind.SUBSCRIPTION, owner, entity_id, topic, msgtype, type_hash, qos)
         self._token = session.liveliness().declare_token(self.token_key)
         self._closed = False
 
