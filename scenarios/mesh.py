@@ -7,6 +7,7 @@ from outside, so the face normal points out). Two-sided faces (fins, panels) are
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -40,9 +41,9 @@ class Mesh:
     def __len__(self) -> int:
         return len(self.faces)
 
-    @property
+    @cached_property
     def normals(self) -> np.ndarray:
-        """Unit face normals (Newell's method), shape (F, 3)."""
+        """Unit face normals (Newell's method), shape (F, 3); made once per mesh (a moved mesh rotates them)."""
         out = np.zeros((len(self.faces), 3))
         for i, face in enumerate(self.faces):
             p = self.vertices[face]
@@ -66,14 +67,18 @@ class Mesh:
     def transformed(self, T: np.ndarray) -> "Mesh":
         """The mesh moved by the 4x4 transform ``T`` (e.g. ``world_from_target``)."""
         v = self.vertices @ T[:3, :3].T + T[:3, 3]
-        return Mesh(v, self.faces, self.colours, self.two_sided)
+        moved = Mesh(v, self.faces, self.colours, self.two_sided)
+        moved.__dict__["normals"] = self.normals @ T[:3, :3].T  # a rigid motion rotates the normals
+        return moved
 
     def __add__(self, other: "Mesh") -> "Mesh":
         offset = len(self.vertices)
-        return Mesh(np.concatenate([self.vertices, other.vertices]),
-                    self.faces + tuple(f + offset for f in other.faces),
-                    np.concatenate([self.colours, other.colours]).reshape(-1, 3),
-                    np.concatenate([self.two_sided, other.two_sided]))
+        joined = Mesh(np.concatenate([self.vertices, other.vertices]),
+                      self.faces + tuple(f + offset for f in other.faces),
+                      np.concatenate([self.colours, other.colours]).reshape(-1, 3),
+                      np.concatenate([self.two_sided, other.two_sided]))
+        joined.__dict__["normals"] = np.concatenate([self.normals, other.normals]).reshape(-1, 3)  # face by face
+        return joined
 
 
 def _outward(vertices: np.ndarray, faces: list[np.ndarray], centre: np.ndarray) -> list[np.ndarray]:

@@ -263,6 +263,19 @@ def _draw_distractors(image: np.ndarray, rng: np.random.Generator, render: Rende
     return np.array(uv_out).reshape(-1, 2), colours
 
 
+def _gain_and_noise(image: np.ndarray, gain: float, sigma: float, seed: int) -> np.ndarray:
+    """``image * gain`` plus Gaussian sensor noise of ``sigma`` grey levels, rounded and saturated to uint8.
+
+    OpenCV's generator (seeded per frame, so a frame renders the same every time) and arithmetic: about 4x
+    faster than numpy's here, and outside the interpreter lock, so an agent's other threads keep running.
+    """
+    noise = np.zeros(image.shape, np.float32)
+    if sigma > 0:
+        cv2.setRNGSeed(seed)
+        cv2.randn(noise.reshape(-1), 0.0, float(sigma))  # one channel: a scalar sigma would reach only blue
+    return cv2.addWeighted(image, float(gain), noise, 1.0, 0.0, dtype=cv2.CV_8U)
+
+
 def render_frame(scenario: Scenario, frame: int, vehicle: str | None = None, *, clean: bool = False) -> RenderedFrame:
     """Render what ``vehicle`` (default: the first) sees at ``frame``.
 
@@ -358,10 +371,7 @@ def render_frame(scenario: Scenario, frame: int, vehicle: str | None = None, *, 
         if blur > 0:
             image = cv2.GaussianBlur(image, (0, 0), blur)
         if gain != 1.0 or render.noise_sigma > 0:
-            noisy = image.astype(np.float32) * np.float32(gain)
-            if render.noise_sigma > 0:
-                noisy += rng.standard_normal(noisy.shape, dtype=np.float32) * np.float32(render.noise_sigma)
-            image = np.clip(noisy, 0, 255).astype(np.uint8)
+            image = _gain_and_noise(image, gain, render.noise_sigma, int(rng.integers(1, 2**31)))
 
     sensors = {}
     target_pose = scenario.target_pose(frame)

@@ -89,3 +89,18 @@ def test_feature_sets_carry_the_best_and_team_mates_agree(paper_scale):
         if n >= 1:  # from the second frame on, each has the other's best
             agreed += bool(np.array_equal(r1.estimate.pose, r2.estimate.pose))
     assert agreed == 3
+
+
+# -- the improver's slots (agents.vehicle.roles.SlotSchedule) ----------------------------------------------
+
+def test_slot_schedule_keeps_the_rate_and_makes_up_at_most_a_burst():
+    from agents.vehicle.roles import SlotSchedule
+    schedule = SlotSchedule(200.0, burst=20)  # 5 ms slots, up to a 100 ms frame's worth made up
+    assert schedule.due(0.0) and not schedule.due(0.001) and schedule.wait_s(0.001) == pytest.approx(0.004)
+    # a 60 ms frame held the thread: the 12 slots it covered are made up at once, then the rate is 200 Hz again
+    made_up = sum(schedule.due(0.065) for _ in range(30))
+    assert made_up == 13 and schedule.wait_s(0.065) == pytest.approx(0.005)
+    # a long stall is not made up beyond the burst: never more than 200 Hz over a burst's window
+    assert sum(schedule.due(10.0) for _ in range(100)) == 20
+    plain = SlotSchedule(200.0)  # burst 1: a late call does not lower the rate, and nothing is made up
+    assert plain.due(0.0) and plain.due(0.007) and not plain.due(0.008) and plain.due(0.010)

@@ -20,6 +20,7 @@ from agents.transport.presence import ensure_name_free
 from agents.transport.session import SessionOptions, open_session
 from agents.vehicle.config import CAMERA_ROLES, AgentConfig
 from agents.vehicle.memory import pin_mmap_threshold
+from agents.vehicle.threads import limit_blas_threads
 from agents.vehicle.roles import CameraVehicle, GroundStation, Vehicle
 from agents.vehicle.target_roles import Airship, Target
 
@@ -61,6 +62,7 @@ def run_agent(options: SessionOptions, config: AgentConfig, stop: threading.Even
     """Open the bus and run the vehicle of its role until ``stop`` or ``config.frames``; returns the summary."""
     config.check()
     pin_mmap_threshold()
+    limit_blas_threads()
     scenario = load_world(config)
     role = resolve_role(scenario, config.vehicle, config.role)
     if role in CAMERA_ROLES:

@@ -38,26 +38,32 @@ from agents.vehicle.team_views import TeamViews, attitude_knowledge, build_views
 Emit = Callable[[dict], None]
 #: Share of a frame's period a search from scratch may take in the frame loop (the rest: render, extract, share).
 SEARCH_SHARE_OF_FRAME = 0.5
-#: Share of the time the improver thread may run generations (it shares the interpreter with the frame loop).
-IMPROVER_DUTY = 0.5
 #: Frames estimated before joining (a search, then tracking), so that no frame compiles a kernel.
 WARM_UP_FRAMES = 3
 #: Hints kept while waiting for the next frame or generation (the newest).
 HINTS_KEPT = 64
 
 
-class HintSchedule:
-    """At most ``rate_hz`` hints a second, as a schedule (a late wake-up does not lower the rate)."""
+class SlotSchedule:
+    """At most ``rate_hz`` events (hints, generations) a second on average, with a backlog of at most ``burst``.
 
-    def __init__(self, rate_hz: float) -> None:
-        self.period, self.next_s = 1.0 / rate_hz, 0.0
+    Slots missed while the frame loop had the interpreter are made up afterwards (up to ``burst`` of them), so
+    the rate over a frame period is kept although the generations run only between frames.
+    """
+
+    def __init__(self, rate_hz: float, burst: int = 1) -> None:
+        self.period, self.next_s, self.burst = 1.0 / rate_hz, 0.0, max(int(burst), 1)
 
     def due(self, now_s: float) -> bool:
-        """True (and the next slot booked) when a hint may go out at ``now_s``."""
+        """True (and the next slot booked) when a slot is free at ``now_s``."""
         if now_s < self.next_s:
             return False
-        self.next_s = max(self.next_s + self.period, now_s - self.period)
+        self.next_s = max(self.next_s + self.period, now_s - (self.burst - 1) * self.period)
         return True
+
+    def wait_s(self, now_s: float) -> float:
+        """Seconds until the next slot (0 when one is free)."""
+        return max(self.next_s - now_s, 0.0)
 
 
 class Vehicle(ABC):
@@ -128,6 +134,8 @@ class Vehicle(ABC):
         return {"event": "summary", "vehicle": self.config.vehicle, "role": self.role, "share": self.config.share,
                 "fleet": self.config.fleet, "scenario": self.scenario.name, "seed": self.config.seed,
                 "world_seed": self.scenario.seed, "fps": self.clock.fps, **self.record.summary(),
+                # from the first frame's instant to the end of the last frame (rates per second of the run)
+                "run_s": (time.time_ns() - self._started_ns) / NS if self._started_ns else 0.0,
                 "teammates": sorted(self.bus.teammates()), "traffic": self.bus.counters.snapshot()}
 
 
@@ -151,10 +159,17 @@ class CameraVehicle(Vehicle):
         self._sharing_mates: set[str] = set()  # team-mates that ever sent views
         self._stale: set[str] = set()  # of those, the live ones whose data are stale now
         self._hints_lock = threading.Lock()
-        self._hint_schedule = HintSchedule(config.hint_rate_hz)
+        # slots missed during a frame are made up after it (at most a frame period's worth)
+        burst = max(int(config.hint_rate_hz * self.period_s), 1)
+        self._hint_schedule = SlotSchedule(config.hint_rate_hz, burst)
+        self._generation_schedule = SlotSchedule(config.hint_rate_hz, burst)
         self._hint_send_lock = threading.Lock()
         #: held while the estimator is used: by the frame loop and by the improver thread (one writer at a time)
         self._estimator_lock = threading.Lock()
+        #: set while no frame is in progress: the improver runs only then, so the frame loop keeps the camera rate
+        #: (both share one interpreter; a generation between frames never delays a frame by more than itself)
+        self._between_frames = threading.Event()
+        self._between_frames.set()
         self._image_ready: float | None = None  # perf_counter when the first frame's image existed
         self._done = threading.Event()
 
@@ -300,6 +315,13 @@ class CameraVehicle(Vehicle):
     # -- the frame ------------------------------------------------------------------------------
 
     def frame(self, n: int) -> None:
+        self._between_frames.clear()
+        try:
+            self._frame(n)
+        finally:
+            self._between_frames.set()
+
+    def _frame(self, n: int) -> None:
         stamp = self.clock.stamp_ns(n)
         t_acquire = time.perf_counter()
         frame = self.camera.acquire(n, stamp)
@@ -370,23 +392,26 @@ class CameraVehicle(Vehicle):
             self.record.hints_published += 1
 
     def improve(self, stop: threading.Event) -> None:
-        """The improver thread: generations on the latest views (and the search in progress), with the hints that
-        arrive; in hint mode each best goes out as a hint, at up to ``hint_rate_hz``."""
+        """The improver thread: between frames, generations on the latest views (and the search in progress) with
+        the hints that arrived; in hint mode each good best goes out as a hint. One generation per slot of
+        ``hint_rate_hz``; the slots that fell during a frame are made up after it."""
         period = 1.0 / self.config.hint_rate_hz
         hint_mode = self.config.share == "hint"
-        next_s = time.monotonic()
+        schedule = self._generation_schedule
         while not stop.is_set() and not self._done.is_set():
-            started = time.monotonic()
+            if not self._between_frames.wait(0.1):
+                continue
+            now = time.monotonic()
+            if not schedule.due(now):
+                self._done.wait(schedule.wait_s(now))
+                continue
             with self._estimator_lock:
                 estimate = self.estimator.generation(self.take_hints() if hint_mode else None, budget_s=period)
+            if estimate is None:  # nothing to improve before the first estimate
+                self._done.wait(0.01)
             # a search's best so far, or an unsure pose, is no hint
-            if estimate is not None and estimate.good and estimate.solution.confident and hint_mode:
+            elif estimate.good and estimate.solution.confident and hint_mode:
                 self.send_hint(estimate.pose)
-            now = time.monotonic()
-            next_s = max(next_s + period, now - period)
-            # at most IMPROVER_DUTY of the time: the frame loop (rendering, extraction) keeps the camera rate
-            rest = (now - started) * (1.0 - IMPROVER_DUTY) / IMPROVER_DUTY
-            self._done.wait(max(next_s - now, rest) if estimate is not None else 0.01)
 
 
 class GroundStation(CameraVehicle):
@@ -411,4 +436,4 @@ class GroundStation(CameraVehicle):
         return []
 
 
-__all__ = ["CameraVehicle", "GroundStation", "HintSchedule", "Vehicle"]
+__all__ = ["CameraVehicle", "GroundStation", "SlotSchedule", "Vehicle"]

@@ -1,0 +1,24 @@
+"""An agent's native thread pools: one BLAS thread per agent process.
+
+numpy's OpenBLAS starts a worker per core and, after each call large enough to be split (the covariance's
+Monte Carlo moments, e.g. ``(4096, 6) @ (6, 6)``), that worker busy-waits for the next one. In an agent,
+which computes every frame, it never went back to sleep: measured on this 2-core machine, it took 70 % of a
+core in each hint-mode agent, more than the frame loop itself (36 %), so the two agents of a pair missed
+camera ticks and sent fewer hints. An agent's arrays are small and it has threads of its own (frame loop,
+improver, receivers): BLAS gains nothing from more than one thread there.
+"""
+
+from __future__ import annotations
+
+from threadpoolctl import threadpool_limits
+
+#: BLAS threads of an agent process.
+AGENT_BLAS_THREADS = 1
+
+
+def limit_blas_threads(threads: int = AGENT_BLAS_THREADS) -> None:
+    """Cap the BLAS libraries loaded in this process at ``threads`` threads (for the rest of the process)."""
+    threadpool_limits(limits=threads, user_api="blas")
+
+
+__all__ = ["AGENT_BLAS_THREADS", "limit_blas_threads"]
