@@ -113,15 +113,29 @@ def test_camera_round_trip_and_pairing_by_stamp(exp2):
 def test_a_narrow_attitude_box_still_lets_the_position_converge():
     """Eq. (3) with an accurate IMU: roll, pitch and yaw held within 0.2° of the truth. The refinement must
     keep moving the position while the angles sit at the edges of their narrow box (before the active-set
-    step it was stuck there: 17 cm off, never good)."""
+    step it was stuck there: 17 cm off, never good, and worse on eq. 1 than the truth).
+
+    Stuck means an estimate that fits its own frame worse than the true pose does, so that is asserted on
+    every frame. The distance to the truth is asserted on the median: a clutter mark near a model mark can
+    move a frame's optimum itself (frame 0 here: 6 cm, 1.9 sigma of the estimate's own x, and it fits the
+    frame better than the truth does)."""
     scenario = load_scenario("exp1-airship")
-    frame = SimulatedCamera(scenario, "ground-station").acquire(0, 0)
-    views, _ = build_views([own_view("station", 0, frame.camera, frame.points)])
-    knowledge = [Knowledge(n, float(frame.truth[3 + i]), np.deg2rad(0.2))
-                 for i, n in enumerate(("roll", "pitch", "yaw"))]
-    estimate = _estimator(scenario).estimate(views, knowledge=knowledge)
-    assert estimate.good and estimate.good_at is not None
-    assert _position_error(estimate.pose, frame.truth) < 0.02
+    camera = SimulatedCamera(scenario, "ground-station")
+    errors = []
+    for n in range(5):
+        frame = camera.acquire(n, n)
+        views, _ = build_views([own_view("station", 0, frame.camera, frame.points)])
+        knowledge = [Knowledge(name, float(frame.truth[3 + i]), np.deg2rad(0.2))
+                     for i, name in enumerate(("roll", "pitch", "yaw"))]
+        estimator = _estimator(scenario)
+        estimate = estimator.estimate(views, knowledge=knowledge)
+        assert estimate.good and estimate.good_at is not None
+        objective = PoseObjective(estimator.problem(views, knowledge, None), estimator.options.fitness,
+                                  estimator.options.tau)
+        at_estimate, at_truth = objective(np.stack([estimate.pose, frame.truth]))
+        assert at_estimate <= at_truth + 1e-6, n
+        errors.append(_position_error(estimate.pose, frame.truth))
+    assert np.median(errors) < 0.02, errors
 
 
 def _copy(value):
