@@ -15,7 +15,6 @@ import argparse
 import socket
 import statistics
 import threading
-import time
 from pathlib import Path
 
 from agents.experiments.runner import run_scenario

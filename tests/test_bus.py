@@ -17,7 +17,7 @@ import pytest
 from protocol import SIZE_LIMITS, Topic, decode, encode
 from agents.tools.runners import PublishSpec, sample_message
 from agents.transport.bus import FleetBus
-from agents.transport.session import SessionOptions
+from agents.transport.session import MAX_MESSAGE_BYTES, SessionOptions
 from tests.fleet_procs import free_port
 
 FLEET = "bus-test"
@@ -180,6 +180,22 @@ def test_bad_payloads_are_counted_by_reason_and_not_delivered(endpoint):
         assert rx.latest(Topic.ATTITUDE)["tx"].message.seq == 7
     assert snap["rejected"] == {"malformed": 2, "oversized": 1, "invalid": 1}, snap
     assert snap["rejected_by_topic"] == {"attitude": 4} and snap["received"] == {"attitude": 1}
+
+
+def test_a_message_beyond_the_session_bound_is_dropped_by_zenoh_and_the_link_stays_up(endpoint):
+    """Zenoh reassembles at most MAX_MESSAGE_BYTES per message (16 MiB; its own default is 1 GiB): a 24 MiB
+    payload never reaches the receiver, not even as an oversized rejection, and the next message still does."""
+    with open_bus("tx", endpoint, listen=True) as tx, open_bus("rx", endpoint) as rx:
+        rx.subscribe(Topic.ATTITUDE)
+        assert rx.wait_for_teammates({"tx"}, DEADLINE) and tx.wait_for_subscribers(Topic.ATTITUDE, DEADLINE)
+        tx.put_raw(Topic.ATTITUDE, b"\x00" * (MAX_MESSAGE_BYTES + 8 * 2**20))
+        tx.put_raw(Topic.ATTITUDE, b"\x00" * (SIZE_LIMITS[Topic.ATTITUDE] + 1))  # within the bound: ours refuses it
+        tx.publish(message(tx, Topic.ATTITUDE, seq=3))
+        good = rx.recv(Topic.ATTITUDE, timeout=DEADLINE)
+        assert good is not None and good.message.seq == 3
+        snap = rx.counters.snapshot()
+    assert snap["rejected"] == {"oversized": 1} and snap["received"] == {"attitude": 1}, snap
+    assert snap["bytes_received"]["attitude"] < 1024
 
 
 def test_a_teammate_that_leaves_is_dropped_and_used_again_when_it_is_back(endpoint):

@@ -110,6 +110,24 @@ def test_camera_round_trip_and_pairing_by_stamp(exp2):
     assert team.newest({"H2"}, now + 5 * 10**9, 1.0) == {}
 
 
+def test_only_team_mates_on_the_fleet_clock_are_waited_for(exp2):
+    """Issue 12: a member whose newest feature set is stamped between the clock's ticks (a flood at arbitrary
+    instants, a wrong --fps) is not waited for at a frame; it is again once its data come on the clock."""
+    _, frames = exp2
+    info = camera_info(frames["H1"].camera)
+    clock = FrameClock(10.0, epoch_ns=1_000)
+    on_clock = lambda stamp: clock.index_of(stamp) is not None  # noqa: E731
+    team = TeamViews()
+    points = np.zeros((4, 2), np.float32)
+    for n in range(3):
+        team.add(MateView("H2", clock.stamp_ns(n), info, points))
+        team.add(MateView("H3", clock.stamp_ns(n), info, points))
+    team.add(MateView("H3", clock.stamp_ns(2) + 37_000_000, info, points))  # the flood's: 37 ms off the tick
+    assert team.on_clock({"H2", "H3", "H4"}, on_clock) == {"H2"}  # H4 sent nothing: nothing to wait for
+    team.add(MateView("H3", clock.stamp_ns(3), info, points))
+    assert team.on_clock({"H2", "H3"}, on_clock) == {"H2", "H3"}
+
+
 def test_a_narrow_attitude_box_still_lets_the_position_converge():
     """Eq. (3) with an accurate IMU: roll, pitch and yaw held within 0.2° of the truth. The refinement must
     keep moving the position while the angles sit at the edges of their narrow box (before the active-set

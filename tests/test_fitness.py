@@ -15,7 +15,6 @@ from evopose.fitness import (
     auto_tau,
     project_into_view,
     step_weights,
-    view_term,
 )
 from evopose.kernels import MUTUAL, NO_MATCH_D2, chamfer_matches, chamfer_sums, view_terms
 from evopose.pose import rotation_from_euler

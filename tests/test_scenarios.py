@@ -132,6 +132,11 @@ def test_scenario_run_is_watchable_and_leaves_nothing_running():
             {"rate_hz": s["traffic"]["sent"]["features"] / seconds,
              "bytes_per_message": s["traffic"]["bytes_sent"]["features"] / s["traffic"]["sent"]["features"],
              "bytes_per_s": s["traffic"]["bytes_sent"]["features"] / seconds})
+        # the costs (issue 13's team-size table): the whole process's CPU over the run's span, every topic
+        assert 0 < s["render_s"] and 0 < s["cpu_s"] <= s["run_s"] * (os.cpu_count() or 1), s
+        assert row["cpu_per_frame_s"] == s["cpu_s"] / 25 and row["render_per_frame_s"] == s["render_s"] / 25
+        assert row["bytes_sent_per_s"] == sum(s["traffic"]["bytes_sent"].values()) / s["run_s"]
+        assert row["bytes_received_per_s"] == sum(s["traffic"]["bytes_received"].values()) / s["run_s"] > 0
     assert running_with(endpoint) == []
 
 

@@ -30,6 +30,9 @@ WORLDS = (("exp2-paper-scale", "exp2-paper-scale-driving", "paper scale (Pioneer
           ("exp2", "exp2-driving", "telephoto (Pioneer ~180 px)"))
 #: The scenarios run with the Pioneer driving (tracking, eq. 2).
 DRIVING = ("exp2a-features", "exp2b-hints")
+#: Issue 13's team-size sweep (1, 2, 4, 8 UAVs on one world) and its runs: at most this many, as each run of
+#: its seven variants starts up to nine processes on this 2-core machine.
+TEAM_SIZE, TEAM_SIZE_RUNS = "exp2-team-size", 3
 
 #: Paper, Table I: roll, pitch, yaw error (deg), X, Y, Z error (cm), each (mean, σ); time (s).
 PAPER_TABLE_I = {
@@ -156,15 +159,16 @@ def run_all(*, runs: int, frames: int | None, seed: int, endpoint: str, stop: th
             on_run=None) -> list[dict]:
     """Every experiment: Experiment 1 on its world; Experiment 2 on each of :data:`WORLDS`, also driving."""
     records: list[dict] = []
-    plan = [("exp1-airship", None)]
+    plan = [("exp1-airship", None, runs)]
     for world, driving, _ in WORLDS:
-        plan += [(name, world) for name in SCENARIOS if name != "exp1-airship"]
-        plan += [(name, driving) for name in DRIVING]
-    for name, world in plan:
+        plan += [(name, world, runs) for name in SCENARIOS if name != "exp1-airship"]
+        plan += [(name, driving, runs) for name in DRIVING]
+    plan.append((TEAM_SIZE, None, min(runs, TEAM_SIZE_RUNS)))
+    for name, world, n in plan:
         if stop.is_set():
             break
         scenario = load_fleet_scenario(name, world)
-        records += run_scenario(scenario, runs=runs, frames=frames, seed=seed, endpoint=endpoint, stop=stop,
+        records += run_scenario(scenario, runs=n, frames=frames, seed=seed, endpoint=endpoint, stop=stop,
                                 on_run=on_run, keep_going=True)
     return records
 
@@ -201,6 +205,30 @@ def _tracking_lines(result_rows: list[dict]) -> list[str]:
         for r in (r for r in result_rows if r["world"] == driving):
             lines.append(f"| {driving} | {r['scenario']} | {r['vehicle']} | {r['good_fraction']:.0%} | "
                          f"{_cell(r['position'] * 100, r['position_sd'] * 100, 1)} | {_cell(r['yaw'], r['yaw_sd'], 2)} |")
+    return lines
+
+
+def _team_size_lines(records: list[dict], result_rows: list[dict]) -> list[str]:
+    """Issue 13: per team size and share mode, the UAVs' errors, agreement with H1, and per-UAV costs."""
+    lines = ["| share | UAVs | frames good | position error, cm: mean (worst UAV) | yaw error, °: mean (worst) | "
+             "same pose as H1 (1 cm, 0.1°) | CPU per frame, ms (of which rendering) | sent, B/s | received, B/s |",
+             "|---|---|---|---|---|---|---|---|---|"]
+    variants = dict.fromkeys(r["variant"] for r in result_rows if r["scenario"] == TEAM_SIZE)
+    for variant in variants:
+        uavs = sorted((r for r in result_rows if r["scenario"] == TEAM_SIZE and r["variant"] == variant
+                       and r["role"] == "uav"), key=lambda r: int(r["vehicle"].lstrip("H") or 0))
+        if not uavs:
+            continue
+        mean = lambda key: statistics.fmean(r[key] for r in uavs)  # noqa: E731
+        worst = lambda key: max(r[key] for r in uavs)  # noqa: E731
+        runs = [r for r in records if r["scenario"] == TEAM_SIZE and r["variant"] == variant]
+        shares = [frame_agreement(runs, "H1", r["vehicle"]) for r in uavs[1:]]
+        same = (f"{min(a['fraction'] for a in shares):.0%} (worst pair)" if shares else "-")
+        lines.append(f"| {uavs[0]['share']} | {len(uavs)} | {mean('good_fraction'):.0%} | "
+                     f"{mean('position') * 100:.1f} ({worst('position') * 100:.1f}) | "
+                     f"{mean('yaw'):.2f} ({worst('yaw'):.2f}) | {same} | "
+                     f"{mean('cpu_per_frame_s') * 1e3:.0f} ({mean('render_per_frame_s') * 1e3:.0f}) | "
+                     f"{mean('bytes_sent_per_s'):,.0f} | {mean('bytes_received_per_s'):,.0f} |")
     return lines
 
 
@@ -246,7 +274,13 @@ def write_report(out: Path, *, runs: int, frames: int | None, seed: int, endpoin
               "", "## Pose agreement between H1 and H2, frame by frame", "",
               *_agreement_lines(records, [w for w, _, _ in WORLDS] + [d for _, d, _ in WORLDS]),
               "", "## Tracking a driving Pioneer (eq. 2): 0.5 m/s, turning at 0.2 rad/s", "",
-              *_tracking_lines(result_rows), "", "## Fig. 6: fitness of the best individual", ""]
+              *_tracking_lines(result_rows), "",
+              f"## Team size: 1, 2, 4 and 8 UAVs (`{TEAM_SIZE}`, world `exp2-eight`, 2 frames/s)", "",
+              *_team_size_lines(records, result_rows), "",
+              f"Up to {TEAM_SIZE_RUNS} runs per size. Errors over each UAV's good frames. CPU: the whole agent process "
+              "(every thread) per frame, of which rendering its simulated camera, which a real vehicle does not "
+              "pay. Bytes: every topic, per second of the run, per UAV (the router's and the meter's traffic "
+              "aside).", "", "## Fig. 6: fitness of the best individual", ""]
     for world, _, title in WORLDS:
         fig = figures.figure_6({"H1 alone": _find(result_rows, "exp2-solo", "H1", world),
                                 "H2 alone": _find(result_rows, "exp2-solo", "H2", world),

@@ -48,6 +48,7 @@ def rows(records: list[dict]) -> list[dict]:
                                       / max(sum(s["estimates"] for s in summaries), 1))
         row["history"] = next((s["first_history"] for s in summaries if s.get("first_history")), [])
         row["traffic"] = traffic_rates(summaries)
+        row.update(costs(summaries))
         out.append(row)
     return out
 
@@ -66,6 +67,21 @@ def traffic_rates(summaries: list[dict]) -> dict[str, dict]:
     return {topic: {"rate_hz": statistics.fmean(r for r, _ in v),
                     "bytes_per_message": statistics.fmean(b for _, b in v),
                     "bytes_per_s": statistics.fmean(r * b for r, b in v)} for topic, v in per_topic.items()}
+
+
+def costs(summaries: list[dict]) -> dict[str, float]:
+    """What one vehicle cost, averaged over runs: process CPU seconds per frame (every thread), of which
+    acquiring the image (rendering, in simulation), and bytes/s sent and received on every topic."""
+    cpu, render, sent, received = [], [], [], []
+    for s in summaries:
+        if s.get("frames") and s.get("cpu_s") is not None:
+            cpu.append(s["cpu_s"] / s["frames"])
+            render.append(s.get("render_s", 0.0) / s["frames"])
+        if s.get("run_s"):
+            sent.append(sum(s["traffic"]["bytes_sent"].values()) / s["run_s"])
+            received.append(sum(s["traffic"]["bytes_received"].values()) / s["run_s"])
+    return {"cpu_per_frame_s": _mean_sd(cpu)[0], "render_per_frame_s": _mean_sd(render)[0],
+            "bytes_sent_per_s": _mean_sd(sent)[0], "bytes_received_per_s": _mean_sd(received)[0]}
 
 
 #: Two published poses agree when their positions are within this (m) and each angle within this (deg).

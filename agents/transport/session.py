@@ -12,6 +12,10 @@ Safe defaults (docs/security.md), where Zenoh's own are wide open:
   :data:`PEER_LISTEN` ``tcp/127.0.0.1:0`` (a free port, so that peers on this host that learn of it by
   gossip can still connect to it). Zenoh's defaults would be ``tcp/[::]:7447`` and ``tcp/[::]:0``:
   every interface. A peer that must be reachable from other hosts says so: ``--listen tcp/0.0.0.0:0``.
+- a message is reassembled up to :data:`MAX_MESSAGE_BYTES` (16 MiB, twice the largest payload any topic
+  accepts, ``protocol.limits``) instead of Zenoh's 1 GiB, unless the file sets
+  ``transport/link/rx/max_message_size``: a larger message is dropped by Zenoh before it is assembled, and
+  the link stays up for the messages after it (docs/security.md);
 - TLS file names in a configuration file that are relative (as ``evopose fleet credentials`` writes
   them) are resolved against the file's directory, not the working directory.
 
@@ -36,6 +40,7 @@ from pathlib import Path
 import zenoh
 
 from agents.errors import BusConfigError
+from protocol.limits import SIZE_LIMITS
 
 MODES = ("peer", "client", "router")
 #: Where a router listens by default (loopback only).
@@ -47,6 +52,10 @@ TLS_FILE_KEYS = ("root_ca_certificate", "listen_private_key", "listen_certificat
                  "connect_certificate")
 #: How often a lost ``connect`` endpoint is tried again, ms: Zenoh's default is 1000 doubling up to 4000.
 CONNECT_RETRY = {"period_init_ms": 250, "period_max_ms": 1000, "period_increase_factor": 2}
+#: Largest message a session reassembles, bytes: twice the largest payload a topic accepts (room for the key,
+#: attachments and other Zenoh traffic of the same size class, e.g. a ROS 2 mirror's image).
+MAX_MESSAGE_BYTES = 2 * max(SIZE_LIMITS.values())
+_MAX_MESSAGE_KEY = "transport/link/rx/max_message_size"
 _ENDPOINT = re.compile(r"[a-z][a-z0-9\-]*/\S+")
 
 
@@ -132,6 +141,8 @@ def make_config(options: SessionOptions) -> zenoh.Config:
     if not options.listen:
         _listen_on_loopback_by_default(config)
     _insert(config, "scouting/multicast/enabled", bool(options.multicast), "multicast")
+    if _get(config, _MAX_MESSAGE_KEY) == _get(zenoh.Config(), _MAX_MESSAGE_KEY):  # the file did not choose
+        _insert(config, _MAX_MESSAGE_KEY, MAX_MESSAGE_BYTES, _MAX_MESSAGE_KEY)
     if _get(config, "connect/retry") is None:  # the file did not choose
         _insert(config, "connect/retry", CONNECT_RETRY, "connect/retry")
     for key, value in options.extra.items():

@@ -77,6 +77,7 @@ class Vehicle(ABC):
         self.period_s = 1.0 / self.clock.fps
         self.record = RunRecord()
         self._started_ns = 0
+        self._cpu_started_s = 0.0
 
     def subscribe(self) -> None:
         """Declare the subscriptions of the role (before the first frame)."""
@@ -114,6 +115,7 @@ class Vehicle(ABC):
             n = nxt
             if not self._started_ns:
                 self._started_ns = self.clock.stamp_ns(n)
+                self._cpu_started_s = time.process_time()
             try:
                 self.frame(n)
             except SourceEnded:  # a video file or image sequence has no more frames: a clean end, not an error
@@ -136,6 +138,9 @@ class Vehicle(ABC):
                 "world_seed": self.scenario.seed, "fps": self.clock.fps, **self.record.summary(),
                 # from the first frame's instant to the end of the last frame (rates per second of the run)
                 "run_s": (time.time_ns() - self._started_ns) / NS if self._started_ns else 0.0,
+                # CPU seconds of the whole process (every thread) over the same span: per frame, what a vehicle
+                # of a team this size costs (of which ``render_s``: the simulated camera, not a vehicle's work)
+                "cpu_s": time.process_time() - self._cpu_started_s if self._started_ns else 0.0,
                 "teammates": sorted(self.bus.teammates()), "traffic": self.bus.counters.snapshot()}
 
 
@@ -281,10 +286,7 @@ class CameraVehicle(Vehicle):
         self.team.keep_only(alive)
         expected = self.team.sharing(alive, stamp_ns, max_age + self.period_s)
         self._report_staleness(alive, expected, stamp_ns)
-        # waited for only while its data come on the fleet clock: views stamped off it (a member flooding feature
-        # sets at arbitrary instants, a wrong --fps or --epoch-ns) never pair with a frame, so a wait would only
-        # cost the frame (issue 12: a flooding member took 0.57-0.74 of the frame rate this way)
-        expected = {m for m in expected if self._on_clock(self.team.newest_stamp_ns(m))}
+        expected = self.team.on_clock(expected, lambda stamp: self.clock.index_of(stamp) is not None)
         if not self.record.frames:  # the first frame: the team waited for is expected before anything came from it
             expected |= set(self.config.wait_for) & set(alive)
         deadline = time.monotonic() + self.sync_wait_s
@@ -293,9 +295,6 @@ class CameraVehicle(Vehicle):
         # a team-mate whose frame of this instant did not come in time: its newest fresh one
         found.update(self.team.newest(expected - set(found), stamp_ns, max_age))
         return list(found.values())
-
-    def _on_clock(self, stamp_ns: int | None) -> bool:
-        return stamp_ns is not None and self.clock.index_of(stamp_ns) is not None
 
     def _report_staleness(self, alive: frozenset[str], fresh: set[str], stamp_ns: int) -> None:
         """A live team-mate whose data went stale (frozen, or a cut link: nothing newer than ``--max-age`` and the
@@ -325,6 +324,7 @@ class CameraVehicle(Vehicle):
         stamp = self.clock.stamp_ns(n)
         t_acquire = time.perf_counter()
         frame = self.camera.acquire(n, stamp)
+        self.record.render_s += frame.render_s
         if self._image_ready is None:
             self._image_ready = t_acquire + frame.render_s
         mine = own_view(self.config.vehicle, stamp, frame.camera, frame.points, frame.labels)
