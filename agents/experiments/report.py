@@ -210,9 +210,10 @@ def _tracking_lines(result_rows: list[dict]) -> list[str]:
 
 def _team_size_lines(records: list[dict], result_rows: list[dict]) -> list[str]:
     """Issue 13: per team size and share mode, the UAVs' errors, agreement with H1, and per-UAV costs."""
-    lines = ["| share | UAVs | frames good | position error, cm: mean (worst UAV) | yaw error, °: mean (worst) | "
-             "same pose as H1 (1 cm, 0.1°) | CPU per frame, ms (of which rendering) | sent, B/s | received, B/s |",
-             "|---|---|---|---|---|---|---|---|---|"]
+    lines = ["| share | UAVs | frames good | H1's position error, cm | position error, cm: mean (worst UAV) | "
+             "yaw error, °: mean (worst) | same pose as H1 (1 cm, 0.1°) | CPU per frame, ms (of which rendering) | "
+             "sent, B/s | received, B/s |",
+             "|---|---|---|---|---|---|---|---|---|---|"]
     variants = dict.fromkeys(r["variant"] for r in result_rows if r["scenario"] == TEAM_SIZE)
     for variant in variants:
         uavs = sorted((r for r in result_rows if r["scenario"] == TEAM_SIZE and r["variant"] == variant
@@ -225,6 +226,7 @@ def _team_size_lines(records: list[dict], result_rows: list[dict]) -> list[str]:
         shares = [frame_agreement(runs, "H1", r["vehicle"]) for r in uavs[1:]]
         same = (f"{min(a['fraction'] for a in shares):.0%} (worst pair)" if shares else "-")
         lines.append(f"| {uavs[0]['share']} | {len(uavs)} | {mean('good_fraction'):.0%} | "
+                     f"{_cell(uavs[0]['position'] * 100, uavs[0]['position_sd'] * 100, 1)} | "
                      f"{mean('position') * 100:.1f} ({worst('position') * 100:.1f}) | "
                      f"{mean('yaw'):.2f} ({worst('yaw'):.2f}) | {same} | "
                      f"{mean('cpu_per_frame_s') * 1e3:.0f} ({mean('render_per_frame_s') * 1e3:.0f}) | "

@@ -76,7 +76,7 @@ def costs(summaries: list[dict]) -> dict[str, float]:
     for s in summaries:
         if s.get("frames") and s.get("cpu_s") is not None:
             cpu.append(s["cpu_s"] / s["frames"])
-            render.append(s.get("render_s", 0.0) / s["frames"])
+            render.append(s.get("render_cpu_s", 0.0) / s["frames"])
         if s.get("run_s"):
             sent.append(sum(s["traffic"]["bytes_sent"].values()) / s["run_s"])
             received.append(sum(s["traffic"]["bytes_received"].values()) / s["run_s"])

@@ -88,6 +88,9 @@ class Frame:
     render_s : float
         Seconds the simulation took to render the image (what a real camera would not cost); for a real
         source the seconds its read took.
+    render_cpu_s : float
+        CPU seconds of the rendering thread for it (0 for a real source): what the simulator, not the vehicle,
+        cost; unlike ``render_s`` it does not grow while the thread waits for a core.
     """
 
     index: int
@@ -100,6 +103,7 @@ class Frame:
     render_s: float = 0.0
     labels: np.ndarray | None = None
     skipped: str | None = None
+    render_cpu_s: float = 0.0
 
 
 class SimulatedCamera:
@@ -119,12 +123,12 @@ class SimulatedCamera:
 
     def acquire(self, index: int, stamp_ns: int) -> Frame:
         scene = self.scene_frame(index)
-        t0 = time.perf_counter()
+        t0, cpu0 = time.perf_counter(), time.thread_time()
         rendered = render_frame(self.scenario, scene, self.vehicle)
-        render_s = time.perf_counter() - t0
+        render_s, render_cpu_s = time.perf_counter() - t0, time.thread_time() - cpu0
         points, labels = self.extract(rendered.image)
         return Frame(index, scene, stamp_ns, rendered.image, rendered.camera, points,
-                     self.scenario.target_pose(scene), render_s, labels)
+                     self.scenario.target_pose(scene), render_s, labels, render_cpu_s=render_cpu_s)
 
     def extract(self, image: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The target's colour marks in a BGR image (own or a team-mate's raw frame), shape (N, 2), and each one's

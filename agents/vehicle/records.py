@@ -68,7 +68,7 @@ class RunRecord:
     first_confirmed_s: float | None = None
     first_solve_s: float | None = None
     first_history: list = field(default_factory=list)
-    render_s: float = 0.0  #: seconds acquiring images: rendering (simulation) or reading (a real source)
+    render_cpu_s: float = 0.0  #: CPU seconds spent rendering simulated frames (0 with a real source)
     hints_published: int = 0
     hints_used: int = 0
     last_pose: list | None = None

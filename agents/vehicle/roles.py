@@ -139,7 +139,7 @@ class Vehicle(ABC):
                 # from the first frame's instant to the end of the last frame (rates per second of the run)
                 "run_s": (time.time_ns() - self._started_ns) / NS if self._started_ns else 0.0,
                 # CPU seconds of the whole process (every thread) over the same span: per frame, what a vehicle
-                # of a team this size costs (of which ``render_s``: the simulated camera, not a vehicle's work)
+                # of a team this size costs (of which ``render_cpu_s``: the simulated camera, not a vehicle's work)
                 "cpu_s": time.process_time() - self._cpu_started_s if self._started_ns else 0.0,
                 "teammates": sorted(self.bus.teammates()), "traffic": self.bus.counters.snapshot()}
 
@@ -324,7 +324,7 @@ class CameraVehicle(Vehicle):
         stamp = self.clock.stamp_ns(n)
         t_acquire = time.perf_counter()
         frame = self.camera.acquire(n, stamp)
-        self.record.render_s += frame.render_s
+        self.record.render_cpu_s += frame.render_cpu_s
         if self._image_ready is None:
             self._image_ready = t_acquire + frame.render_s
         mine = own_view(self.config.vehicle, stamp, frame.camera, frame.points, frame.labels)
