@@ -212,7 +212,7 @@ def register_report(app: typer.Typer) -> None:
         with stop_on_signals() as stop:
             path = write_report(out, runs=runs, frames=frames, seed=seed, endpoint=listen, stop=stop,
                                 on_run=lambda r: console.print(f"{r['scenario']} / {r['variant']}: run "
-                                                               f"{r['run'] + 1} of {runs} "
+                                                               f"{r['run'] + 1} "
                                                                + (f"failed: {r['error']}" if r.get("error") else
                                                                   f"done in {r['seconds']:.1f} s")))
         print(path)
