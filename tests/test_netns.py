@@ -72,18 +72,26 @@ def test_a_lossy_link_between_the_hosts_keeps_both_views_and_agreement(hosts):
     # --frames counts the frames a vehicle ran: one that skipped frames (CPU contention: late frames) runs on after
     # the other stopped. Both views are expected while both ran.
     together = range(max(min(h1), min(h2)), min(max(h1), max(h2)) + 1)
-    multi = {}
+    multi, first_both = {}, {}
     for vehicle, frames in (("H1", h1), ("H2", h2)):
         s = summaries[vehicle]
         # every frame it ran was estimated (frames skipped because the CPU was busy are counted as late)
         assert s["frames"] == s["estimates"] == len(frames) == LOSSY_FRAMES, s
-        ran = [r for n, r in frames.items() if n in together]
+        # Until the team-mate's first feature set arrives there is no older one to fall back on: a loss among the
+        # first segments (TCP resends after >= 200 ms, doubling) leaves the first frames alone. Measured: H2's first
+        # frame with both views was 0-1 frames after the start in 6 runs, 4 and 8 in two others (then 56 of 56 and
+        # 52 of 52). So the start is bounded (three resends of one segment, 0.2 + 0.4 + 0.8 s, and some margin:
+        # 2 s), and "keeps" is counted from the first frame with both views.
+        first_both[vehicle] = min(n for n, r in frames.items() if r["views"] == BOTH)
+        assert first_both[vehicle] <= together.start + 20, (vehicle, first_both[vehicle], together)
+        ran = [r for n, r in frames.items() if n in together and n >= first_both[vehicle]]
         multi[vehicle] = (sum(r["views"] == BOTH for r in ran), len(ran))
         alone = [n for n, r in frames.items() if n in together and r["views"] != BOTH]
         assert multi[vehicle][0] >= 0.95 * len(ran), (vehicle, multi[vehicle], alone, s["traffic"])
     same = [n for n in h1 if n in h2 and h1[n]["views"] == h2[n]["views"] == BOTH
             and h1[n]["views_of_this_instant"] and h2[n]["views_of_this_instant"]]
-    print(f"lossy link: frames with both views (of those run while both ran) {multi}; {len(same)} frames with "
+    print(f"lossy link: first frame with both views {first_both} (both ran from {together.start}); frames with "
+          f"both views after it (of those run while both ran) {multi}; {len(same)} frames with "
           f"both views of the same instant on both; late frames {summaries['H1']['late_frames']}, "
           f"{summaries['H2']['late_frames']}")
     assert len(same) >= LOSSY_FRAMES // 4  # loss delays some feature sets past the sync wait, not most
