@@ -16,9 +16,11 @@ seconds after the victim's frame 0. Conditions, side by side in one run (interle
 * **team-mate flood** - the flood on the victim's subscribed key ``evopose/<fleet>/H2/features``, the flooder
   holding H2's presence token (a member flooding under its own name);
 * **outsider flood** - the same flood from a sender without a presence token (an outsider; it shares the
-  budget of unknown senders).
+  budget of unknown senders);
+* **on-clock team-mate flood** - the team-mate flood with every set stamped at the fleet clock's newest frame
+  instant, so the victim pairs the flooder's sets with its frames (a member lying in step with the clock).
 
-The flooder declares H2's token in the first three flood conditions (so the victim's team is the same).
+The flooder declares H2's token in every flood condition but the outsider's (so the victim's team is the same).
 Measured over the flood window (frames whose stamp falls in it): frames due by the clock, frames run, skipped;
 estimate time p50/p95 (the ``seconds`` of the victim's frame events); the victim's CPU use (``/proc``); its RSS
 just before the flood and just after it; the rejection counters of its summary. The benchmark asserts nothing.
@@ -46,14 +48,16 @@ FPS = 10.0
 EPOCH_LEAD_S = 6.0
 #: Normal running before the flood, and after it, s.
 BEFORE_S, AFTER_S = 2.5, 2.0
-CONDITIONS = ("no flood", "unsubscribed key", "team-mate flood", "outsider flood")
+CONDITIONS = ("no flood", "unsubscribed key", "team-mate flood", "outsider flood", "on-clock team-mate flood")
 TICKS = os.sysconf("SC_CLK_TCK")
 
 
-def flood(endpoint: str, fleet: str, key: str, token: bool, start_ns: int, end_ns: int, rate: float) -> None:
+def flood(endpoint: str, fleet: str, key: str, token: bool, start_ns: int, end_ns: int, rate: float,
+          epoch_ns: int | None = None) -> None:
     """The flooder (run in its own process): valid feature sets on ``key`` from ``start_ns`` to ``end_ns`` at ``rate``
     per second (0: as fast as this loop goes), spinning in between (it keeps a core busy either way); prints
-    ``{"sent": n, "seconds": s, "cpu_s": c}``."""
+    ``{"sent": n, "seconds": s, "cpu_s": c}``. Each set is stamped now, or with ``epoch_ns`` at the newest frame
+    instant of the fleet clock (:data:`FPS`)."""
     import zenoh
 
     from protocol import CameraInfo, FeatureSet, encode
@@ -67,6 +71,7 @@ def flood(endpoint: str, fleet: str, key: str, token: bool, start_ns: int, end_n
                         world_from_camera=(-27, 6, 12, 0, 0, 0))
     points = np.random.default_rng(0).uniform(300, 340, (30, 2)).astype("<f4").tobytes()
     sender = key.split("/")[2]
+    period_ns = int(1e9 / FPS)
     with zenoh.open(config) as session:
         alive = session.liveliness().declare_token(f"evopose/{fleet}/@alive/H2") if token else None
         publisher = session.declare_publisher(key)
@@ -75,7 +80,10 @@ def flood(endpoint: str, fleet: str, key: str, token: bool, start_ns: int, end_n
         while time.time_ns() < end_ns:
             if rate and sent >= (time.monotonic() - started) * rate:
                 continue
-            message = FeatureSet(sender=sender, seq=sent, stamp_ns=time.time_ns(), camera=camera, points=points)
+            stamp = time.time_ns()
+            if epoch_ns is not None:  # in step with the fleet clock: the newest frame instant
+                stamp = epoch_ns + (stamp - epoch_ns) // period_ns * period_ns
+            message = FeatureSet(sender=sender, seq=sent, stamp_ns=stamp, camera=camera, points=points)
             publisher.put(encode(message))
             sent += 1
         seconds, cpu = time.monotonic() - started, time.process_time() - cpu0
@@ -137,8 +145,10 @@ def measure(condition: str, flood_s: float, rate: float, victim_args: list[str])
         if condition != "no flood":
             sender = "x0" if condition == "outsider flood" else "H2"
             topic = "unsubscribed" if condition == "unsubscribed key" else "features"
+            on_clock = epoch if condition == "on-clock team-mate flood" else None
             code = (f"from benchmarks.bench_flood import flood; flood({endpoint!r}, {fleet!r}, "
-                    f"'evopose/{fleet}/{sender}/{topic}', {condition != 'outsider flood'}, {start_ns}, {end_ns}, {rate})")
+                    f"'evopose/{fleet}/{sender}/{topic}', {condition != 'outsider flood'}, {start_ns}, {end_ns}, {rate}, "
+                    f"{on_clock})")
             time.sleep(2.0)  # the victim listens by then (it opens its session before the warm-up ends)
             flooder = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True,
                                      timeout=EPOCH_LEAD_S + BEFORE_S + flood_s + 60)
@@ -175,6 +185,9 @@ def measure(condition: str, flood_s: float, rate: float, victim_args: list[str])
     cpu0, rss0 = at(start_ns)
     cpu1, rss1 = at(end_ns)
     return {"condition": condition, "due": last_due - first_due, "run": len(in_window),
+            "good": sum(bool(r.get("good")) for r in in_window),
+            "with_flooder": sum("H2" in r.get("views", ()) for r in in_window),
+            "error_cm": float(np.median([r["error"]["position"] for r in in_window if r.get("error")] or [np.nan])) * 100,
             "p50_ms": float(np.percentile(seconds, 50)) * 1e3 if len(seconds) else float("nan"),
             "p95_ms": float(np.percentile(seconds, 95)) * 1e3 if len(seconds) else float("nan"),
             "cpu": (cpu1 - cpu0) / flood_s, "rss0_mb": rss0 / 1024, "rss1_mb": rss1 / 1024,
@@ -211,12 +224,14 @@ def main() -> None:
         rate = row["run"] / row["due"]
         rejected = ", ".join(f"{k} {v}" for k, v in sorted(row["rejected"].items())) or "-"
         table.append([row["condition"], f"{row['sent']:,} ({row['flood_rate']:,.0f}/s)" if row["sent"] else "-",
-                      f"{row['run']} / {row['due']}", row["due"] - row["run"],
+                      f"{row['run']} / {row['due']}", row["due"] - row["run"], row["good"], row["with_flooder"],
+                      f"{row['error_cm']:.2f}",
                       f"{rate / base_rate:.2f}" if base_rate else "-",
                       f"{row['p50_ms']:.1f} / {row['p95_ms']:.1f}", f"{row['cpu']:.2f}",
                       f"{row['rss0_mb']:.1f} -> {row['rss1_mb']:.1f} ({row['rss_max_mb'] - row['rss0_mb']:+.1f})",
                       row["received"], rejected])
-    header = ["condition", "flood sent", "frames run / due", "skipped", "frame rate vs no flood",
+    header = ["condition", "flood sent", "frames run / due", "skipped", "good", "with the flooder's view",
+              "median position error, cm", "frame rate vs no flood",
               "estimate p50 / p95, ms", "victim CPU, cores", "victim RSS, MB: before -> after (max - before)",
               "feature sets received", "rejected (whole run)"]
     command = (f".venv/bin/python -m benchmarks.bench_flood --flood-s {args.flood_s:g} --rate {args.rate:g} "
