@@ -220,17 +220,19 @@ def _team_size_lines(records: list[dict], result_rows: list[dict]) -> list[str]:
                        and r["role"] == "uav"), key=lambda r: int(r["vehicle"].lstrip("H") or 0))
         if not uavs:
             continue
-        mean = lambda key: statistics.fmean(r[key] for r in uavs)  # noqa: E731
-        worst = lambda key: max(r[key] for r in uavs)  # noqa: E731
+        mean = {key: statistics.fmean(r[key] for r in uavs)
+                for key in ("good_fraction", "position", "yaw", "cpu_per_frame_s", "render_per_frame_s",
+                            "bytes_sent_per_s", "bytes_received_per_s")}
+        worst = {key: max(r[key] for r in uavs) for key in ("position", "yaw")}
         runs = [r for r in records if r["scenario"] == TEAM_SIZE and r["variant"] == variant]
         shares = [frame_agreement(runs, "H1", r["vehicle"]) for r in uavs[1:]]
         same = (f"{min(a['fraction'] for a in shares):.0%} (worst pair)" if shares else "-")
-        lines.append(f"| {uavs[0]['share']} | {len(uavs)} | {mean('good_fraction'):.0%} | "
+        lines.append(f"| {uavs[0]['share']} | {len(uavs)} | {mean['good_fraction']:.0%} | "
                      f"{_cell(uavs[0]['position'] * 100, uavs[0]['position_sd'] * 100, 1)} | "
-                     f"{mean('position') * 100:.1f} ({worst('position') * 100:.1f}) | "
-                     f"{mean('yaw'):.2f} ({worst('yaw'):.2f}) | {same} | "
-                     f"{mean('cpu_per_frame_s') * 1e3:.0f} ({mean('render_per_frame_s') * 1e3:.0f}) | "
-                     f"{mean('bytes_sent_per_s'):,.0f} | {mean('bytes_received_per_s'):,.0f} |")
+                     f"{mean['position'] * 100:.1f} ({worst['position'] * 100:.1f}) | "
+                     f"{mean['yaw']:.2f} ({worst['yaw']:.2f}) | {same} | "
+                     f"{mean['cpu_per_frame_s'] * 1e3:.0f} ({mean['render_per_frame_s'] * 1e3:.0f}) | "
+                     f"{mean['bytes_sent_per_s']:,.0f} | {mean['bytes_received_per_s']:,.0f} |")
     return lines
 
 
