@@ -43,6 +43,7 @@ bench: $(STAMP)
 	NUMBA_NUM_THREADS=1 $(PY) -m benchmarks.bench_time_budget
 	$(PY) -m benchmarks.bench_capacity
 	$(PY) -m benchmarks.bench_flood
+	$(PY) -m benchmarks.bench_blas_threads
 	$(PY) -m benchmarks.report
 
 # Three agent pairs for 10 minutes each (30 min): memory and CPU over time.
