@@ -3,8 +3,8 @@
 numpy's OpenBLAS starts a worker per core and, after each call large enough to be split (the covariance's
 Monte Carlo moments, a ``(16384, 6) @ (6, 6)`` product), that worker busy-waits for the next one. In an agent,
 which computes every few milliseconds, it never went back to sleep: `python -m benchmarks.bench_blas_threads`
-(BENCHMARKS.md) repeats that call 200 times a second and measures 1.52-1.54 cores for the process with the
-default pool against 0.54-0.58 with one thread, the calls themselves taking ~0.53 in both. The agents of a pair
+(BENCHMARKS.md) repeats that call 200 times a second and measures 1.46-1.52 cores for the process with the
+default pool against 0.51-0.53 with one thread, the calls themselves taking 0.45-0.52 in both. The agents of a pair
 missed camera ticks and sent fewer hints. An agent's arrays are small and it has threads of its own (frame
 loop, improver, receivers): BLAS gains nothing from more than one thread there.
 """
