@@ -34,7 +34,8 @@ from cryptography.x509.oid import NameOID
 
 from agents.cli.main import main
 from agents.transport.credentials import create_credentials, fleet_keys
-from agents.transport.session import PEER_LISTEN, ROUTER_LISTEN, SessionOptions, listen_endpoints, make_config
+from agents.transport.session import (MAX_MESSAGE_BYTES, PEER_LISTEN, ROUTER_LISTEN, SessionOptions,
+                                     listen_endpoints, make_config)
 from tests.fleet_procs import ROOT, Proc, free_port
 
 VEHICLES = ("H1", "H2", "pioneer")
@@ -255,9 +256,13 @@ def test_defaults_listen_on_loopback_with_multicast_off(tmp_path: Path) -> None:
     assert listen_endpoints(SessionOptions(mode="router", listen=("tcp/0.0.0.0:7447",))) == ("tcp/0.0.0.0:7447",)
     assert json.loads(make_config(router).get_json("scouting/multicast/enabled")) is False
     assert json.loads(make_config(SessionOptions(multicast=True)).get_json("scouting/multicast/enabled")) is True
-    chosen = tmp_path / "z.json5"  # a file that chooses its endpoints keeps them
-    chosen.write_text('{mode: "router", listen: {endpoints: ["tcp/127.0.0.2:7447"]}}')
+    chosen = tmp_path / "z.json5"  # a file that chooses its endpoints (or its message bound) keeps them
+    chosen.write_text('{mode: "router", listen: {endpoints: ["tcp/127.0.0.2:7447"]}, '
+                      'transport: {link: {rx: {max_message_size: 65536}}}}')
     assert listen_endpoints(SessionOptions(config_file=chosen)) == ("tcp/127.0.0.2:7447",)
+    key = "transport/link/rx/max_message_size"
+    assert json.loads(make_config(SessionOptions(config_file=chosen)).get_json(key)) == 65536
+    assert json.loads(make_config(router).get_json(key)) == MAX_MESSAGE_BYTES == 16 * 2**20
 
 
 def _listening(pid: int) -> set[tuple[str, int]]:

@@ -101,6 +101,11 @@ def _get(config: zenoh.Config, path: str) -> object:
     return json.loads(config.get_json(path))
 
 
+def _left_default(config: zenoh.Config, path: str) -> bool:
+    """Whether ``path`` still holds Zenoh's default (no file chose it)."""
+    return _get(config, path) == _get(zenoh.Config(), path)
+
+
 def config_path(options: SessionOptions) -> Path | None:
     """The configuration file ``options`` read: ``config_file``, else ``$ZENOH_CONFIG``, else None."""
     if options.config_file is not None:
@@ -141,7 +146,7 @@ def make_config(options: SessionOptions) -> zenoh.Config:
     if not options.listen:
         _listen_on_loopback_by_default(config)
     _insert(config, "scouting/multicast/enabled", bool(options.multicast), "multicast")
-    if _get(config, _MAX_MESSAGE_KEY) == _get(zenoh.Config(), _MAX_MESSAGE_KEY):  # the file did not choose
+    if _left_default(config, _MAX_MESSAGE_KEY):
         _insert(config, _MAX_MESSAGE_KEY, MAX_MESSAGE_BYTES, _MAX_MESSAGE_KEY)
     if _get(config, "connect/retry") is None:  # the file did not choose
         _insert(config, "connect/retry", CONNECT_RETRY, "connect/retry")
@@ -152,7 +157,7 @@ def make_config(options: SessionOptions) -> zenoh.Config:
 
 def _listen_on_loopback_by_default(config: zenoh.Config) -> None:
     """Replace Zenoh's default listen endpoints (every interface) by loopback ones; keep endpoints a file set."""
-    if _get(config, "listen/endpoints") != _get(zenoh.Config(), "listen/endpoints"):
+    if not _left_default(config, "listen/endpoints"):
         return  # the file chose
     mode = _get(config, "mode") or "peer"
     if mode == "router":
