@@ -58,6 +58,8 @@ class PartSpec(Strict):
     polygon: Annotated[list[Vec3], Field(min_length=3)] | None = None
     colour: BGR
     two_sided: bool = True
+    #: Paint roughness (0 mirror, 1 matte) for a physically based renderer (:mod:`scenarios.photoreal`).
+    roughness: Annotated[float, Field(ge=0, le=1)] = 0.45
 
     @model_validator(mode="after")
     def _one_shape(self) -> "PartSpec":
@@ -92,6 +94,8 @@ class ModelFileSpec(Strict):
     name: str
     description: str = ""
     mark_radius: Annotated[float, Field(gt=0, le=1)]
+    #: Roughness of the marks' paint (0 mirror, 1 matte), for a physically based renderer.
+    mark_roughness: Annotated[float, Field(ge=0, le=1)] = 0.35
     colours: Annotated[dict[str, BGR], Field(min_length=1)]
     parts: list[PartSpec] = []
     marks: Annotated[list[MarkSpec], Field(min_length=1)]
@@ -132,6 +136,9 @@ class TargetModel:
     mark_radius: float
     body: Mesh
     description: str = ""
+    #: The body's parts as in the file (shapes, colours, roughness), for a physically based renderer.
+    parts: tuple[PartSpec, ...] = ()
+    mark_roughness: float = 0.35
 
     @property
     def size(self) -> float:
@@ -158,7 +165,7 @@ def model_from_spec(spec: ModelFileSpec) -> TargetModel:
         body = body + part.mesh()
     return TargetModel(spec.name, np.array([m.position for m in spec.marks], float), normals,
                        tuple(m.colour for m in spec.marks), {k: tuple(v) for k, v in spec.colours.items()},
-                       spec.mark_radius, body, spec.description)
+                       spec.mark_radius, body, spec.description, tuple(spec.parts), spec.mark_roughness)
 
 
 def resolve_model_path(name_or_path: str | Path, base: Path | None = None) -> Path:

@@ -36,7 +36,7 @@ from pathlib import Path
 from typing import Any, Annotated, Literal
 
 import numpy as np
-from pydantic import Field, model_validator
+from pydantic import Field, field_validator, model_validator
 
 from evopose import Bounds, Camera
 from evopose.pose import PARAM_NAMES, matrix_from_pose
@@ -186,6 +186,31 @@ class LightingSpec(Strict):
     gain_jitter: Annotated[float, Field(ge=0, lt=1)] = 0.0
     ambient: Annotated[float, Field(ge=0, le=1)] = 0.55
     sun: Vec3 = [0.3, 0.4, 1.0]
+    #: Physically based renderer (:mod:`scenarios.photoreal`): the sun's irradiance (Blender's sun strength,
+    #: W/m^2), the sky (clear: a sky texture lit by the sun at ``sun``; overcast: no direct sun, a bright grey
+    #: sky, soft shadows) and the sky's strength.
+    sun_strength: Annotated[float, Field(ge=0, le=100)] = 4.0
+    sky: Literal["clear", "overcast"] = "clear"
+    sky_strength: Annotated[float, Field(ge=0, le=100)] = 1.0
+
+    @field_validator("sun")
+    @classmethod
+    def _sun_direction(cls, sun: list[float]) -> list[float]:
+        if math.hypot(*sun) < 1e-9:
+            raise ValueError("the sun direction must be a non-zero vector")
+        return sun
+
+
+class ClutterSpec(Strict):
+    """An object lying about in the world (a bucket, a cone, a ball), world frame, metres: drawn by both renderers,
+    it hides what is behind it. ``size`` is the box's sides, or the diameters along x and y and the height."""
+
+    shape: Literal["box", "cylinder", "sphere", "disc"]
+    centre: Vec3
+    size: Annotated[list[Annotated[float, Field(gt=0, le=100)]], Field(min_length=3, max_length=3)]
+    colour: BGR
+    roughness: Annotated[float, Field(ge=0, le=1)] = 0.5
+    yaw: float = 0.0
 
 
 class GroundSpec(Strict):
@@ -202,6 +227,7 @@ class RenderSpec(Strict):
     ground: GroundSpec = GroundSpec()
     distractors: DistractorSpec = DistractorSpec()
     occluders: list[OccluderSpec] = []
+    clutter: Annotated[list[ClutterSpec], Field(max_length=200)] = []
 
 
 class SearchSpec(Strict):
