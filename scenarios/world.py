@@ -41,6 +41,7 @@ from pydantic import Field, field_validator, model_validator
 from evopose import Bounds, Camera
 from evopose.pose import PARAM_NAMES, matrix_from_pose
 
+from .camera_model import CameraModelSpec
 from .documents import Strict, read_mapping, validate
 from .errors import FrameError, ModelFileError, ScenarioError
 from .sensors import GpsModel, ImuModel
@@ -228,6 +229,9 @@ class RenderSpec(Strict):
     distractors: DistractorSpec = DistractorSpec()
     occluders: list[OccluderSpec] = []
     clutter: Annotated[list[ClutterSpec], Field(max_length=200)] = []
+    #: The camera's sensor, processing and encoder (:mod:`scenarios.camera_model`); None: the renderer's
+    #: plain gain and Gaussian noise on perfect colours.
+    camera_model: CameraModelSpec | None = None
 
 
 class SearchSpec(Strict):
