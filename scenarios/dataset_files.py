@@ -1,0 +1,290 @@
+"""The files of a rendered dataset (docs/datasets.md): their schemas, the camera_info format, bounded JSON-lines
+reading, and :class:`DatasetError`. The writer is :mod:`scenarios.dataset_writer`, the reader :mod:`scenarios.dataset`.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Annotated, Any, Literal, TypeVar
+
+import numpy as np
+import yaml
+from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+
+from evopose import Camera
+from evopose.pose import PARAM_NAMES, pose_from_matrix
+
+from .documents import (MAX_DEPTH, Strict, _json_depth_ok, _json_object, _no_constant, describe, one_line,
+                        read_bytes, read_mapping, validate)
+from .errors import WorldError
+
+T = TypeVar("T", bound=BaseModel)
+
+#: The layout's version (``manifest.yaml``'s ``format``).
+FORMAT = "evopose-dataset/1"
+MANIFEST, WORLD, MODEL, TRUTH = "manifest.yaml", "world.yaml", "model.yaml", "truth.jsonl"
+CAMERA_INFO, POSES = "camera_info.yaml", "poses.jsonl"
+#: Image files a camera folder may hold (by suffix, lower case); frame ``k`` is ``{k:06d}<suffix>``.
+IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png", ".bmp", ".tif", ".tiff", ".ppm", ".pgm", ".webp")
+#: Digits of an image's frame number.
+FRAME_DIGITS = 6
+#: Most frames a dataset may have (frame numbers have :data:`FRAME_DIGITS` digits).
+MAX_FRAMES = 10 ** FRAME_DIGITS - 1
+#: Most cameras a dataset may have.
+MAX_CAMERAS = 64
+#: Most marks a camera's truth may list in one frame.
+MAX_MARKS = 10_000
+#: Largest ``truth.jsonl`` and ``poses.jsonl`` read, bytes; longest line of each.
+MAX_TRUTH_BYTES, MAX_TRUTH_LINE = 256 * 1024 * 1024, 2 * 1024 * 1024
+MAX_POSES_BYTES, MAX_POSES_LINE = 64 * 1024 * 1024, 4096
+#: A camera (vehicle) name: a folder name, as the fleet's vehicle names (protocol.keys).
+CAMERA_NAME = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.\-]{0,63}")
+_IMAGE_NAME = re.compile(rf"(\d{{{FRAME_DIGITS}}})(\.[A-Za-z]+)")
+
+
+class DatasetError(WorldError):
+    """A dataset directory that cannot be written or read; one line naming the file, the line and the field."""
+
+
+# -- the schemas ----------------------------------------------------------------------------------------------
+
+CameraName = Annotated[str, Field(pattern=rf"^{CAMERA_NAME.pattern}$")]
+
+
+class EngineSpec(Strict):
+    """The renderer that wrote the dataset: its ``name`` and its settings (``samples``, ``blender``, any other
+    setting the engine records; they are kept as written)."""
+
+    model_config = ConfigDict(extra="allow", allow_inf_nan=False, frozen=True)
+
+    name: Literal["cycles", "opencv"]
+
+
+class ManifestSpec(Strict):
+    """``manifest.yaml``."""
+
+    format: Literal["evopose-dataset/1"]
+    world: Annotated[str, Field(min_length=1)]
+    engine: EngineSpec
+    frames: Annotated[int, Field(ge=1, le=MAX_FRAMES)]
+    fps: Annotated[float, Field(gt=0)]
+    cameras: Annotated[list[CameraName], Field(min_length=1, max_length=MAX_CAMERAS)]
+    camera_model: dict[str, Any] | None = None
+    target_visible: bool = True
+
+    @field_validator("cameras")
+    @classmethod
+    def _unique(cls, cameras: list[str]) -> list[str]:
+        repeated = sorted({c for c in cameras if cameras.count(c) > 1})
+        if repeated:
+            raise ValueError(f"camera names must be unique; repeated: {', '.join(repeated)}")
+        return cameras
+
+
+class PoseLineSpec(Strict):
+    """A pose ``(x, y, z, roll, pitch, yaw)``, metres and radians, every value given."""
+
+    x: float
+    y: float
+    z: float
+    roll: float
+    pitch: float
+    yaw: float
+
+    def vector(self) -> np.ndarray:
+        return np.array([getattr(self, n) for n in PARAM_NAMES], float)
+
+    @classmethod
+    def of(cls, pose: np.ndarray) -> "PoseLineSpec":
+        """The spec of a pose (6,) or a transform (4, 4)."""
+        pose = np.asarray(pose, float)
+        if pose.shape == (4, 4):
+            pose = pose_from_matrix(pose)
+        return cls(**{n: float(v) for n, v in zip(PARAM_NAMES, pose.reshape(6))})
+
+
+class MarkSpec(Strict):
+    """A mark whose centre is visible: model index, projected centre (pixels), colour name, whole disc visible."""
+
+    index: Annotated[int, Field(ge=0)]
+    uv: Annotated[list[float], Field(min_length=2, max_length=2)]
+    colour: str
+    fully_visible: bool
+
+
+class ViewTruthSpec(Strict):
+    world_from_camera: PoseLineSpec
+    marks: Annotated[list[MarkSpec], Field(max_length=MAX_MARKS)] = []
+
+
+class TruthLineSpec(Strict):
+    """A line of ``truth.jsonl``."""
+
+    frame: Annotated[int, Field(ge=0)]
+    time: Annotated[float, Field(ge=0)]
+    target_pose: PoseLineSpec
+    target_visible: bool
+    cameras: Annotated[dict[CameraName, ViewTruthSpec], Field(max_length=MAX_CAMERAS)]
+
+
+class PosesLineSpec(Strict):
+    """A line of a camera's ``poses.jsonl``."""
+
+    frame: Annotated[int, Field(ge=0)]
+    world_from_camera: PoseLineSpec
+
+
+class RosMatrixSpec(Strict):
+    """A matrix of a ROS calibration file: ``rows`` x ``cols`` numbers in ``data``, row-major."""
+
+    rows: Annotated[int, Field(gt=0, le=16)]
+    cols: Annotated[int, Field(gt=0, le=16)]
+    data: Annotated[list[float], Field(min_length=1, max_length=256)]
+
+    @model_validator(mode="after")
+    def _size(self) -> "RosMatrixSpec":
+        if len(self.data) != self.rows * self.cols:
+            raise ValueError(f"data: expected rows x cols = {self.rows * self.cols} numbers, got {len(self.data)}")
+        return self
+
+
+class CameraInfoFileSpec(Strict):
+    """A camera's ``camera_info.yaml`` (camera_calibration_parsers' format, plumb_bob), as
+    :mod:`agents.problem.camera_info` reads it: a pinhole ``camera_matrix`` and 5 distortion coefficients."""
+
+    image_width: Annotated[int, Field(gt=0, le=8192)]
+    image_height: Annotated[int, Field(gt=0, le=8192)]
+    camera_name: str = ""
+    camera_matrix: RosMatrixSpec
+    distortion_model: Literal["plumb_bob"] = "plumb_bob"
+    distortion_coefficients: RosMatrixSpec | None = None
+    rectification_matrix: RosMatrixSpec | None = None
+    projection_matrix: RosMatrixSpec | None = None
+
+    @model_validator(mode="after")
+    def _pinhole(self) -> "CameraInfoFileSpec":
+        if (self.camera_matrix.rows, self.camera_matrix.cols) != (3, 3):
+            raise ValueError(f"camera_matrix: expected a 3x3 matrix, got {self.camera_matrix.rows}x"
+                             f"{self.camera_matrix.cols}")
+        k = np.array(self.camera_matrix.data).reshape(3, 3)
+        if k[0, 0] <= 0 or k[1, 1] <= 0:
+            raise ValueError(f"camera_matrix: fx and fy must be > 0, got {k[0, 0]:g} and {k[1, 1]:g}")
+        if np.any(np.abs([k[0, 1], k[1, 0], k[2, 0], k[2, 1], k[2, 2] - 1.0]) > 1e-9):
+            raise ValueError("camera_matrix: expected [fx, 0, cx, 0, fy, cy, 0, 0, 1] (no skew)")
+        d = self.distortion_coefficients
+        if d is not None and (min(d.rows, d.cols) != 1 or len(d.data) != 5):
+            raise ValueError(f"distortion_coefficients: plumb_bob has 5 coefficients [k1, k2, p1, p2, k3] in 1 row, "
+                             f"got {d.rows}x{d.cols}")
+        for name, shape in (("rectification_matrix", (3, 3)), ("projection_matrix", (3, 4))):
+            m = getattr(self, name)
+            if m is not None and (m.rows, m.cols) != shape:
+                raise ValueError(f"{name}: expected a {shape[0]}x{shape[1]} matrix, got {m.rows}x{m.cols}")
+        return self
+
+    def to_camera(self, world_from_camera: np.ndarray | None = None) -> Camera:
+        k = np.array(self.camera_matrix.data, float).reshape(3, 3)
+        dist = np.zeros(5) if self.distortion_coefficients is None else np.array(self.distortion_coefficients.data)
+        return Camera(k[0, 0], k[1, 1], k[0, 2], k[1, 2], self.image_width, self.image_height, dist,
+                      np.eye(4) if world_from_camera is None else world_from_camera)
+
+
+def camera_info_document(camera: Camera, name: str = "") -> dict[str, Any]:
+    """The ROS calibration-file mapping (camera_calibration_parsers' keys) of a camera's intrinsics: ``K``, plumb_bob
+    ``D``, identity ``R`` and ``P = [K | 0]`` (a monocular, unrectified camera)."""
+    fx, fy, cx, cy = (float(v) for v in (camera.fx, camera.fy, camera.cx, camera.cy))
+    return {"image_width": int(camera.width), "image_height": int(camera.height), "camera_name": name,
+            "camera_matrix": {"rows": 3, "cols": 3, "data": [fx, 0.0, cx, 0.0, fy, cy, 0.0, 0.0, 1.0]},
+            "distortion_model": "plumb_bob",
+            "distortion_coefficients": {"rows": 1, "cols": 5,
+                                        "data": [float(v) for v in np.asarray(camera.distortion).reshape(5)]},
+            "rectification_matrix": {"rows": 3, "cols": 3, "data": [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]},
+            "projection_matrix": {"rows": 3, "cols": 4,
+                                  "data": [fx, 0.0, cx, 0.0, 0.0, fy, cy, 0.0, 0.0, 0.0, 1.0, 0.0]}}
+
+
+def read_camera_info_file(path: Path) -> Camera:
+    """The intrinsics of a dataset camera's ``camera_info.yaml`` (identity ``world_from_camera``)."""
+    return validate(CameraInfoFileSpec, read_mapping(path, DatasetError), path, DatasetError).to_camera()
+
+
+# -- JSON lines -------------------------------------------------------------------------------------------------
+
+
+def read_json_lines(path: Path, schema: type[T], *, max_bytes: int, max_line: int,
+                    complete_only: bool = False) -> list[T]:
+    """The lines of a JSON-lines file validated by ``schema``, read with a size bound (the file, each line).
+
+    A line that is not one JSON object or does not fit ``schema`` raises :class:`DatasetError`
+    (``<file>:<line>: <field>: <problem>``). With ``complete_only`` a last line without its newline (a write cut
+    short) is left out instead.
+    """
+    data = read_bytes(path, DatasetError, max_bytes)
+    lines = data.split(b"\n")
+    tail = lines.pop()  # after the last newline: b"" when the file ends with one
+    if tail and not complete_only:
+        lines.append(tail)
+    out = []
+    for n, raw in enumerate(lines, 1):
+        where = f"{path}:{n}"
+        if len(raw) > max_line:
+            raise DatasetError(f"{where}: line is {len(raw)} bytes, more than the limit of {max_line}")
+        try:
+            text = raw.decode("utf-8")
+        except UnicodeDecodeError:
+            raise DatasetError(f"{where}: not UTF-8 text") from None
+        if not text.strip():
+            raise DatasetError(f"{where}: empty line (expected one JSON object)")
+        if not _json_depth_ok(text):
+            raise DatasetError(f"{where}: invalid JSON: nesting deeper than {MAX_DEPTH} levels")
+        try:
+            document = json.loads(text, object_pairs_hook=_json_object, parse_constant=_no_constant)
+        except json.JSONDecodeError as err:
+            raise DatasetError(f"{where}:{err.colno}: invalid JSON: {err.msg}") from None
+        except (ValueError, RecursionError) as err:
+            raise DatasetError(f"{where}: invalid JSON: {one_line(err)}") from None
+        if not isinstance(document, dict):
+            raise DatasetError(f"{where}: expected a JSON object, got {describe(document)}")
+        out.append(validate(schema, document, where, DatasetError))
+    return out
+
+
+def _check_frame_numbers(path: Path, lines: Sequence[Any]) -> None:
+    """Line ``n`` (1-based) must be frame ``n - 1``."""
+    for n, line in enumerate(lines, 1):
+        if line.frame != n - 1:
+            raise DatasetError(f"{path}:{n}: frame: expected {n - 1} (frames in order from 0), got {line.frame}")
+
+
+def _json_line(model: BaseModel) -> str:
+    return json.dumps(model.model_dump(mode="json"), separators=(",", ":"), allow_nan=False) + "\n"
+
+
+def _dump_yaml(document: Any) -> str:
+    return yaml.safe_dump(document, sort_keys=False, default_flow_style=None, width=120)
+
+
+def _write_text(path: Path, text: str) -> None:
+    """Write ``text`` to ``path`` through a temporary file (a reader never sees half a file)."""
+    tmp = path.with_name(f".{path.name}.tmp")
+    tmp.write_text(text, encoding="utf-8")
+    os.replace(tmp, path)
+
+
+
+
+def _check_camera(camera: str, cameras: Sequence[str]) -> None:
+    if camera not in cameras:
+        raise DatasetError(f"no camera {camera!r} in the dataset (cameras: {', '.join(cameras)})")
+
+
+def image_name(k: int, suffix: str) -> str:
+    """``000042.jpg``: the file name of frame ``k``'s image."""
+    if not 0 <= k <= MAX_FRAMES:
+        raise DatasetError(f"frame {k} out of range 0..{MAX_FRAMES}")
+    if suffix.lower() not in IMAGE_SUFFIXES:
+        raise DatasetError(f"image suffix {suffix!r} is not one of {', '.join(IMAGE_SUFFIXES)}")
+    return f"{k:0{FRAME_DIGITS}d}{suffix}"
