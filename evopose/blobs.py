@@ -1,0 +1,305 @@
+"""Marks found by their contrast, not by preset hues: the front-end for images the project did not draw.
+
+A camera's picture of a 5 cm paint mark 30 m away is 2-4 px of a colour mixed with its surroundings, its chroma
+halved again by the encoder's 4:2:0 subsampling, its brightness set by the sun, the exposure and the white
+balance. A hue threshold sees the saturated red body and misses a pale sunlit yellow. What survives is
+*contrast*: a mark is a small spot that differs from the ring around it, in luminance or chroma, at the
+scale a mark has at the target's distance. So (docs/design.md, "The feature front-end"):
+
+1. **Scale space** (:func:`contrast_responses`): the image in an opponent space (CIE L*a*b*: lightness and two
+   chroma axes), blurred at scales sigma_i = r / sqrt(2) for the mark radii r the geometry allows
+   (:class:`MarkPrior`); a difference of Gaussians per channel is the scale-normalised Laplacian, whose
+   magnitude over the three channels peaks at a disc's centre and scale.
+2. **Candidates** (:func:`detect_contrast_marks`): local maxima in position and scale above a threshold of
+   ``k_sigma`` times the image's own robust spread of the response (the ground's texture and the sensor's
+   noise set it, so no exposure or gain is assumed), whose Hessian is not an edge's (a ridge along the body's
+   outline, a wheel, a shadow's border) and whose scale fits a mark, not the body.
+3. **Position** from the response's sub-pixel peak (a quadratic through the 3 x 3 neighbourhood), where the
+   luminance carries the full resolution.
+4. **Label** (:func:`label_colours`): which of the model's colours, seen under an unknown brightness ``s``,
+   lies on the line from the background through the observed spot (a blend ``p = a c + (1 - a) b``), in
+   linear light; a confidence from the margin to the second colour. A spot that fits no paint colour (a
+   body corner, a shadow) is dropped.
+5. **Context**: the marks of one target lie within its image extent; with the prior's extent the densest
+   such cluster is kept and far specks are dropped.
+
+Images are OpenCV BGR ``uint8`` (H, W, 3); points ``(u, v)`` pixels with pixel centres at integers.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from .features import MarkDetections, _coverage, _to_bgr
+
+#: Scale steps per octave of the scale space.
+STEPS_PER_OCTAVE = 3
+#: A candidate's response must exceed this many robust spreads (1.4826 MAD) of its level's response.
+K_SIGMA = 6.0
+#: Largest ratio of the Hessian's eigenvalues (a disc seen at 70 deg from its normal is 3:1; an edge is >> 10).
+MAX_EDGE_RATIO = 12.0
+#: Largest misfit of a label: distance of the fitted paint colour from the line through background and spot,
+#: as a fraction of the colour's brightness.
+MAX_LABEL_MISFIT = 0.35
+#: Largest blend factor t = 1 / coverage: a spot shows at least 1/MAX_BLEND of its mark's contrast to the ring.
+MAX_BLEND = 6.0
+#: How far below black (linear light) an extrapolated mark colour may reach (noise).
+BLACK_SLACK = 0.02
+#: Weight of the chroma axes against lightness in the response (CIE Lab units).
+CHROMA_WEIGHT = 1.0
+
+
+@dataclass(frozen=True)
+class MarkPrior:
+    """What the camera's geometry says about the marks in its image.
+
+    ``radius_px``: the smallest and the largest radius a mark can have, pixels (mark radius times focal length
+    over the farthest and the nearest distance of the operating area; an oblique disc is narrower). ``extent_px``:
+    the target's largest extent in pixels at the nearest distance, or None (no context filter).
+    """
+
+    radius_px: tuple[float, float] = (0.7, 12.0)
+    extent_px: float | None = None
+
+    def __post_init__(self) -> None:
+        lo, hi = self.radius_px
+        if not (0 < lo <= hi and np.isfinite(hi)):
+            raise ValueError(f"radius_px must be 0 < lo <= hi, got {self.radius_px}")
+
+
+def _srgb_to_linear(x: np.ndarray) -> np.ndarray:
+    return np.where(x <= 0.04045, x / 12.92, ((x + 0.055) / 1.055) ** 2.4).astype(np.float32)
+
+
+def scales(prior: MarkPrior) -> np.ndarray:
+    """The blur sigmas of the scale space, pixels: one step below the smallest mark's sigma = r / sqrt(2) to one
+    above the largest (a DoG between levels i and i + 1 is centred between them)."""
+    step = 2 ** (1 / STEPS_PER_OCTAVE)
+    lo = max(0.5, prior.radius_px[0] / np.sqrt(2) / step)
+    hi = max(lo * step ** 2, prior.radius_px[1] / np.sqrt(2) * step)
+    return lo * step ** np.arange(int(np.ceil(np.log(hi / lo) / np.log(step))) + 2)
+
+
+def contrast_responses(lab: np.ndarray, sigmas: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Difference-of-Gaussian stack of an L*a*b* image (H, W, 3) float32: ``dog`` (S - 1, H, W, 3), the
+    scale-normalised Laplacian per channel between levels i and i + 1 (divided by ``k - 1``), and ``levels``
+    (S, H, W, 3) the blurred images."""
+    levels = np.stack([cv2.GaussianBlur(lab, (0, 0), float(s)) for s in sigmas])
+    k = sigmas[1] / sigmas[0]
+    dog = (levels[1:] - levels[:-1]) / np.float32(k - 1)
+    return dog, levels
+
+
+def _magnitude(dog: np.ndarray) -> np.ndarray:
+    w = np.float32(CHROMA_WEIGHT)
+    return np.sqrt(dog[..., 0] ** 2 + w * w * (dog[..., 1] ** 2 + dog[..., 2] ** 2))
+
+
+def label_colours(spot: np.ndarray, ring: np.ndarray, palette_linear: np.ndarray) -> tuple[np.ndarray, np.ndarray,
+                                                                                            np.ndarray]:
+    """Which paint colour each spot is (linear BGR): ``spot`` (K, 3) the colour at its centre, ``ring`` (K, 3) its
+    surroundings, ``palette_linear`` (C, 3) the model's colours. A spot blends its mark's colour ``s c`` (``s``
+    the unknown light on it) with the ring: ``ring + t (spot - ring) = s c`` for some ``t >= 1``. Least squares in
+    ``(t, s)`` per colour; the misfit is the residual over ``|s c|``. Returns ``label`` (K,), ``misfit`` (K,) of
+    the best colour and ``confidence`` (K,) in [0, 1]: 1 - best misfit / second misfit."""
+    k, c = len(spot), len(palette_linear)
+    if k == 0:
+        return np.zeros(0, int), np.zeros(0), np.zeros(0)
+    u = spot - ring                                          # (K, 3)
+    misfit = np.full((k, c), np.inf)
+    for j, colour in enumerate(palette_linear):
+        a = np.stack([u, np.broadcast_to(-colour, u.shape)], axis=2)     # (K, 3, 2): [u, -c] [t, s] = -ring
+        ata = np.einsum("kij,kil->kjl", a, a)
+        atb = np.einsum("kij,ki->kj", a, -ring)
+        det = ata[:, 0, 0] * ata[:, 1, 1] - ata[:, 0, 1] ** 2
+        ok = np.abs(det) > 1e-12
+        t = np.where(ok, (ata[:, 1, 1] * atb[:, 0] - ata[:, 0, 1] * atb[:, 1]) / np.where(ok, det, 1), 0)
+        s = np.where(ok, (ata[:, 0, 0] * atb[:, 1] - ata[:, 0, 1] * atb[:, 0]) / np.where(ok, det, 1), 0)
+        # the mark is at least as far from the ring as the spot (t >= 1), shows it at least MAX_BLEND of its contrast,
+        # and is a colour: no channel below black (a spot darker than a red ring is not cyan)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            to_black = np.where(u < 0, (ring + BLACK_SLACK) / -u, np.inf).min(axis=1)
+        t = np.clip(t, 1.0, np.maximum(np.minimum(to_black, MAX_BLEND), 1.0))
+        s = np.maximum(np.einsum("ki,i->k", ring + t[:, None] * u, colour) / max(float(colour @ colour), 1e-12), 0)
+        resid = ring + t[:, None] * u - s[:, None] * colour
+        misfit[:, j] = np.linalg.norm(resid, axis=1) / np.maximum(s * np.linalg.norm(colour), 1e-6)
+    order = np.argsort(misfit, axis=1)
+    best = misfit[np.arange(k), order[:, 0]]
+    second = misfit[np.arange(k), order[:, 1]] if c > 1 else np.full(k, np.inf)
+    confidence = np.clip(1.0 - best / np.maximum(second, 1e-9), 0.0, 1.0)
+    return order[:, 0], best, confidence
+
+
+@dataclass(frozen=True)
+class ContrastMarks(MarkDetections):
+    """:class:`MarkDetections` with what the contrast front-end knows more: ``label_confidence`` (K,) in [0, 1],
+    ``radius`` (K,) pixels (from the scale), ``contrast`` (K,) the response over its threshold."""
+
+    label_confidence: np.ndarray = None  # type: ignore[assignment]
+    radius: np.ndarray = None  # type: ignore[assignment]
+    contrast: np.ndarray = None  # type: ignore[assignment]
+
+
+def detect_contrast_marks(image_bgr: np.ndarray, palette: Mapping[str, tuple[int, int, int]],
+                          prior: MarkPrior = MarkPrior(), *, k_sigma: float = K_SIGMA,
+                          max_edge_ratio: float = MAX_EDGE_RATIO, max_misfit: float = MAX_LABEL_MISFIT,
+                          max_marks: int = 256) -> ContrastMarks:
+    """The model's marks in a camera image (uint8 (H, W, 3) BGR) by their contrast (see the module's docstring).
+
+    ``palette``: the model's mark colours, name -> BGR (sRGB, 0-255); ``prior``: the marks' radius range and the
+    target's extent in pixels. Returns the marks sorted by label then row."""
+    bgr = _to_bgr(image_bgr)
+    names = tuple(palette)
+    if not names:
+        raise ValueError("the palette names no colour")
+    h, w = bgr.shape[:2]
+    img = bgr.astype(np.float32) / 255.0
+    lab = cv2.cvtColor(img, cv2.COLOR_BGR2Lab)
+    sigmas = scales(prior)
+    dog, levels = contrast_responses(lab, sigmas)
+    mag = _magnitude(dog)                                                # (S - 1, H, W)
+    # threshold per level: robust spread of the response over the image (texture and noise)
+    sample = mag[:, ::3, ::3].reshape(len(mag), -1)
+    med = np.median(sample, axis=1)
+    spread = 1.4826 * np.median(np.abs(sample - med[:, None]), axis=1)
+    thresh = med + k_sigma * np.maximum(spread, 1e-3)
+    # local maxima in position and scale among the levels whose scale fits a mark (a disc of radius r peaks at
+    # sigma = r / sqrt(2); a dog level's scale lies between its two blurs): at the largest fitting level a peak may
+    # still be growing, as neighbours (marks 3-5 px apart, the body) keep the response rising past a small mark's
+    # own scale
+    level_radius = np.sqrt(sigmas[:-1] * sigmas[1:]) * np.sqrt(2)
+    step = 2 ** (1 / STEPS_PER_OCTAVE)
+    fits = (level_radius >= prior.radius_px[0] / step) & (level_radius <= prior.radius_px[1] * step)
+    kernel = np.ones((3, 3), np.uint8)
+    dil = np.stack([cv2.dilate(m, kernel) if ok else np.zeros_like(m) for m, ok in zip(mag, fits)])
+    up = np.concatenate([dil[1:], np.zeros_like(dil[:1])])     # a fitting level's neighbours in scale; at the ends
+    down = np.concatenate([np.zeros_like(dil[:1]), dil[:-1]])  # of the fitting range the response may still grow
+    peak = (mag >= dil) & (mag >= up) & (mag >= down) & (mag > thresh[:, None, None]) & fits[:, None, None]
+    peak[:, :2, :] = peak[:, -2:, :] = peak[:, :, :2] = peak[:, :, -2:] = False
+    lvl, ys, xs = np.nonzero(peak)
+    radius = level_radius[lvl]
+    if len(lvl) > 4 * max_marks:   # strongest first
+        top = np.argsort(-mag[lvl, ys, xs])[:4 * max_marks]
+        lvl, ys, xs, radius = lvl[top], ys[top], xs[top], radius[top]
+    # the contrast direction at each peak, and the response projected on it (one signed channel)
+    d = dog[lvl, ys, xs]                                                # (K, 3)
+    d_unit = d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-9)
+    pts, ok = np.zeros((len(lvl), 2)), np.ones(len(lvl), bool)
+    for i, (l, y, x) in enumerate(zip(lvl.tolist(), ys.tolist(), xs.tolist())):
+        patch = np.einsum("ijc,c->ij", dog[l, y - 1:y + 2, x - 1:x + 2], d_unit[i])   # (3, 3), peak positive
+        dxx = patch[1, 2] - 2 * patch[1, 1] + patch[1, 0]
+        dyy = patch[2, 1] - 2 * patch[1, 1] + patch[0, 1]
+        dxy = (patch[2, 2] - patch[2, 0] - patch[0, 2] + patch[0, 0]) / 4
+        tr, det = dxx + dyy, dxx * dyy - dxy * dxy
+        r = max_edge_ratio
+        if det <= 0 or tr * tr / det >= (r + 1) ** 2 / r:
+            ok[i] = False
+            continue
+        gx, gy = (patch[1, 2] - patch[1, 0]) / 2, (patch[2, 1] - patch[0, 1]) / 2
+        off = -np.linalg.solve(np.array([[dxx, dxy], [dxy, dyy]]), np.array([gx, gy]))
+        pts[i] = (x + np.clip(off[0], -0.5, 0.5), y + np.clip(off[1], -0.5, 0.5))
+    lvl, ys, xs, radius, pts = lvl[ok], ys[ok], xs[ok], radius[ok], pts[ok]
+    # colours: the spot (finest blur at the centre) and its ring (median around, outside the mark), linear light
+    lin = _srgb_to_linear(img)
+    spot = np.array([lin[y, x] if r < 1.5 else cv2.GaussianBlur(lin[max(y - 2, 0):y + 3, max(x - 2, 0):x + 3],
+                                                                (0, 0), 0.5 * r)[min(y, 2), min(x, 2)]
+                     for y, x, r in zip(ys.tolist(), xs.tolist(), radius.tolist())]).reshape(-1, 3)
+    ring = np.zeros((len(ys), 3), np.float32)
+    for i, (y, x, r) in enumerate(zip(ys.tolist(), xs.tolist(), radius.tolist())):
+        r_in, r_out = r + 1.5, r + 3.0
+        y0, y1, x0, x1 = max(int(y - r_out), 0), min(int(y + r_out) + 1, h), max(int(x - r_out), 0), min(
+            int(x + r_out) + 1, w)
+        yy, xx = np.mgrid[y0:y1, x0:x1]
+        dist = np.hypot(yy - y, xx - x)
+        sel = (dist >= r_in) & (dist <= r_out)
+        ring[i] = np.median(lin[y0:y1, x0:x1][sel], axis=0)
+    pal = _srgb_to_linear(np.array([palette[n] for n in names], np.float32) / 255.0)
+    labels, misfit, conf = label_colours(spot.astype(float), ring.astype(float), pal.astype(float))
+    good = misfit <= max_misfit
+    lvl, ys, xs, radius, pts, labels, conf = lvl[good], ys[good], xs[good], radius[good], pts[good], labels[good], \
+        conf[good]
+    contrast = mag[lvl, ys, xs] / thresh[lvl]
+    pts = _coverage_centroids(lin, pts, radius, spot[good], ring[good])
+    # one detection per place: a stronger peak within its radius (another scale of the same spot) wins
+    order = np.argsort(-contrast)
+    taken: list[int] = []
+    for i in order.tolist():
+        if all(not _same_spot(pts[i], radius[i], pts[j], radius[j]) for j in taken):
+            taken.append(i)
+        if len(taken) >= max_marks:
+            break
+    sel = np.array(sorted(taken), int)
+    pts, labels, conf, radius, contrast = pts[sel], labels[sel], conf[sel], radius[sel], contrast[sel]
+    if prior.extent_px is not None and len(pts) > 1:
+        keep = _densest_cluster(pts, contrast, 0.75 * prior.extent_px)
+        pts, labels, conf, radius, contrast = pts[keep], labels[keep], conf[keep], radius[keep], contrast[keep]
+    order = np.lexsort((pts[:, 0], pts[:, 1], labels)) if len(pts) else np.zeros(0, int)
+    areas = np.round(np.pi * radius ** 2).astype(int)
+    return ContrastMarks(pts[order].reshape(-1, 2), labels[order].astype(int), areas[order], names,
+                         np.zeros(len(order), bool), conf[order], radius[order], contrast[order])
+
+
+def _coverage_centroids(lin: np.ndarray, pts: np.ndarray, radius: np.ndarray, spot: np.ndarray,
+                        ring: np.ndarray) -> np.ndarray:
+    """Each spot's position as the centroid of its coverage (:func:`evopose.features._coverage`: a pixel's share
+    of the spot's colour on the line ring -> spot, in linear light) within its radius + 1.5 px of the peak: the
+    covered area's centre, to a tenth of a pixel for 2-4 px marks where a peak's quadratic is coarser. Shapes:
+    lin (H, W, 3), pts (K, 2), radius (K,), spot and ring (K, 3)."""
+    h, w = lin.shape[:2]
+    out = pts.copy()
+    for i, ((u, v), r) in enumerate(zip(pts, radius)):
+        reach = r + 1.5
+        x0, x1 = max(int(np.floor(u - reach)), 0), min(int(np.ceil(u + reach)) + 1, w)
+        y0, y1 = max(int(np.floor(v - reach)), 0), min(int(np.ceil(v + reach)) + 1, h)
+        yy, xx = np.mgrid[y0:y1, x0:x1]
+        inside = np.hypot(xx - u, yy - v) <= reach
+        a = _coverage(lin[y0:y1, x0:x1] - ring[i], (spot[i] - ring[i])[None, None, :]) * inside
+        if a.sum() > 1e-6:
+            out[i] = ((a * xx).sum() / a.sum(), (a * yy).sum() / a.sum())
+    return out
+
+
+def _same_spot(p: np.ndarray, r: float, q: np.ndarray, s: float) -> bool:
+    """Whether two peaks are one spot: within the larger radius (two scales of one disc), or a small peak on the
+    rim of a much larger one (an oblique disc's ends, its anti-aliased outline)."""
+    d = float(np.hypot(*(p - q)))
+    big, small = max(r, s), min(r, s)
+    return d <= max(big, 1.0) or (big >= 1.8 * small and d < 1.3 * (big + small))
+
+
+def _densest_cluster(pts: np.ndarray, weight: np.ndarray, radius: float) -> np.ndarray:
+    """Indices of the points within ``radius`` of the point whose ``radius`` neighbourhood holds the most weight
+    (the target's marks; specks and clutter far from it are dropped)."""
+    d = np.linalg.norm(pts[:, None, :] - pts[None, :, :], axis=2)
+    near = d <= radius
+    centre = int(np.argmax(near @ np.minimum(weight, 3.0)))
+    members = near[centre]
+    # re-centre once on the members' weighted mean
+    mean = np.average(pts[members], axis=0, weights=np.minimum(weight[members], 3.0))
+    return np.nonzero(np.linalg.norm(pts - mean, axis=1) <= radius)[0]
+
+
+__all__ = ["ContrastMarks", "MarkPrior", "contrast_responses", "detect_contrast_marks", "label_colours", "scales"]
+
+
+def mark_prior(camera, mark_radius: float, target_extent: float, lo: np.ndarray, hi: np.ndarray,
+               min_facing: float = 0.3) -> MarkPrior:
+    """The :class:`MarkPrior` of ``camera`` (a :class:`evopose.Camera` with its ``world_from_camera``) for a target
+    whose marks have radius ``mark_radius`` and whose largest extent is ``target_extent`` (metres), somewhere in
+    the box ``lo``..``hi`` (world x, y, z, shape (3,) each: the operating area). A disc seen at ``min_facing``
+    (cosine) is that much narrower."""
+    corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])], float)
+    p_cam = corners @ camera.world_from_camera[:3, :3] - camera.world_from_camera[:3, 3] @ camera.world_from_camera[
+        :3, :3]
+    dist = np.linalg.norm(p_cam, axis=1)
+    centre = camera.world_from_camera[:3, :3].T @ ((lo + hi) / 2 - camera.world_from_camera[:3, 3])
+    near = max(float(dist.min()) if np.all(p_cam[:, 2] > 0) else float(np.linalg.norm(centre)) * 0.5, 1e-3)
+    near = max(near - target_extent, 1e-3)
+    far = float(dist.max()) + target_extent
+    f = max(camera.fx, camera.fy)
+    return MarkPrior((max(0.5, min_facing * f * mark_radius / far), f * mark_radius / near),
+                     f * target_extent / near)
