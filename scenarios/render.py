@@ -11,6 +11,13 @@ OpenCV drawing, no per-pixel Python loops:
 5. for a degraded camera (:mod:`scenarios.degrade`): an occluding band over part of the target, more distractors,
    heavier blur.
 
+With a camera model (``render.camera_model``, :mod:`scenarios.camera_model`) the scene is drawn in linear light
+(float32, the palette's sRGB colours made linear): faces and marks lit by the sun (ambient + Lambert diffuse + a
+Blinn-Phong highlight towards the camera), polygons anti-aliased by coverage in linear light; blur and the
+lighting gain act on the light, and the camera model's ``capture`` replaces the plain gain and Gaussian noise
+(its own seeded stream, :data:`STREAM_CAMERA`). Without one, the 8-bit path above is unchanged.
+The world's clutter objects (:mod:`scenarios.clutter`) are drawn like the body in either path and hide marks.
+
 Ground truth: the target pose, the camera pose and, for every mark whose centre is visible, its model
 index and its projected centre in pixels (``fully_visible`` tells whether its whole disc is).
 Every random draw of frame N comes from a generator seeded by ``(scenario seed, vehicle, N)``.
@@ -27,10 +34,14 @@ import numpy as np
 from evopose import Camera
 from evopose.pose import matrix_from_pose, pose_from_matrix
 
-from .degrade import STREAM_DEGRADED, composed_blur, draw_band, inside_band, occluder_band, target_box
+from .camera_model import capture, linear_from_srgb, srgb_from_linear
+from .clutter import clutter_mesh
+from .degrade import (OCCLUDER_COLOUR, STREAM_DEGRADED, composed_blur, draw_band, inside_band, occluder_band,
+                      target_box)
 from .mesh import Mesh, box_mesh, first_hits, hits
 from .sensors import stream_rng
-from .world import GroundSpec, RenderSpec, Scenario, Vehicle
+from .shading import SHIFT, ellipse_linear, fill_linear, lit_linear  # SHIFT: fixed-point bits of drawing (1/16 px)
+from .world import GroundSpec, LightingSpec, RenderSpec, Scenario, Vehicle
 
 #: Points per mark outline (its projected polygon, and the samples of the partial-visibility test).
 MARK_OUTLINE = 24
@@ -38,8 +49,6 @@ MARK_OUTLINE = 24
 MARK_LIFT = 0.003
 #: Faces with a vertex nearer than this (metres, optical axis) are not drawn.
 NEAR_CLIP = 0.05
-#: Fixed-point bits of OpenCV drawing coordinates (1/16 px).
-SHIFT = 4
 #: Side of the square ground texture, texels (a power of two: the FFT noise tiles seamlessly).
 TEXTURE_SIZE = 1024
 #: Largest HSV saturation (0-255) of the ground texture.
@@ -49,6 +58,8 @@ MAX_GROUND_SATURATION = 60
 MIN_FACING_COS = 0.2
 #: Stream numbers of the scenario's random processes (see :func:`scenarios.sensors.stream_rng`).
 STREAM_GROUND, STREAM_FRAME = 101, 202
+#: Stream of the camera model's sensor noise (a frame's noise does not depend on how many blobs were drawn).
+STREAM_CAMERA = 404
 
 
 @dataclass
@@ -141,8 +152,9 @@ def ground_texture(seed: int, colour: tuple[int, int, int], contrast: float) -> 
     return cv2.cvtColor(hsv, cv2.COLOR_HSV2BGR)
 
 
-def _background(camera: Camera, ground: GroundSpec, seed: int, shade: float) -> np.ndarray:
-    """Sky and textured ground plane ``z = 0`` seen by ``camera`` (distortion ignored for the background)."""
+def _background(camera: Camera, ground: GroundSpec, seed: int, shade: float, linear: bool = False) -> np.ndarray:
+    """Sky and textured ground plane ``z = 0`` seen by ``camera`` (distortion ignored for the background):
+    uint8, or with ``linear`` float32 linear light (the sky's colour is its radiance)."""
     w, h = camera.width, camera.height
     c_from_w = camera.camera_from_world
     K = camera.matrix
@@ -151,7 +163,11 @@ def _background(camera: Camera, ground: GroundSpec, seed: int, shade: float) -> 
     H = K @ np.column_stack([c_from_w[:3, 0], c_from_w[:3, 1], c_from_w[:3, 3]]) @ np.diag([texel, texel, 1.0])
     tex = ground_texture(seed, tuple(ground.colour), float(ground.contrast))
     image = cv2.warpPerspective(tex, H, (w, h), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_WRAP)
-    if shade != 1.0:
+    if linear:  # texture colours are sRGB-encoded reflectances: light them in linear light
+        image = linear_from_srgb(image)
+        if shade != 1.0:
+            image *= np.float32(shade)
+    elif shade != 1.0:
         image = cv2.convertScaleAbs(image, alpha=shade)
     # rays that do not reach the ground in front of the camera see the sky
     ray_z = (camera.world_from_camera[:3, :3] @ np.linalg.inv(K))[2]  # world z of the ray through (u, v, 1)
@@ -163,7 +179,7 @@ def _background(camera: Camera, ground: GroundSpec, seed: int, shade: float) -> 
     if sky.any():
         gradient = np.clip(0.75 + 0.25 * (v / h), 0, 1)[:, None, None] * np.asarray(ground.sky, np.float32)
         sky_img = np.broadcast_to(gradient, (h, w, 3)).astype(np.uint8)
-        image[sky] = sky_img[sky]
+        image[sky] = linear_from_srgb(sky_img[sky]) if linear else sky_img[sky]
     return image
 
 
@@ -176,13 +192,16 @@ def _occluder_mesh(render: RenderSpec, t: float) -> Mesh:
     for occ in render.occluders:
         centre = np.asarray(occ.centre) + t * np.asarray(occ.velocity)
         mesh = mesh + box_mesh(centre, occ.size, tuple(occ.colour))
+    if render.clutter:
+        mesh = mesh + clutter_mesh(render.clutter)
     return mesh
 
 
 class _SceneFaces:
     """The faces of one frame in the camera frame: culled, shaded, sorted far to near, projected."""
 
-    def __init__(self, mesh: Mesh, camera: Camera, sun_world: np.ndarray, ambient: float) -> None:
+    def __init__(self, mesh: Mesh, camera: Camera, sun_world: np.ndarray, ambient: float,
+                 light: LightingSpec | None = None) -> None:
         R, t = camera.camera_from_world[:3, :3], camera.camera_from_world[:3, 3]
         v_cam = mesh.vertices @ R.T + t
         self.uv, _ = camera.project_camera_points(v_cam)
@@ -198,6 +217,8 @@ class _SceneFaces:
         self.visible = np.nonzero(keep)[0]
         self.order = self.visible[np.argsort(-centres[self.visible, 2], kind="stable")]
         self.colours = mesh.colours * shades[:, None]
+        if light is not None:  # linear light, with the highlight
+            self.colours = lit_linear(mesh.colours, normals, centres, sun_cam, light)
         # triangles that can hide something: the kept faces (seen from the camera)
         tris, owner = [], []
         for i in self.visible:
@@ -213,7 +234,10 @@ class _SceneFaces:
             pts = np.round(self.uv[self.mesh.faces[i]] * (1 << SHIFT)).astype(np.int32)
             if np.abs(pts).max() > (1 << 28):
                 continue
-            cv2.fillConvexPoly(image, pts, tuple(float(c) for c in self.colours[i]), cv2.LINE_AA, SHIFT)
+            if image.dtype == np.uint8:
+                cv2.fillConvexPoly(image, pts, tuple(float(c) for c in self.colours[i]), cv2.LINE_AA, SHIFT)
+            else:
+                fill_linear(image, pts, self.colours[i])
 
 
 def _mark_outlines(points: np.ndarray, normals: np.ndarray, radius: float) -> np.ndarray:
@@ -229,6 +253,7 @@ def _mark_outlines(points: np.ndarray, normals: np.ndarray, radius: float) -> np
 
 def _draw_distractors(image: np.ndarray, rng: np.random.Generator, render: RenderSpec, palette: dict,
                       marks_uv: np.ndarray, shade: float) -> tuple[np.ndarray, list[str]]:
+    """Blobs in the palette's colours, lit by ``shade`` (in linear light for a float ``image``)."""
     spec = render.distractors
     h, w = image.shape[:2]
     if spec.count == 0:
@@ -255,9 +280,13 @@ def _draw_distractors(image: np.ndarray, rng: np.random.Generator, render: Rende
         name = names[int(rng.integers(len(names)))]
         axes = (r * (1 << SHIFT), r * rng.uniform(0.5, 1.0) * (1 << SHIFT))
         centre = tuple(int(round(c * (1 << SHIFT))) for c in uv)
-        colour = tuple(float(c) * shade for c in palette[name])
-        cv2.ellipse(image, centre, tuple(int(a) for a in axes), float(rng.uniform(0, 180)), 0, 360, colour,
-                    -1, cv2.LINE_AA, SHIFT)
+        if image.dtype == np.uint8:
+            colour = tuple(float(c) * shade for c in palette[name])
+            cv2.ellipse(image, centre, tuple(int(a) for a in axes), float(rng.uniform(0, 180)), 0, 360, colour,
+                        -1, cv2.LINE_AA, SHIFT)
+        else:
+            ellipse_linear(image, uv, r, centre, tuple(int(a) for a in axes), float(rng.uniform(0, 180)),
+                            linear_from_srgb(np.asarray(palette[name], float)) * shade)
         uv_out.append(uv)
         colours.append(name)
     return np.array(uv_out).reshape(-1, 2), colours
@@ -282,8 +311,9 @@ def render_frame(scenario: Scenario, frame: int, vehicle: str | None = None, *, 
     Parameters
     ----------
     clean : bool
-        Leave out every nuisance (noise, blur, lighting changes, distractors, occluders): the
-        geometry only, for checking the feature extraction against the truth.
+        Leave out every nuisance (noise, blur, lighting changes, distractors, occluders, clutter): the
+        geometry only, for checking the feature extraction against the truth. With a camera model, the
+        linear scene is only sRGB-encoded (a perfect camera: no exposure, sensor or encoder).
 
     Raises
     ------
@@ -300,14 +330,15 @@ def render_frame(scenario: Scenario, frame: int, vehicle: str | None = None, *, 
                                            + light.gain_jitter * rng.standard_normal())
     sun = np.asarray(light.sun, float)
     ground_shade = light.ambient + (1 - light.ambient) * max(sun[2] / np.linalg.norm(sun), 0)
-    image = _background(camera, render.ground, scenario.seed, ground_shade)
+    linear = render.camera_model is not None
+    image = _background(camera, render.ground, scenario.seed, ground_shade, linear)
 
     model = scenario.model
     world_from_target = matrix_from_pose(scenario.target_pose(frame))
     mesh = model.body.transformed(world_from_target)
     if not clean:
         mesh = mesh + _occluder_mesh(render, t)
-    faces = _SceneFaces(mesh, camera, sun, light.ambient)
+    faces = _SceneFaces(mesh, camera, sun, light.ambient, light if linear else None)
     faces.draw(image, faces.order)
 
     # marks: centre and outline in the world, visibility by normal, image bounds and occlusion rays
@@ -332,11 +363,18 @@ def render_frame(scenario: Scenario, frame: int, vehicle: str | None = None, *, 
     shown = candidates[~blocked[:, 0]]
     whole = ~blocked[~blocked[:, 0]].any(axis=1)
     whole &= np.all(camera.in_image(uv_o[shown], margin=-0.5), axis=1) & front_o.reshape(-1, MARK_OUTLINE)[shown].all(1)
-    mark_shades = _face_shades(normals_w[shown] @ camera.camera_from_world[:3, :3].T,
-                               camera.camera_from_world[:3, :3] @ (sun / np.linalg.norm(sun)), light.ambient)
+    R_cw = camera.camera_from_world[:3, :3]
+    mark_shades = _face_shades(normals_w[shown] @ R_cw.T, R_cw @ (sun / np.linalg.norm(sun)), light.ambient)
+    if linear:
+        mark_radiance = lit_linear(np.array([model.palette[model.mark_colours[i]] for i in shown]).reshape(-1, 3),
+                                    normals_w[shown] @ R_cw.T, centres_w[shown] @ R_cw.T + camera.camera_from_world[:3, 3],
+                                    R_cw @ (sun / np.linalg.norm(sun)), light)
     for k, i in enumerate(shown):
-        colour = tuple(float(c) * mark_shades[k] for c in model.palette[model.mark_colours[i]])
         pts = np.round(uv_o[i] * (1 << SHIFT)).astype(np.int32)
+        if linear:
+            fill_linear(image, pts, mark_radiance[k])
+            continue
+        colour = tuple(float(c) * mark_shades[k] for c in model.palette[model.mark_colours[i]])
         cv2.fillConvexPoly(image, pts, colour, cv2.LINE_AA, SHIFT)
     # faces hiding part of a drawn mark go over it again
     partial = candidates[~blocked[:, 0]][~whole] if len(shown) else np.zeros(0, int)
@@ -351,7 +389,13 @@ def render_frame(scenario: Scenario, frame: int, vehicle: str | None = None, *, 
         box = target_box(camera, model.body.transformed(world_from_target).vertices)
         if box is not None:
             band = occluder_band(box, degraded.occluded_fraction)
-            draw_band(image, band)
+            if linear:  # the band's paint, lit like the ground
+                u0, v0, u1, v1 = (int(round(c)) for c in band)
+                cv2.rectangle(image, (u0, v0), (u1, v1),
+                              tuple(float(c) for c in linear_from_srgb(np.asarray(OCCLUDER_COLOUR, float))
+                                    * ground_shade), -1)
+            else:
+                draw_band(image, band)
             behind = inside_band(uv_c[shown], band)
             whole = whole[~behind] & ~inside_band(uv_o[shown[~behind]], band).any(axis=1)
             shown = shown[~behind]
@@ -370,8 +414,14 @@ def render_frame(scenario: Scenario, frame: int, vehicle: str | None = None, *, 
             blur = composed_blur(blur, degraded.blur_sigma)
         if blur > 0:
             image = cv2.GaussianBlur(image, (0, 0), blur)
-        if gain != 1.0 or render.noise_sigma > 0:
+        if linear:  # the lighting's gain is on the light; the camera model's sensor replaces the Gaussian noise
+            if gain != 1.0:
+                image *= np.float32(gain)
+            image = capture(image, render.camera_model, stream_rng(scenario.seed, STREAM_CAMERA, veh.index, frame)).image
+        elif gain != 1.0 or render.noise_sigma > 0:
             image = _gain_and_noise(image, gain, render.noise_sigma, int(rng.integers(1, 2**31)))
+    if linear and clean:
+        image = srgb_from_linear(image)
 
     sensors = {}
     target_pose = scenario.target_pose(frame)

@@ -187,6 +187,9 @@ class LightingSpec(Strict):
     gain_jitter: Annotated[float, Field(ge=0, lt=1)] = 0.0
     ambient: Annotated[float, Field(ge=0, le=1)] = 0.55
     sun: Vec3 = [0.3, 0.4, 1.0]
+    #: With a camera model, the OpenCV renderer's Blinn-Phong sun highlight on paint (strength, exponent).
+    specular: Annotated[float, Field(ge=0, le=10)] = 0.25
+    shininess: Annotated[float, Field(ge=1, le=10000)] = 60.0
     #: Physically based renderer (:mod:`scenarios.photoreal`): the sun's irradiance (Blender's sun strength,
     #: W/m^2), the sky (clear: a sky texture lit by the sun at ``sun``; overcast: no direct sun, a bright grey
     #: sky, soft shadows) and the sky's strength.
@@ -229,8 +232,7 @@ class RenderSpec(Strict):
     distractors: DistractorSpec = DistractorSpec()
     occluders: list[OccluderSpec] = []
     clutter: Annotated[list[ClutterSpec], Field(max_length=200)] = []
-    #: The camera's sensor, processing and encoder (:mod:`scenarios.camera_model`); None: the renderer's
-    #: plain gain and Gaussian noise on perfect colours.
+    #: Sensor, processing and encoder (:mod:`scenarios.camera_model`); None: plain gain and Gaussian noise.
     camera_model: CameraModelSpec | None = None
 
 

@@ -201,3 +201,77 @@ def test_a_camera_model_in_yaml_loads():
     document = {"exposure": "auto", "chroma": 444, "jpeg_quality": None, "white_balance": [0.95, 1, 1.05]}
     spec = CameraModelSpec.model_validate(document)
     assert spec.chroma == "444" and spec.jpeg_quality is None and spec.bayer == "RGGB"
+
+
+# --- the renderer with a camera model: sun shading, the highlight, clutter -------------------------------------
+
+#: A camera that keeps what the renderer drew: fixed exposure, no mosaic, no noise, lossless.
+PLAIN = {"exposure": 1.0, "bayer": "none", "read_noise": 0.0, "full_well": 1e7, "bit_depth": 16, "jpeg_quality": None}
+
+
+def _lit_world(eye, sun=(0.0, 0.0, 1.0), clutter=(), camera_model=PLAIN, **lighting):
+    from scenarios.world import ScenarioSpec, build_scenario
+    document = {
+        "name": "lit", "target": {"model": str(MODELS_DIR / "pioneer.yaml"), "trajectory": {"start": {}}},
+        "vehicles": [{"name": "C", "trajectory": {"start": dict(zip("xyz", eye))},
+                      "camera": {"intrinsics": {"fx": 700, "fy": 700, "cx": 160, "cy": 120, "width": 320,
+                                                "height": 240},
+                                 "look_at": [0.0, 0.0, 0.12]}}],
+        "render": {"lighting": {"ambient": 0.3, "sun": list(sun), **lighting}, "clutter": list(clutter),
+                   "camera_model": camera_model},
+    }
+    return build_scenario(ScenarioSpec.model_validate(document))
+
+
+def _face_median(frame, scenario, normal, channel: int) -> float:
+    """Median of ``channel`` over the body's red face with this ``normal`` (eroded: no edge pixels)."""
+    body = scenario.model.body  # the target stands at the origin, unturned: its frame is the world's
+    red = [i for i in range(len(body)) if body.colours[i][2] > body.colours[i][1] + 50
+           and np.allclose(body.normals[i], normal, atol=1e-6)]
+    mask = np.zeros(frame.image.shape[:2], np.uint8)
+    for i in red:
+        uv, _ = frame.camera.project_world(body.vertices[body.faces[i]])
+        cv2.fillConvexPoly(mask, np.round(uv).astype(np.int32), 255)
+    mask = cv2.erode(mask, np.ones((5, 5), np.uint8))
+    assert mask.sum() > 255 * 50, "the face is not in view"
+    return float(np.median(frame.image[..., channel][mask > 0]))
+
+
+def test_the_sunlit_top_is_brighter_than_a_side():
+    from scenarios.render import render_frame
+    world = _lit_world((2.5, 0.6, 2.2), specular=0.0)
+    frame = render_frame(world, 0)
+    top = _face_median(frame, world, (0, 0, 1), 2)
+    side = _face_median(frame, world, (1, 0, 0), 2)
+    assert top > side + 40  # Lambert: the sun straight above lights the top only (ambient 0.3 on the sides)
+
+
+def test_a_highlight_shows_where_the_view_mirrors_the_sun():
+    from scenarios.render import render_frame
+    sun = np.array([0.3, 0.4, 1.0]) / np.linalg.norm([0.3, 0.4, 1.0])
+    mirror = 4.0 * np.array([-sun[0], -sun[1], sun[2]])  # the sun's reflection off the top points here
+    away = 4.0 * sun  # beside the sun: the half vector is the sun's, 27 deg off the top's normal
+    green = {}
+    for name, eye in (("mirror", mirror), ("away", away)):
+        for specular in (0.0, 0.25):
+            world = _lit_world(eye, sun=sun, specular=specular, shininess=60)
+            green[name, specular] = _face_median(render_frame(world, 0), world, (0, 0, 1), 1)
+    assert green["mirror", 0.25] > green["mirror", 0.0] + 60  # dark red paint turns pale in the glint
+    assert abs(green["away", 0.25] - green["away", 0.0]) <= 3
+
+
+@pytest.mark.parametrize("shape, centre, size, eye, camera_model", [
+    ("box", [1.5, 0.0, 0.6], [0.3, 1.2, 1.2], (3.0, 0.0, 1.5), PLAIN),
+    ("box", [1.5, 0.0, 0.6], [0.3, 1.2, 1.2], (3.0, 0.0, 1.5), None),  # the 8-bit path draws clutter too
+    ("cylinder", [1.5, 0.0, 0.6], [0.8, 1.2, 1.2], (3.0, 0.0, 1.5), PLAIN),
+    ("sphere", [1.5, 0.0, 0.7], [1.2, 1.2, 1.2], (3.0, 0.0, 1.5), PLAIN),
+    ("disc", [0.0, 0.0, 0.6], [1.2, 1.2, 0.03], (0.5, 0.0, 4.0), PLAIN),  # a table top over the robot
+])
+def test_clutter_hides_marks_in_the_image_and_the_truth(shape, centre, size, eye, camera_model):
+    from scenarios.render import render_frame
+    clutter = {"shape": shape, "centre": centre, "size": size, "colour": [200, 180, 60]}  # a blue bin
+    open_view = render_frame(_lit_world(eye, camera_model=camera_model), 0)
+    hidden = render_frame(_lit_world(eye, clutter=[clutter], camera_model=camera_model), 0)
+    assert len(open_view.truth.mark_index) >= 4 and len(hidden.truth.mark_index) == 0
+    b, g, r = (hidden.image[int(v), int(u)].astype(int) for u, v in open_view.truth.mark_uv[:1]).__next__()
+    assert b > r + 30  # where a mark was, the bin's paint
