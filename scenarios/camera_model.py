@@ -125,7 +125,8 @@ def linear_from_srgb(image: np.ndarray) -> np.ndarray:
     """sRGB-encoded values 0-255 (uint8 image, or any array such as a palette colour) -> linear float32 0-1."""
     a = np.asarray(image)
     if a.dtype == np.uint8:
-        return cv2.LUT(a, _SRGB_TO_LINEAR) if a.ndim >= 2 and a.shape[-1] <= 4 else _SRGB_TO_LINEAR[a]
+        image_like = a.ndim == 2 or (a.ndim == 3 and a.shape[2] <= 4)  # what cv2.LUT takes (4x faster)
+        return cv2.LUT(a, _SRGB_TO_LINEAR) if image_like else _SRGB_TO_LINEAR[a]
     return _srgb_decode(np.clip(a.astype(np.float64), 0, 255) / 255.0).astype(np.float32)
 
 

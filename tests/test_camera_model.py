@@ -40,6 +40,9 @@ def test_srgb_round_trip():
     assert np.array_equal(srgb_from_linear(linear_from_srgb(values)), values)
     assert linear_from_srgb(np.array([0, 255], np.uint8)).tolist() == [0.0, 1.0]
     np.testing.assert_allclose(linear_from_srgb(np.array([118.0])), 0.18, atol=0.003)  # mid-grey
+    for shape in ((7, 3), (4, 5, 3), (2, 2, 2, 3), (3, 3, 7)):  # images (a table in OpenCV) and other arrays
+        values = _rng(1).integers(0, 256, shape).astype(np.uint8)
+        np.testing.assert_allclose(linear_from_srgb(values), linear_from_srgb(values.astype(float)), atol=1e-6)
 
 
 def test_jpeg_420_washes_out_a_small_discs_colour_but_keeps_its_brightness():
