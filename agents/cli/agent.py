@@ -46,7 +46,9 @@ def register(app: typer.Typer) -> None:
     def agent_command(
         fleet: Annotated[str, typer.Option(help="Fleet name.")],
         vehicle: Annotated[str, typer.Option(help="This vehicle: a vehicle of the scenario, or its target.")],
-        scenario: Annotated[str, typer.Option(help="Scenario file or shipped name (the simulated world).")] = "exp2",
+        scenario: Annotated[str | None, typer.Option(
+            "--scenario", "--world", help="Scenario file or shipped name (the simulated world; default: the world of "
+                                          "a dataset --source, else exp2).")] = None,
         role: Annotated[str | None, typer.Option(help=f"One of {', '.join(ROLES)} (default: the scenario's).")]
         = None,
         share: Annotated[str, typer.Option(help=f"What to share with team-mates: {', '.join(SHARES)}.")] = "none",
@@ -81,16 +83,18 @@ def register(app: typer.Typer) -> None:
                                                              "(team-mates' clocks must agree to within it).")] = 0.5,
         source: Annotated[str | None, typer.Option(
             help="Real images instead of the renderer: a video file, an image sequence (printf pattern like "
-                 "left%02d.jpg, a glob, or a directory), a V4L2 device (/dev/videoN or N), or a ROS 2 topic in the "
-                 "rmw_zenoh format, ros2:/camera/image_raw (sensor_msgs/msg/Image or CompressedImage). A file source "
-                 "is played one frame per tick and ends the run; a device or a topic gives its newest frame.")] = None,
+                 "left%02d.jpg, a glob, or a directory), a rendered dataset (its root, or a camera's folder in it: "
+                 "that camera's images with each frame's camera and truth; docs/datasets.md), a V4L2 device "
+                 "(/dev/videoN or N), or a ROS 2 topic in the rmw_zenoh format, ros2:/camera/image_raw "
+                 "(sensor_msgs/msg/Image or CompressedImage). A file source is played one frame per tick and ends the "
+                 "run; a device or a topic gives its newest frame.")] = None,
         camera_info: Annotated[str | None, typer.Option(
             help="--source's intrinsics: a ROS camera_info YAML, or ros2:/TOPIC (its first valid "
-                 "sensor_msgs/msg/CameraInfo); default: the scenario vehicle's.")] = None,
+                 "sensor_msgs/msg/CameraInfo); default: a dataset's camera_info, else the scenario vehicle's.")] = None,
         camera_pose: Annotated[str | None, typer.Option(
             help="--source's world_from_camera: a YAML/JSON file with a static x, y, z, roll, pitch, yaw (m, rad), or "
                  "ros2:/TOPIC (the newest geometry_msgs/msg/PoseStamped of the optical frame in map at each frame); "
-                 "default: the scenario vehicle's pose.")] = None,
+                 "default: a dataset's per-frame pose, else the scenario vehicle's pose.")] = None,
         ros_domain: Annotated[int, typer.Option(min=0, max=232, help="ROS_DOMAIN_ID of the ros2: inputs.")] = 0,
         source_max_age: Annotated[float, typer.Option(
             help="A ros2: image or camera pose received longer ago than S seconds is stale: the frame is skipped "

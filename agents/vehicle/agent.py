@@ -25,14 +25,24 @@ from agents.vehicle.roles import CameraVehicle, GroundStation, Vehicle
 from agents.vehicle.target_roles import Airship, Target
 
 Emit = Callable[[dict], None]
+#: The world of an agent given no ``--scenario`` (and no dataset with its own world).
+DEFAULT_WORLD = "exp2"
 #: The class of each role.
 ROLE_CLASSES: dict[str, type[Vehicle]] = {"uav": CameraVehicle, "ground-station": GroundStation,
                                           "airship": Airship, "target": Target}
 
 
 def load_world(config: AgentConfig) -> Scenario:
-    """The scenario, with its seed replaced by ``world_seed`` when given (each run of a scenario differs)."""
-    scenario = load_scenario(config.scenario)
+    """The scenario, with its seed replaced by ``world_seed`` when given (each run of a scenario differs).
+
+    Without ``--scenario``: the world of the dataset ``--source`` is in (its world.yaml), else :data:`DEFAULT_WORLD`.
+    """
+    if config.scenario is not None:
+        scenario = load_scenario(config.scenario)
+    else:
+        from agents.vehicle.dataset_source import dataset_world
+
+        scenario = dataset_world(config.source) or load_scenario(DEFAULT_WORLD)
     if config.world_seed is not None:
         spec = scenario.spec.model_copy(update={"seed": int(config.world_seed)})
         scenario = build_scenario(spec, Path(scenario.path).parent if scenario.path else None, scenario.path)

@@ -34,7 +34,8 @@ class AgentConfig:
 
     fleet: str
     vehicle: str
-    scenario: str | Path
+    #: the world file or shipped name; None: the dataset's world with a dataset ``source``, else exp2
+    scenario: str | Path | None
     role: str | None = None
     share: str = "none"
     frames: int | None = None

@@ -217,7 +217,13 @@ class CameraVehicle(Vehicle):
         try:
             if improver is not None:
                 improver.start()
-            return super().run(stop)
+            summary = super().run(stop)
+            source = getattr(self.camera, "summary_fields", None)  # a dataset: which, and whether the target is in it
+            if source is not None:
+                summary.update(source())
+                if not summary["target_visible"]:  # no target in the images: every good frame is a false positive
+                    summary["false_positives"] = summary["good"]
+            return summary
         finally:
             self._done.set()
             if improver is not None and improver.is_alive():

@@ -11,6 +11,8 @@ only the latest). What ``--source`` may be:
 - a video file (``cv2.VideoCapture``, FFmpeg);
 - an image sequence: a printf pattern (``left%02d.jpg``, read by ``cv2.VideoCapture``), a glob (``'img/*.png'``)
   or a directory (its images in name order, read by ``cv2.imread``);
+- a rendered dataset (docs/datasets.md): its root or one camera's folder, played in frame order with each frame's
+  camera and truth from the dataset (:mod:`agents.vehicle.dataset_source`);
 - a V4L2 device: ``/dev/videoN`` or its index ``N``;
 - a ROS 2 topic in the rmw_zenoh format, ``ros2:/camera/image_raw`` (``sensor_msgs/msg/Image`` or
   ``CompressedImage``, on ``--ros-domain``, followed on the agent's own Zenoh session): live, like a device, each
@@ -315,6 +317,8 @@ def open_camera(config: AgentConfig, scenario: Scenario, bus: FleetBus | None = 
     if config.source is None:
         return SimulatedCamera(scenario, config.vehicle, extract)
     ros_inputs = any(is_ros(spec) for spec in (config.source, config.camera_info, config.camera_pose))
+    from agents.vehicle.dataset_source import dataset_location, open_dataset_camera  # it imports this module
+
     if ros_inputs:  # imported here: ros_camera imports this module, and it brings in the bridges (rosbags)
         from agents.vehicle.ros_camera import check_ros_topics, open_ros_camera
 
@@ -322,6 +326,11 @@ def open_camera(config: AgentConfig, scenario: Scenario, bus: FleetBus | None = 
     k_file = None if config.camera_info is None or is_ros(config.camera_info) else read_camera_info(config.camera_info)
     pose_file = None if config.camera_pose is None or is_ros(config.camera_pose) else \
         matrix_from_pose(read_camera_pose(config.camera_pose))
+    located = None if ros_inputs else dataset_location(config.source)
+    if located is not None:  # a rendered dataset (docs/datasets.md): its images, per-frame cameras and truth
+        return open_dataset_camera(str(config.source), located, scenario, config.vehicle, extract, intrinsics=k_file,
+                                   world_from_camera=pose_file, intrinsics_from=None if config.camera_info is None
+                                   else f"--camera-info {config.camera_info}")
     if ros_inputs and bus is None:
         if not is_ros(config.source):
             open_reader(str(config.source)).close()
