@@ -36,12 +36,13 @@ from pathlib import Path
 from typing import Any, Annotated, Literal
 
 import numpy as np
-from pydantic import Field, field_validator, model_validator
+from pydantic import Field, model_validator
 
 from evopose import Bounds, Camera
 from evopose.pose import PARAM_NAMES, matrix_from_pose
 
 from .camera_model import CameraModelSpec
+from .clutter_spec import ClutterSpec
 from .documents import Strict, read_mapping, validate
 from .errors import FrameError, ModelFileError, ScenarioError
 from .sensors import GpsModel, ImuModel
@@ -190,31 +191,10 @@ class LightingSpec(Strict):
     #: With a camera model, the OpenCV renderer's Blinn-Phong sun highlight on paint (strength, exponent).
     specular: Annotated[float, Field(ge=0, le=10)] = 0.25
     shininess: Annotated[float, Field(ge=1, le=10000)] = 60.0
-    #: Physically based renderer (:mod:`scenarios.photoreal`): the sun's irradiance (Blender's sun strength,
-    #: W/m^2), the sky (clear: a sky texture lit by the sun at ``sun``; overcast: no direct sun, a bright grey
-    #: sky, soft shadows) and the sky's strength.
+    #: Photoreal renderer: the sun's irradiance (W/m^2), a clear sky (the sun at ``sun``) or overcast (no sun).
     sun_strength: Annotated[float, Field(ge=0, le=100)] = 4.0
     sky: Literal["clear", "overcast"] = "clear"
     sky_strength: Annotated[float, Field(ge=0, le=100)] = 1.0
-
-    @field_validator("sun")
-    @classmethod
-    def _sun_direction(cls, sun: list[float]) -> list[float]:
-        if math.hypot(*sun) < 1e-9:
-            raise ValueError("the sun direction must be a non-zero vector")
-        return sun
-
-
-class ClutterSpec(Strict):
-    """An object lying about in the world (a bucket, a cone, a ball), world frame, metres: drawn by both renderers,
-    it hides what is behind it. ``size`` is the box's sides, or the diameters along x and y and the height."""
-
-    shape: Literal["box", "cylinder", "sphere", "disc"]
-    centre: Vec3
-    size: Annotated[list[Annotated[float, Field(gt=0, le=100)]], Field(min_length=3, max_length=3)]
-    colour: BGR
-    roughness: Annotated[float, Field(ge=0, le=1)] = 0.5
-    yaw: float = 0.0
 
 
 class GroundSpec(Strict):
