@@ -4,7 +4,7 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test fuzz bench bench-footprint examples install clean lock compose
+.PHONY: demo test fuzz bench bench-footprint examples install clean lock compose photoreal
 
 $(STAMP): pyproject.toml constraints.txt
 	$(PYTHON) -m venv $(VENV)
@@ -13,6 +13,16 @@ $(STAMP): pyproject.toml constraints.txt
 	touch $(STAMP)
 
 install: $(STAMP)
+
+# Blender's bpy (Cycles, the photoreal renderer: docs/datasets.md) in its own interpreter: bpy 4.5 needs Python 3.11
+# and numpy < 2, the project pins numpy 2. EVOPOSE_BPY_PYTHON may name another Python that has bpy 4.5.
+PHOTOREAL := .venv-photoreal
+photoreal: $(PHOTOREAL)/.installed
+
+$(PHOTOREAL)/.installed: constraints-photoreal.txt
+	$(PYTHON) -m venv $(PHOTOREAL)
+	$(PHOTOREAL)/bin/pip install --quiet -c constraints-photoreal.txt bpy==4.5.15
+	touch $@
 
 demo: $(STAMP)
 	$(VENV)/bin/evopose scenario run exp2a-features

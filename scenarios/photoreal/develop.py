@@ -1,0 +1,51 @@
+"""Radiance -> the camera's image: the lens's distortion, then the camera model (:mod:`scenarios.camera_model`).
+
+Blender renders a pinhole image; a world camera with plumb_bob distortion gets it by resampling: each output
+(distorted) pixel takes the pinhole image at its undistorted position (the mapping OpenCV's
+``initUndistortRectifyMap`` computes). The camera model then exposes, mosaics, adds sensor noise, demosaics,
+tones and encodes, seeded per world, camera and frame.
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+from evopose import Camera
+
+from ..camera_model import CameraModelSpec, Captured, capture, linear_from_srgb
+from ..sensors import stream_rng
+from ..world import Scenario
+
+#: Stream of the camera model's draws for a dataset's images (the OpenCV renderer's own is 404).
+STREAM_DATASET_CAMERA = 505
+
+
+def distort(radiance: np.ndarray, camera: Camera) -> np.ndarray:
+    """The pinhole image ``radiance`` (intrinsics of ``camera``) as the distorted lens sees it."""
+    if not np.any(camera.distortion):
+        return radiance
+    size = (camera.width, camera.height)
+    map_x, map_y = cv2.initUndistortRectifyMap(camera.matrix, camera.distortion, None, camera.matrix, size,
+                                               cv2.CV_32FC1)
+    return cv2.remap(radiance, map_x, map_y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+
+
+def camera_model_of(scenario: Scenario) -> CameraModelSpec:
+    """The world's camera model, or the default one (a small industrial colour camera streaming JPEG)."""
+    return scenario.render.camera_model or CameraModelSpec()
+
+
+def camera_rng(scenario: Scenario, vehicle_index: int, frame: int) -> np.random.Generator:
+    return stream_rng(scenario.seed, STREAM_DATASET_CAMERA, vehicle_index, frame)
+
+
+def develop_radiance(radiance: np.ndarray, camera: Camera, spec: CameraModelSpec,
+                     rng: np.random.Generator) -> Captured:
+    """Linear BGR radiance of the pinhole render -> the captured (encoded and decoded) image."""
+    return capture(distort(np.asarray(radiance, np.float32), camera), spec, rng)
+
+
+def radiance_of_srgb(image: np.ndarray) -> np.ndarray:
+    """An 8-bit sRGB image as linear light (the OpenCV renderer's output before a camera model)."""
+    return linear_from_srgb(image)
