@@ -41,7 +41,7 @@ STEPS_PER_OCTAVE = 3
 #: A candidate's response must exceed this many robust spreads (1.4826 MAD) of its level's response.
 K_SIGMA = 6.0
 #: Largest ratio of the Hessian's eigenvalues (a disc seen at 70 deg from its normal is 3:1; an edge is >> 10).
-MAX_EDGE_RATIO = 12.0
+MAX_EDGE_RATIO = 40.0
 #: Largest misfit of a label: distance of the fitted paint colour from the line through background and spot,
 #: as a fraction of the colour's brightness.
 MAX_LABEL_MISFIT = 0.35
@@ -49,6 +49,9 @@ MAX_LABEL_MISFIT = 0.35
 MAX_BLEND = 6.0
 #: How far below black (linear light) an extrapolated mark colour may reach (noise).
 BLACK_SLACK = 0.02
+#: Least brightness (channel sum, linear) of a fitted mark colour, relative to the image's median brightness (a
+#: mark in the shade of its own body, lit by the sky alone, keeps ~0.25 of a sunlit ground's).
+MIN_RELATIVE_BRIGHTNESS = 0.2
 #: Weight of the chroma axes against lightness in the response (CIE Lab units).
 CHROMA_WEIGHT = 1.0
 
@@ -99,13 +102,14 @@ def _magnitude(dog: np.ndarray) -> np.ndarray:
     return np.sqrt(dog[..., 0] ** 2 + w * w * (dog[..., 1] ** 2 + dog[..., 2] ** 2))
 
 
-def label_colours(spot: np.ndarray, ring: np.ndarray, palette_linear: np.ndarray) -> tuple[np.ndarray, np.ndarray,
-                                                                                            np.ndarray]:
+def label_colours(spot: np.ndarray, ring: np.ndarray, palette_linear: np.ndarray,
+                  min_brightness: float = 0.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Which paint colour each spot is (linear BGR): ``spot`` (K, 3) the colour at its centre, ``ring`` (K, 3) its
     surroundings, ``palette_linear`` (C, 3) the model's colours. A spot blends its mark's colour ``s c`` (``s``
     the unknown light on it) with the ring: ``ring + t (spot - ring) = s c`` for some ``t >= 1``. Least squares in
     ``(t, s)`` per colour; the misfit is the residual over ``|s c|``. Returns ``label`` (K,), ``misfit`` (K,) of
-    the best colour and ``confidence`` (K,) in [0, 1]: 1 - best misfit / second misfit."""
+    the best colour and ``confidence`` (K,) in [0, 1]: 1 - best misfit / second misfit. A fitted colour whose
+    brightness (channel sum, linear) is under ``min_brightness`` fits no paint."""
     k, c = len(spot), len(palette_linear)
     if k == 0:
         return np.zeros(0, int), np.zeros(0), np.zeros(0)
@@ -127,10 +131,14 @@ def label_colours(spot: np.ndarray, ring: np.ndarray, palette_linear: np.ndarray
         s = np.maximum(np.einsum("ki,i->k", ring + t[:, None] * u, colour) / max(float(colour @ colour), 1e-12), 0)
         resid = ring + t[:, None] * u - s[:, None] * colour
         misfit[:, j] = np.linalg.norm(resid, axis=1) / np.maximum(s * np.linalg.norm(colour), 1e-6)
+        # lit paint: a spot whose fitted colour is near black is a shadow, a hole, a wheel (any colour fits black at
+        # a small enough s)
+        misfit[s * colour.sum() < min_brightness, j] = np.inf
     order = np.argsort(misfit, axis=1)
     best = misfit[np.arange(k), order[:, 0]]
     second = misfit[np.arange(k), order[:, 1]] if c > 1 else np.full(k, np.inf)
-    confidence = np.clip(1.0 - best / np.maximum(second, 1e-9), 0.0, 1.0)
+    with np.errstate(invalid="ignore"):
+        confidence = np.where(np.isfinite(best), np.clip(1.0 - best / np.maximum(second, 1e-9), 0.0, 1.0), 0.0)
     return order[:, 0], best, confidence
 
 
@@ -218,7 +226,9 @@ def detect_contrast_marks(image_bgr: np.ndarray, palette: Mapping[str, tuple[int
         sel = (dist >= r_in) & (dist <= r_out)
         ring[i] = np.median(lin[y0:y1, x0:x1][sel], axis=0)
     pal = _srgb_to_linear(np.array([palette[n] for n in names], np.float32) / 255.0)
-    labels, misfit, conf = label_colours(spot.astype(float), ring.astype(float), pal.astype(float))
+    scene = float(np.median(lin[::4, ::4].sum(axis=2)))
+    labels, misfit, conf = label_colours(spot.astype(float), ring.astype(float), pal.astype(float),
+                                         MIN_RELATIVE_BRIGHTNESS * scene)
     good = misfit <= max_misfit
     lvl, ys, xs, radius, pts, labels, conf = lvl[good], ys[good], xs[good], radius[good], pts[good], labels[good], \
         conf[good]

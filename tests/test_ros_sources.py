@@ -315,7 +315,7 @@ def test_a_skipped_tick_gives_a_frame_without_points_and_no_estimate():
         return pose
 
     camera = SourceCamera(TicksReader([image, None, image, image]), scenario, "H1",
-                          feature_extractor("marks", scenario.model.palette), world_from_camera=world_from_camera)
+                          feature_extractor("marks", scenario.model), world_from_camera=world_from_camera)
     frames = [camera.acquire(n, n) for n in range(4)]  # image, stale image, stale pose, image
     assert [len(f.points) > 0 for f in frames] == [True, False, False, True] and camera.skipped == 2
     assert [f.scene_frame for f in frames] == [0, 1, 1, 1] and camera.frames == 2

@@ -1,7 +1,9 @@
 """Which image points a target gives EvoPose: its colour marks, or a chessboard's inner corners.
 
 ``--features marks`` (the default of ``evopose agent`` and ``evopose solve --image``) finds the model's colour
-marks (:func:`evopose.features.detect_colour_marks`, the paper's Section IV); ``--features corners`` finds
+marks by preset hue bands (:func:`evopose.features.detect_colour_marks`, the paper's Section IV: flat-coloured
+drawings); ``--features contrast`` by their contrast (:func:`evopose.blobs.detect_contrast_marks`: camera images);
+``--features corners`` finds
 Shi-Tomasi corners (:func:`evopose.features.detect_corners`) and keeps the X-junctions
 (:func:`evopose.features.x_junctions`), the inner corners of a chessboard: a board's outline and the corners
 of boxes are L-corners and would let a grid shifted by one square fit as well as the true one. Either way the
@@ -13,20 +15,34 @@ model's palette (:func:`feature_extractor`), the label a point is matched by (ou
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import Protocol
 
 import numpy as np
 
+from evopose import Bounds, Camera
+from evopose.blobs import MarkPrior, detect_contrast_marks, mark_prior
 from evopose.features import colour_ranges, detect_colour_marks, detect_corners, x_junctions
+from scenarios.target import TargetModel
 
-#: The kinds of feature points (``--features``).
-FEATURE_KINDS = ("marks", "corners")
+#: The kinds of feature points (``--features``): colour ``marks`` by preset hue bands (the default; the front-end
+#: for the project's flat-coloured drawings), marks by ``contrast`` (camera images: photoreal renders, JPEG 4:2:0),
+#: chessboard ``corners``.
+FEATURE_KINDS = ("marks", "contrast", "corners")
 #: Shi-Tomasi settings of ``corners``: at most this many corners, quality relative to the strongest, spacing in
 #: pixels (a 640 x 480 photo of a 9 x 6 board 0.3-0.4 m away: squares of 30-60 px).
 MAX_CORNERS, CORNER_QUALITY, CORNER_SPACING_PX = 150, 0.05, 8.0
 
+
+class FeatureExtractor(Protocol):
+    """``extract(image (H, W, 3) uint8, camera or None) -> (points (N, 2), labels (N,) or None)``: every detector
+    behind one call. ``camera`` (with its ``world_from_camera``) lets a detector know how large the target's marks
+    can be in this image (:func:`evopose.blobs.mark_prior`); without it a generic range is searched."""
+
+    def __call__(self, image: np.ndarray, camera: Camera | None = None) -> tuple[np.ndarray, np.ndarray | None]:
+        ...
+
+
 Extractor = Callable[[np.ndarray], np.ndarray]
-#: ``image (H, W, 3) uint8 -> (points (N, 2), labels (N,) or None)``.
-FeatureExtractor = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray | None]]
 
 
 def chessboard_corners(image: np.ndarray) -> np.ndarray:
@@ -35,27 +51,38 @@ def chessboard_corners(image: np.ndarray) -> np.ndarray:
     return found[x_junctions(image, found)]
 
 
-def feature_extractor(kind: str, palette: dict[str, tuple[int, int, int]]) -> FeatureExtractor:
-    """``image (H, W, 3) uint8 -> (points (N, 2), labels (N,) or None)`` for ``kind`` (one of
-    :data:`FEATURE_KINDS`); ``palette`` is the model's mark colours (name -> BGR), used by ``marks``, whose labels
-    are each mark's colour index in ``palette`` (the order of :meth:`scenarios.target.TargetModel.colour_labels`)."""
+def feature_extractor(kind: str, target: TargetModel, area: Bounds | None = None) -> FeatureExtractor:
+    """The :class:`FeatureExtractor` of ``kind`` (one of :data:`FEATURE_KINDS`) for ``target``: ``marks`` and
+    ``contrast`` label each mark with its colour's index in the model's palette (the order of
+    :meth:`scenarios.target.TargetModel.colour_labels`); ``area`` is the operating area (world x, y, z bounds of
+    the target) from which ``contrast`` derives the marks' size in each camera's image."""
     if kind == "corners":
-        return lambda image: (chessboard_corners(image), None)
-    if kind != "marks":
-        raise ValueError(f"features must be one of {', '.join(FEATURE_KINDS)}, got {kind!r}")
-    ranges = colour_ranges(palette)
+        return lambda image, camera=None: (chessboard_corners(image), None)
+    if kind == "marks":
+        ranges = colour_ranges(target.palette)
 
-    def marks(image: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        found = detect_colour_marks(image, ranges)
+        def hue_marks(image: np.ndarray, camera: Camera | None = None) -> tuple[np.ndarray, np.ndarray]:
+            found = detect_colour_marks(image, ranges)
+            return found.points, found.labels
+
+        return hue_marks
+    if kind != "contrast":
+        raise ValueError(f"features must be one of {', '.join(FEATURE_KINDS)}, got {kind!r}")
+    palette, size = dict(target.palette), target.size
+
+    def contrast_marks(image: np.ndarray, camera: Camera | None = None) -> tuple[np.ndarray, np.ndarray]:
+        prior = MarkPrior() if camera is None or area is None else mark_prior(
+            camera, target.mark_radius, size, area.lo[:3], area.hi[:3])
+        found = detect_contrast_marks(image, palette, prior)
         return found.points, found.labels
 
-    return marks
+    return contrast_marks
 
 
-def point_extractor(kind: str, palette: dict[str, tuple[int, int, int]]) -> Extractor:
-    """``image (H, W, 3) uint8 -> points (N, 2)``: :func:`feature_extractor` without the labels."""
-    extract = feature_extractor(kind, palette)
+def point_extractor(kind: str, target: TargetModel, area: Bounds | None = None) -> Extractor:
+    """``image (H, W, 3) uint8 -> points (N, 2)``: :func:`feature_extractor` without the labels or a camera."""
+    extract = feature_extractor(kind, target, area)
     return lambda image: extract(image)[0]
 
 
-__all__ = ["FEATURE_KINDS", "chessboard_corners", "feature_extractor", "point_extractor"]
+__all__ = ["FEATURE_KINDS", "FeatureExtractor", "chessboard_corners", "feature_extractor", "point_extractor"]

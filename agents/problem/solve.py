@@ -54,7 +54,7 @@ def solve_image(image: str | Path, model: str | Path, camera: str | Path, *, see
                          f"the camera is {cam.width}x{cam.height}")
     if features not in FEATURE_KINDS:
         raise ProblemFileError(f"--features must be one of {', '.join(FEATURE_KINDS)}, got {features!r}")
-    points, labels = feature_extractor(features, target.palette)(picture)
+    points, labels = feature_extractor(features, target)(picture, cam)
     if len(points) < 3:
         raise WorldError(f"{image}: {len(points)} {features} found; at least 3 are needed")
     evo_model = target.evopose_model()

@@ -18,7 +18,7 @@ ENCODINGS = ("raw", "jpeg", "png")
 VIEW_WEIGHTS = ("equal", "step", "adaptive")
 CAMERA_ROLES = ("uav", "ground-station")
 #: Feature points a camera vehicle extracts (``--features``; agents.problem.extract.FEATURE_KINDS).
-FEATURES = ("marks", "corners")
+FEATURES = ("marks", "contrast", "corners")
 #: Share modes in which a vehicle keeps improving its own estimate between frames (generations on the last
 #: views). Not with raw images or features: there every vehicle must compute the same pose from the same data.
 IDLE_GENERATIONS = ("none", "hint")

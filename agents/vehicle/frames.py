@@ -17,8 +17,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from evopose import Camera
-from evopose.features import colour_ranges, detect_colour_marks
 from scenarios.render import render_frame
+
+from agents.problem.extract import feature_extractor
 from scenarios.world import Scenario
 
 NS = 1_000_000_000
@@ -106,17 +107,21 @@ class Frame:
     render_cpu_s: float = 0.0
 
 
+def default_extractor(scenario: Scenario) -> Callable[..., tuple[np.ndarray, np.ndarray | None]]:
+    """The agents' default front-end for ``scenario``: its target's colour marks (``--features marks``)."""
+    return feature_extractor("marks", scenario.model, scenario.bounds() if scenario.spec.search else None)
+
+
 class SimulatedCamera:
-    """A vehicle's camera in a scenario: renders the frame, extracts the target's colour marks with their colours
-    (or what ``extract`` gives: ``image (H, W, 3) -> (points (N, 2), labels (N,) or None)``)."""
+    """A vehicle's camera in a scenario: renders the frame, extracts the target's marks with their colours with
+    ``extract`` (``image (H, W, 3), camera -> (points (N, 2), labels (N,) or None)``,
+    :class:`agents.problem.extract.FeatureExtractor`)."""
 
     def __init__(self, scenario: Scenario, vehicle: str,
-                 extract: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray | None]] | None = None) -> None:
+                 extract: Callable[..., tuple[np.ndarray, np.ndarray | None]] | None = None) -> None:
         self.scenario = scenario
         self.vehicle = scenario.vehicle(vehicle).name
-        self.ranges = colour_ranges(scenario.model.palette)
-        if extract is not None:
-            self.extract = extract
+        self.extract = extract if extract is not None else default_extractor(scenario)
 
     def scene_frame(self, index: int) -> int:
         return index % self.scenario.frames
@@ -126,15 +131,9 @@ class SimulatedCamera:
         t0, cpu0 = time.perf_counter(), time.thread_time()
         rendered = render_frame(self.scenario, scene, self.vehicle)
         render_s, render_cpu_s = time.perf_counter() - t0, time.thread_time() - cpu0
-        points, labels = self.extract(rendered.image)
+        points, labels = self.extract(rendered.image, rendered.camera)
         return Frame(index, scene, stamp_ns, rendered.image, rendered.camera, points,
                      self.scenario.target_pose(scene), render_s, labels, render_cpu_s=render_cpu_s)
-
-    def extract(self, image: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """The target's colour marks in a BGR image (own or a team-mate's raw frame), shape (N, 2), and each one's
-        colour index in the model's palette (N,)."""
-        marks = detect_colour_marks(image, self.ranges)
-        return marks.points, marks.labels
 
     def close(self) -> None:
         """Nothing to release (a real source closes its device or file)."""

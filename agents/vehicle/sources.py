@@ -278,7 +278,7 @@ class SourceCamera:
             raise SourceError(f"--source {self.reader.name}: frame {k} is {image.shape[1]}x{image.shape[0]}, "
                               f"the camera ({self.intrinsics_from}) is {camera.width}x{camera.height}")
         self._last_camera = camera
-        points, labels = self.extract(image)
+        points, labels = self.extract(image, camera)
         return Frame(index, k, stamp_ns, image, camera, points, None, read_s, labels)
 
     def _skipped(self, index: int, stamp_ns: int, read_s: float, why: str) -> Frame:
@@ -313,7 +313,7 @@ def open_camera(config: AgentConfig, scenario: Scenario, bus: FleetBus | None = 
     camera with a ROS input is checked (topic names, files) and is then the renderer: its first frame compiles the
     same kernels, and no ROS message can arrive before the session is open.
     """
-    extract = feature_extractor(config.features, scenario.model.palette)
+    extract = feature_extractor(config.features, scenario.model, scenario.bounds() if scenario.spec.search else None)
     if config.source is None:
         return SimulatedCamera(scenario, config.vehicle, extract)
     ros_inputs = any(is_ros(spec) for spec in (config.source, config.camera_info, config.camera_pose))

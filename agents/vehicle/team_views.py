@@ -93,13 +93,13 @@ class MateView:
 
 
 def mate_view(vehicle: str, message: FeatureSet | ImageFrame,
-              extract: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray | None]]) -> MateView:
+              extract: Callable[..., tuple[np.ndarray, np.ndarray | None]]) -> MateView:
     """A team-mate's view from its feature set, or from its raw frame (marks and their colours extracted with
     ``extract``)."""
     if isinstance(message, FeatureSet):
         best = None if message.best is None else np.array(message.best, float)
         return MateView(vehicle, message.stamp_ns, message.camera, message.points_uv, best, message.labels_array)
-    points, labels = extract(image_of(message))
+    points, labels = extract(image_of(message), camera_from_info(message.camera))
     return own_view(vehicle, message.stamp_ns, message.camera, points, labels)
 
 
