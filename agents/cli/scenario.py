@@ -111,6 +111,10 @@ def run_command(
     record: Annotated[Path | None, typer.Option("--record", metavar="DIR", help="Record each run's traffic into "
                                                 "DIR/<fleet>.mcap (evopose record: ROS 2 channels and the raw "
                                                 "ones, for evopose replay).")] = None,
+    dataset: Annotated[Path | None, typer.Option(
+        "--dataset", metavar="DIR", help="Run on a rendered dataset (docs/datasets.md): each camera vehicle plays "
+                                         "its camera's folder (evopose agent --source DIR), on the dataset's world "
+                                         "and frames.")] = None,
 ) -> None:
     """Start every agent of the scenario as its own process, run, stop them all, print the results."""
     if credentials is not None and not secure:
@@ -123,19 +127,27 @@ def run_command(
                                  param_hint="--record")
     if record is not None and record.exists() and not record.is_dir():
         raise typer.BadParameter(f"{record} exists and is not a directory", param_hint="--record")
+    if dataset is not None and world is not None:
+        raise typer.BadParameter("a dataset has its own world (its world.yaml)", param_hint="--world")
     mirror_domain = ros2_domain if ros2 else None
     from scenarios.fleet import load_fleet_scenario
 
     from agents.experiments.results import rows
-    from agents.experiments.runner import run_scenario
+    from agents.experiments.runner import dataset_scenario, run_scenario
 
-    scenario = load_fleet_scenario(name, world)
+    if dataset is None:
+        scenario = load_fleet_scenario(name, world)
+    else:
+        scenario, dataset_frames = dataset_scenario(name, dataset, variant)
+        if frames is not None and frames > dataset_frames:
+            raise typer.BadParameter(f"the dataset has {dataset_frames} frames, not {frames}", param_hint="--frames")
+        frames = frames or dataset_frames
     console = Console(stderr=True)
     with stop_on_signals() as stop:
         if as_json:
             records = run_scenario(scenario, runs=runs, frames=frames, seed=seed, endpoint=listen,
                                    variants=variant, stop=stop, fps=fps, secure=secure, credentials=credentials,
-                                   ros2_domain=mirror_domain, record_dir=record)
+                                   ros2_domain=mirror_domain, record_dir=record, dataset=dataset)
         else:
             with console.status(f"{scenario.name}: starting") as status:
                 def progress(p: dict) -> None:
@@ -149,12 +161,14 @@ def run_command(
                 records = run_scenario(scenario, runs=runs, frames=frames, seed=seed, endpoint=listen,
                                        variants=variant, stop=stop, on_run=finished, on_progress=progress,
                                        fps=fps, secure=secure, credentials=credentials, ros2_domain=mirror_domain,
-                                       record_dir=record)
+                                       record_dir=record, dataset=dataset)
     result_rows = rows(records)
     if as_json:
-        emit_json({"scenario": scenario.name, "interrupted": stop.is_set(), "rows": result_rows, "runs": records})
+        emit_json({"scenario": scenario.name, "dataset": None if dataset is None else str(dataset),
+                   "interrupted": stop.is_set(), "rows": result_rows, "runs": records})
         return
-    table = results_table(result_rows, f"{scenario.name} on {scenario.world.name}: mean error (σ over runs)")
+    on = scenario.world.name if dataset is None else f"dataset {dataset} ({scenario.world.name})"
+    table = results_table(result_rows, f"{scenario.name} on {on}: mean error (σ over runs)")
     Console(width=None if sys.stdout.isatty() else 200).print(table)
     if stop.is_set():
         console.print("interrupted: every agent was stopped")

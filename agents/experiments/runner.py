@@ -8,6 +8,10 @@ it, peer to peer; with ``router: true`` a router listens there and every agent j
 outside program (``evopose meter --connect tcp/127.0.0.1:7447``) can watch the traffic there. Multicast
 scouting is off (the default): the agents meet through the endpoint only.
 
+``dataset``: the camera vehicles play a rendered dataset's images instead of the renderer (``evopose agent --source
+DIR``: each frame's camera and truth from the dataset, docs/datasets.md); the world is the dataset's world.yaml
+(:func:`dataset_scenario`), the frames the dataset's, the fleet clock as usual.
+
 ``secure``: every run gets its fleet's credentials (``evopose fleet credentials``, in ``credentials/<fleet>``
 or a temporary directory removed after the run), a router listens on the endpoint as ``tls/`` with mutual
 TLS and the deny-by-default ACL, and every agent is a TLS client with its own certificate (docs/security.md).
@@ -36,7 +40,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from scenarios.fleet import FleetScenario, VariantSpec
+from scenarios.fleet import FleetScenario, VariantSpec, load_fleet_scenario
 
 from agents.errors import FleetError
 from agents.experiments import DEFAULT_ENDPOINT
@@ -56,6 +60,29 @@ OBSERVER = "meter"
 
 class ScenarioRunError(FleetError):
     """A run could not be completed (an agent crashed or timed out)."""
+
+
+def dataset_scenario(name: str | Path, dataset: str | Path, variants: list[str] | None = None
+                     ) -> tuple[FleetScenario, int]:
+    """The fleet scenario ``name`` on a rendered dataset's world (its world.yaml), and the dataset's frame count.
+
+    Raises
+    ------
+    DatasetError
+        The dataset is malformed, or a camera vehicle of the chosen variants has no folder in it (one line).
+    """
+    from scenarios.dataset import DatasetError, open_dataset
+
+    data = open_dataset(dataset)
+    scenario = load_fleet_scenario(name, data.root / "world.yaml")
+    target = scenario.world.spec.target.name
+    for variant in [scenario.variant(v) for v in variants] if variants else scenario.spec.variants:
+        for agent in variant.agents:
+            if agent.vehicle != target and agent.vehicle not in data.cameras:
+                raise DatasetError(f"--dataset {dataset}: vehicle {agent.vehicle} of {scenario.name} (variant "
+                                   f"{variant.name}) has no camera folder in the dataset (cameras: "
+                                   f"{', '.join(data.cameras)})")
+    return scenario, data.frames
 
 
 @dataclass
@@ -177,13 +204,14 @@ def start_router(cmd: list[str], env: dict) -> subprocess.Popen:
 def run_variant(scenario: FleetScenario, variant: VariantSpec, run: int, *, frames: int, seed: int,
                 endpoint: str, stop: threading.Event, on_progress: Callable[[dict], None] | None = None,
                 fps: float | None = None, secure: bool = False, credentials: Path | None = None,
-                ros2_domain: int | None = None, record_dir: Path | None = None) -> dict:
+                ros2_domain: int | None = None, record_dir: Path | None = None, dataset: Path | None = None) -> dict:
     """One run of one variant: start its agents (and router), wait for their summaries, stop everything.
 
     ``secure``: TLS, mTLS and the router's ACL, with this run's credentials in ``credentials/<fleet>`` (kept)
     or in a temporary directory (removed). ``ros2_domain``: also run ``evopose ros2`` (docs/ros2.md) on the
     fleet, publishing its ROS 2 mirror in that domain. ``record_dir``: the run's traffic is recorded into
-    ``record_dir/<fleet>.mcap`` (``evopose record``: replayable, and readable by ROS 2 tools).
+    ``record_dir/<fleet>.mcap`` (``evopose record``: replayable, and readable by ROS 2 tools). ``dataset``: every
+    camera vehicle plays that rendered dataset (``--source``; see :func:`dataset_scenario`).
     """
     fps = fps or scenario.fps
     started = time.monotonic()
@@ -220,7 +248,10 @@ def run_variant(scenario: FleetScenario, variant: VariantSpec, run: int, *, fram
                 network = ["--listen", endpoint]
             else:
                 network = ["--connect", endpoint]
-            cmd = agent_command(scenario, agent.cli_args(), fleet=fleet, frames=frames, fps=fps, epoch_ns=epoch_ns,
+            args = agent.cli_args()
+            if dataset is not None and agent.vehicle != scenario.world.spec.target.name:
+                args += ["--source", str(dataset)]
+            cmd = agent_command(scenario, args, fleet=fleet, frames=frames, fps=fps, epoch_ns=epoch_ns,
                                 seed=seed + run, world_seed=scenario.world.seed + run, network=network,
                                 wait_for=[v for v in vehicles if v != agent.vehicle])
             popen = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
@@ -257,6 +288,7 @@ def run_variant(scenario: FleetScenario, variant: VariantSpec, run: int, *, fram
     return {"scenario": scenario.name, "world": scenario.world.name, "variant": variant.name, "run": run,
             "fleet": fleet, "slow": slow, "secure": secure, "router_restarts": router_restarts,
             "recording": str(Path(record_dir) / f"{fleet}.mcap") if record_dir is not None else None,
+            "dataset": None if dataset is None else str(dataset),
             "interrupted": stop.is_set(), "seconds": time.monotonic() - started,
             "agents": {p.vehicle: p.summary for p in procs}}
 
@@ -280,7 +312,7 @@ def run_scenario(scenario: FleetScenario, *, runs: int = 1, frames: int | None =
                  fps: float | None = None, keep_going: bool = False, secure: bool = False,
                  credentials: Path | None = None, on_run: Callable[[dict], None] | None = None,
                  on_progress: Callable[[dict], None] | None = None, ros2_domain: int | None = None,
-                 record_dir: Path | None = None) -> list[dict]:
+                 record_dir: Path | None = None, dataset: Path | None = None) -> list[dict]:
     """Every run of every (chosen) variant; returns one record per run (see :func:`run_variant`).
 
     A run that fails raises :class:`ScenarioRunError`; with ``keep_going`` it is recorded instead, as
@@ -296,7 +328,7 @@ def run_scenario(scenario: FleetScenario, *, runs: int = 1, frames: int | None =
                 record = run_variant(scenario, variant, run, frames=frames or scenario.frames, seed=seed,
                                      endpoint=endpoint, stop=stop, on_progress=on_progress, fps=fps,
                                      secure=secure, credentials=credentials, ros2_domain=ros2_domain,
-                                     record_dir=record_dir)
+                                     record_dir=record_dir, dataset=dataset)
             except ScenarioRunError as err:
                 if not keep_going:
                     raise

@@ -1,0 +1,76 @@
+"""`evopose scenario run NAME --dataset DIR`: a fleet scenario's camera vehicles play a rendered dataset (each its
+camera's folder, on the dataset's world and frames, on the fleet clock), with the usual tables and JSON; a vehicle
+without a camera folder, a malformed dataset or conflicting options: one line and exit 2."""
+
+from __future__ import annotations
+
+import json
+import math
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import yaml
+
+from agents.cli.main import main
+from tests.fleet_procs import ROOT, free_port
+from tests.test_dataset import write_dataset
+
+FRAMES = 10
+
+
+@pytest.fixture(scope="module")
+def datasets(tmp_path_factory):
+    """exp2's first frames seen by H1 and H2 (the OpenCV renderer through the DatasetWriter), and by H1 only."""
+    folder = tmp_path_factory.mktemp("dataset_scenario")
+    return write_dataset(folder / "both", frames=FRAMES), write_dataset(folder / "h1", frames=3, cameras=["H1"])
+
+
+def test_a_fleet_scenario_runs_on_a_dataset(datasets):
+    both, _ = datasets
+    done = subprocess.run([sys.executable, "-m", "agents.cli", "scenario", "run", "exp2a-features", "--dataset",
+                           str(both), "--listen", f"tcp/127.0.0.1:{free_port()}", "--json"], cwd=ROOT,
+                          capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0 and "Traceback" not in done.stderr, done.stderr
+    result = json.loads(done.stdout.splitlines()[-1])
+    assert result["scenario"] == "exp2a-features" and result["dataset"] == str(both)
+    (run,) = result["runs"]
+    assert run["dataset"] == str(both) and run["world"] == "exp2" and not run["slow"]
+    for vehicle in ("H1", "H2"):
+        summary = run["agents"][vehicle]
+        assert summary["dataset_camera"] == vehicle and summary["dataset"] == str(both)
+        assert summary["frames"] == FRAMES and summary["good"] > 0 and summary["target_visible"]
+        assert math.isfinite(summary["error_position"])  # the dataset's truth
+    assert "dataset" not in run["agents"]["pioneer"]  # the target publishes its true pose from the world
+    rows = {r["vehicle"]: r for r in result["rows"]}
+    assert set(rows) == {"H1", "H2"} and all(math.isfinite(r["x"]) and r["good_fraction"] > 0 for r in rows.values())
+    # features: both search both images, so both publish the same pose on the frames they pair
+    h1 = {p[0]: p[1:7] for p in run["agents"]["H1"]["poses"]}
+    h2 = {p[0]: p[1:7] for p in run["agents"]["H2"]["poses"]}
+    assert sum(h1[k] == h2[k] for k in h1.keys() & h2.keys()) >= FRAMES // 2
+
+
+def run_error(capfd, *args: str) -> str:
+    code = main(["scenario", "run", *args, "--listen", f"tcp/127.0.0.1:{free_port()}"])
+    err = capfd.readouterr().err
+    lines = err.splitlines()
+    assert code == 2 and len(lines) == 1 and lines[0].startswith("error: ") and "Traceback" not in err, err
+    return lines[0]
+
+
+def test_a_vehicle_without_its_camera_or_a_bad_dataset_is_one_line_and_exit_2(capfd, datasets, tmp_path):
+    both, h1 = datasets
+    line = run_error(capfd, "exp2a-features", "--dataset", str(h1))
+    assert "vehicle H2 of exp2a-features (variant H1+H2) has no camera folder in the dataset (cameras: H1)" in line
+    assert "the dataset has 10 frames, not 11" in run_error(capfd, "exp2a-features", "--dataset", str(both),
+                                                            "--frames", "11")
+    assert "a dataset has its own world" in run_error(capfd, "exp2a-features", "--dataset", str(both), "--world",
+                                                      "exp2-paper-scale")
+    assert "not a dataset directory (no manifest.yaml)" in run_error(capfd, "exp2-solo", "--dataset", str(tmp_path))
+    manifest = yaml.safe_load((h1 / "manifest.yaml").read_text())
+    broken = tmp_path / "broken"
+    broken.mkdir()
+    (broken / "manifest.yaml").write_text(yaml.safe_dump({**manifest, "fps": "fast"}))
+    assert "manifest.yaml: fps: expected a number" in run_error(capfd, "exp2-solo", "--dataset", str(broken))
+    assert Path(h1 / "world.yaml").is_file()
