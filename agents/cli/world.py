@@ -1,4 +1,5 @@
-"""World commands of the ``evopose`` CLI: ``render`` (what a vehicle sees) and ``features`` (image -> points).
+"""World commands of the ``evopose`` CLI: ``render`` (what a vehicle sees, or a whole dataset) and ``features``
+(image -> points).
 
 Registered on :data:`agents.cli.main.app`; thin commands that call one service function each
 (:mod:`agents.tools.world`). Input problems raise :class:`scenarios.errors.WorldError`, which
@@ -15,28 +16,94 @@ from rich.console import Console
 
 from agents.cli.options import json_line
 
+#: An ``--out`` with one of these suffixes is one image; anything else is a dataset directory.
+IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".ppm", ".webp")
+
 
 def render_command(
     scenario: Annotated[str, typer.Argument(metavar="SCENARIO", show_default=False,
                                             help="Scenario file, or a shipped scenario name (exp1-airship, exp2).")],
-    out: Annotated[Path, typer.Option("--out", "-o", help="PNG to write.")] = Path("frame.png"),
-    frame: Annotated[int, typer.Option("--frame", "-f", min=0, help="Frame index.")] = 0,
-    vehicle: Annotated[str | None, typer.Option(help="Vehicle whose camera renders (default: the first).")] = None,
-    truth: Annotated[Path | None, typer.Option(help="Ground-truth JSON (default: beside the PNG).")] = None,
-    clean: Annotated[bool, typer.Option("--clean", help="No noise, blur, lighting changes, distractors, "
+    out: Annotated[Path, typer.Option("--out", "-o", help="An image to write (X.png), or a dataset directory "
+                                                          "(docs/datasets.md).")] = Path("frame.png"),
+    frame: Annotated[int | None, typer.Option("--frame", "-f", min=0, help="Image: frame index [default: 0].")] = None,
+    vehicle: Annotated[str | None, typer.Option(help="Image: vehicle whose camera renders (default: the "
+                                                     "first).")] = None,
+    truth: Annotated[Path | None, typer.Option(help="Image: ground-truth JSON (default: beside the PNG).")] = None,
+    clean: Annotated[bool, typer.Option("--clean", help="Image: no noise, blur, lighting changes, distractors, "
                                                         "occluders.")] = False,
-    as_json: Annotated[bool, typer.Option("--json", help="Print the ground truth as JSON.")] = False,
+    as_json: Annotated[bool, typer.Option("--json", help="Print the ground truth (a dataset: its summary) as "
+                                                         "JSON.")] = False,
+    engine: Annotated[str | None, typer.Option(help="Dataset: cycles (Blender, photoreal; `make photoreal`) or "
+                                                    "opencv [default: cycles].")] = None,
+    frames: Annotated[int | None, typer.Option(min=1, max=999_999, help="Dataset: frames per camera (default: "
+                                                                        "the world's).")] = None,
+    samples: Annotated[int | None, typer.Option(min=1, max=4096, help="Dataset: Cycles samples per pixel "
+                                                                      "[default: 24].")] = None,
+    cameras: Annotated[str | None, typer.Option(help="Dataset: comma-separated vehicles, e.g. H1,H2 (default: "
+                                                     "all).")] = None,
+    no_target: Annotated[bool, typer.Option("--no-target", help="Dataset: the world without its target "
+                                                                "(absent-target frames).")] = False,
+    force: Annotated[bool, typer.Option("--force", help="Dataset: render anew over an existing dataset of other "
+                                                        "settings.")] = False,
 ) -> None:
-    """Render what a vehicle's camera sees at a frame, with its ground truth (target pose, visible marks)."""
+    """Render what a vehicle's camera sees at a frame with its ground truth (--out X.png), or a dataset of every
+    camera's images, poses and truth (--out DIR)."""
+    if out.suffix.lower() not in IMAGE_SUFFIXES:
+        if frame is not None or vehicle is not None or truth is not None or clean:
+            raise typer.BadParameter("--frame, --vehicle, --truth and --clean are for one image (--out X.png); "
+                                     "a dataset takes --frames, --cameras", param_hint="--out")
+        _render_dataset(scenario, out, engine=engine or "cycles", frames=frames, samples=samples or 24,
+                        cameras=cameras, target=not no_target, force=force, as_json=as_json)
+        return
+    if engine is not None or frames is not None or samples is not None or cameras is not None or no_target or force:
+        raise typer.BadParameter(f"--engine, --frames, --samples, --cameras, --no-target and --force are for a "
+                                 f"dataset directory, not an image ({out.suffix})", param_hint="--out")
     from agents.tools.world import render_to_files
 
-    result = render_to_files(scenario, frame, out, vehicle=vehicle, truth_path=truth, clean=clean)
+    result = render_to_files(scenario, frame or 0, out, vehicle=vehicle, truth_path=truth, clean=clean)
     if as_json:
         print(json_line(result))
     else:
         Console().print(f"{result['image']}: {result['vehicle']} frame {result['frame']} "
                         f"(t = {result['time']:.2f} s), {len(result['marks'])} visible marks; "
                         f"truth in {result['truth']}")
+
+
+def _render_dataset(world: str, out: Path, *, engine: str, frames: int | None, samples: int, cameras: str | None,
+                    target: bool, force: bool, as_json: bool) -> None:
+    """``--out DIR``: the dataset, with a progress bar per camera on stderr."""
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+    from agents.tools.render_dataset import ENGINES, render_dataset
+
+    if engine not in ENGINES:
+        raise typer.BadParameter(f"expected one of {', '.join(ENGINES)}, got {engine!r}", param_hint="--engine")
+    names = None
+    if cameras is not None:
+        names = [c.strip() for c in cameras.split(",")]
+        if not all(names):
+            raise typer.BadParameter(f"expected comma-separated vehicle names, got {cameras!r}", param_hint="--cameras")
+    console = Console(stderr=True)
+    with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
+                  console=console, transient=False) as bar:
+        tasks: dict[str, int] = {}
+
+        def on_image(event: dict) -> None:
+            camera = event["camera"]
+            if camera not in tasks:
+                tasks[camera] = bar.add_task(f"{camera} frames", total=event["frames"])
+            bar.update(tasks[camera], completed=event["frame"] + 1)
+
+        summary = render_dataset(world, out, engine=engine, frames=frames, samples=samples, cameras=names,
+                                 target=target, force=force, progress=on_image)
+    if as_json:
+        print(json_line(summary))
+    else:
+        per = summary["seconds_per_image"]
+        Console().print(f"{summary['dataset']}: {summary['world']}, {summary['complete_frames']} of {summary['frames']} "
+                        f"frames x {', '.join(summary['cameras'])} ({summary['engine']}); "
+                        f"{summary['images_rendered']} images rendered"
+                        + (f", {per:.1f} s each" if per else "") + f" in {summary['wall_seconds']:.0f} s")
 
 
 def features_command(

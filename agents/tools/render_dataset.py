@@ -132,7 +132,8 @@ def render_dataset(world: str | Path, out_dir: str | Path, *, engine: str = "cyc
                    progress: Callable[[dict], None] | None = None) -> dict:
     """Render ``world`` into the dataset directory ``out_dir`` (created, or resumed).
 
-    ``progress(event)`` after each image: ``camera``, ``frame``, ``done`` and ``total`` (images of the dataset),
+    ``progress(event)`` after each image: ``camera``, ``frame``, ``frames`` (per camera), ``done`` and ``total``
+    (images of the dataset),
     ``rendered`` (False: it was there already), ``seconds`` (the engine's time for it).
     Returns a summary: the directory, frames, cameras, images rendered, engine seconds per rendered image, wall time.
 
@@ -168,8 +169,8 @@ def render_dataset(world: str | Path, out_dir: str | Path, *, engine: str = "cyc
         state["rendered"] += int(rendered)
         state["seconds"] += seconds if rendered else 0.0
         if progress is not None:
-            progress({"camera": camera, "frame": k, "done": state["done"], "total": total, "rendered": rendered,
-                      "seconds": seconds})
+            progress({"camera": camera, "frame": k, "frames": writer.frames, "done": state["done"], "total": total,
+                      "rendered": rendered, "seconds": seconds})
 
     pending = [(k, c) for k in range(writer.next_frame, writer.frames) for c in writer.cameras]
     if engine == "opencv":
