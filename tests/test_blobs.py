@@ -1,0 +1,103 @@
+"""The contrast front-end (evopose.blobs): marks found by contrast at the scale the geometry allows, labelled by
+fitting each paint colour on the line ring -> spot; judged against the renderer's truth and on made-up images."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+
+from evopose.blobs import MarkPrior, detect_contrast_marks, label_colours, mark_prior
+from evopose.features import match_to_truth
+from scenarios.render import render_frame
+from scenarios.world import load_scenario
+
+PALETTE = {"yellow": (20, 220, 240), "cyan": (220, 210, 20), "green": (40, 190, 40), "magenta": (200, 40, 210)}
+
+
+def _jpeg_420(image: np.ndarray, quality: int = 85) -> np.ndarray:
+    ok, data = cv2.imencode(".jpg", image, [cv2.IMWRITE_JPEG_QUALITY, quality, cv2.IMWRITE_JPEG_SAMPLING_FACTOR,
+                                            cv2.IMWRITE_JPEG_SAMPLING_FACTOR_420])
+    return cv2.imdecode(data, cv2.IMREAD_COLOR)
+
+
+@pytest.mark.parametrize("world, match_px", [("exp2-paper-scale", 1.5), ("exp2", 3.0)])
+def test_the_marks_of_rendered_frames_are_found_and_labelled(world, match_px):
+    scenario = load_scenario(world)
+    area = scenario.bounds()
+    found = marks = correct = detections = labelled = 0
+    for vehicle in ("H1", "H2"):
+        for k in (0, 20):
+            frame = render_frame(scenario, k, vehicle, clean=True)
+            prior = mark_prior(frame.camera, scenario.model.mark_radius, scenario.model.size, area.lo[:3],
+                               area.hi[:3])
+            det = detect_contrast_marks(frame.image, scenario.model.palette, prior)
+            truth = frame.truth
+            pairs, _ = match_to_truth(det.points, truth.mark_uv[truth.fully_visible], match_px)
+            any_pairs, _ = match_to_truth(det.points, truth.mark_uv, match_px)
+            found, marks = found + len(pairs), marks + int(truth.fully_visible.sum())
+            correct, detections = correct + len(any_pairs), detections + len(det)
+            labelled += sum(det.names[det.labels[i]] == truth.mark_colour[j] for i, j in any_pairs)
+    assert found / marks >= 0.9 and correct / detections >= 0.7 and labelled == correct
+
+
+def test_paper_scale_marks_survive_jpeg_chroma_subsampling_better_than_hue_bands():
+    from evopose.features import colour_ranges, detect_colour_marks
+
+    scenario = load_scenario("exp2-paper-scale")
+    area = scenario.bounds()
+    recall = {"contrast": 0, "hues": 0}
+    total = 0
+    for k in (0, 10, 20, 30):
+        frame = render_frame(scenario, k, "H1")
+        image = _jpeg_420(frame.image)
+        prior = mark_prior(frame.camera, scenario.model.mark_radius, scenario.model.size, area.lo[:3], area.hi[:3])
+        whole = frame.truth.mark_uv[frame.truth.fully_visible]
+        total += len(whole)
+        recall["contrast"] += len(match_to_truth(detect_contrast_marks(image, scenario.model.palette, prior).points,
+                                                 whole, 1.5)[0])
+        recall["hues"] += len(match_to_truth(detect_colour_marks(image, colour_ranges(scenario.model.palette)).points,
+                                             whole, 1.5)[0])
+    assert recall["contrast"] > 1.3 * recall["hues"] and recall["contrast"] / total >= 0.6
+
+
+def _canvas(colour=(40, 40, 150)) -> np.ndarray:
+    rng = np.random.default_rng(0)
+    image = np.full((120, 160, 3), colour, np.float32) + rng.normal(0, 2, (120, 160, 3))
+    return np.clip(image, 0, 255).astype(np.uint8)
+
+
+def test_a_small_mark_is_found_to_a_tenth_of_a_pixel_with_its_colour():
+    canvas = _canvas()
+    big = cv2.resize(canvas, None, fx=8, fy=8, interpolation=cv2.INTER_NEAREST)
+    cv2.circle(big, (int(80.3 * 8 + 4), int(60.6 * 8 + 4)), 12, PALETTE["cyan"], -1, cv2.LINE_AA)
+    image = cv2.resize(big, (160, 120), interpolation=cv2.INTER_AREA)   # a 3 px disc, area-sampled
+    det = detect_contrast_marks(image, PALETTE, MarkPrior((1.0, 2.5)))
+    assert len(det) == 1 and det.colours() == ["cyan"]
+    assert np.linalg.norm(det.points[0] - (80.3, 60.6)) < 0.15
+
+
+def test_a_dark_spot_on_the_red_body_is_no_mark():
+    image = _canvas()
+    cv2.circle(image, (80, 60), 3, (20, 20, 25), -1, cv2.LINE_AA)     # a hole, a wheel hub: less red, not cyan
+    assert len(detect_contrast_marks(image, PALETTE, MarkPrior((1.5, 5.0)))) == 0
+
+
+@pytest.mark.xfail(strict=True, reason="known weakness: the 3 x 3 Hessian of a fine DoG level does not tell a long "
+                   "straight edge in a mark colour from an oblique disc (MAX_EDGE_RATIO 40 lets 3:1 discs through); "
+                   "peaks along such an edge are labelled marks")
+def test_an_edge_of_a_painted_surface_is_no_mark():
+    image = _canvas((110, 110, 110))
+    image[:, 80:] = PALETTE["yellow"]                                 # a yellow crate's side
+    assert len(detect_contrast_marks(image, PALETTE, MarkPrior((1.0, 4.0)))) == 0
+
+
+def test_labels_fit_a_blend_with_the_ring_at_any_brightness():
+    ring = np.array([[0.02, 0.02, 0.30]])                              # linear BGR: the red body
+    cyan = np.array([0.72, 0.64, 0.007])
+    palette = np.array([[0.007, 0.72, 0.87], cyan, [0.02, 0.51, 0.02], [0.58, 0.02, 0.65]])
+    for light in (0.3, 1.0):
+        for coverage in (0.3, 1.0):
+            spot = ring + coverage * (light * cyan - ring)
+            label, misfit, confidence = label_colours(spot, ring, palette)
+            assert label[0] == 1 and misfit[0] < 0.05 and confidence[0] > 0.5
