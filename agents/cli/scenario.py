@@ -218,6 +218,11 @@ def register_report(app: typer.Typer) -> None:
         out: Annotated[Path, typer.Option(help="Directory for report.md and the figures.")] = Path("report"),
         listen: Annotated[str, typer.Option("--listen", help="Where each scenario's fleet listens.")]
         = DEFAULT_ENDPOINT,
+        photoreal: Annotated[Path | None, typer.Option(
+            "--photoreal", metavar="DIR", help="The rendered dataset of 'Table II on a photoreal dataset' "
+                                               "(default: datasets/photoreal-report if it exists, else "
+                                               "tests/data/photoreal/paper; neither: the section is skipped).")]
+        = None,
     ) -> None:
         """Run the paper's experiments and write report.md: Tables I and II, bandwidth, Fig. 6, findings."""
         from agents.experiments.report import write_report
@@ -228,5 +233,6 @@ def register_report(app: typer.Typer) -> None:
                                 on_run=lambda r: console.print(f"{r['scenario']} / {r['variant']}: run "
                                                                f"{r['run'] + 1} "
                                                                + (f"failed: {r['error']}" if r.get("error") else
-                                                                  f"done in {r['seconds']:.1f} s")))
+                                                                  f"done in {r['seconds']:.1f} s")),
+                                photoreal=photoreal)
         print(path)

@@ -237,11 +237,20 @@ def _team_size_lines(records: list[dict], result_rows: list[dict]) -> list[str]:
 
 
 def write_report(out: Path, *, runs: int, frames: int | None, seed: int, endpoint: str,
-                 stop: threading.Event, on_run=None) -> Path:
-    """Run every experiment, write ``out/report.md`` and one Fig. 6 per world; returns the report path."""
+                 stop: threading.Event, on_run=None, photoreal: Path | None = None) -> Path:
+    """Run every experiment, write ``out/report.md`` and one Fig. 6 per world; returns the report path.
+
+    ``photoreal``: the rendered dataset of the section "Table II on a photoreal dataset" (default: the first of
+    :data:`agents.experiments.photoreal.DEFAULT_DATASETS` that exists; none: the section says it was skipped).
+    """
+    from agents.experiments.photoreal import dataset_info, photoreal_section, resolve_dataset, run_photoreal
+
+    dataset, dataset_source = resolve_dataset(photoreal)  # a bad --photoreal fails here, before anything runs
     out.mkdir(parents=True, exist_ok=True)
     started = time.time()
     records = run_all(runs=runs, frames=frames, seed=seed, endpoint=endpoint, stop=stop, on_run=on_run)
+    photoreal_records = [] if dataset is None else run_photoreal(dataset, runs=runs, frames=frames, seed=seed,
+                                                                 endpoint=endpoint, stop=stop, on_run=on_run)
     result_rows = rows(records)
     lines = ["# EvoPose Fleet: the paper's experiments, reproduced",
              "",
@@ -257,6 +266,7 @@ def write_report(out: Path, *, runs: int, frames: int | None, seed: int, endpoin
              ""]
     for world, _, title in WORLDS:
         lines += [f"## Table II at {title}: `{world}`", "", *_table_ii(result_rows, world), ""]
+    lines += photoreal_section(photoreal_records, None if dataset is None else dataset_info(dataset), dataset_source)
     lines += ["## Table I: the airship localized by the ground station (Experiment 1, `exp1-airship`)", "",
               HEADER.format(what="algorithm", u="cm")]
     for variant in ("EvoPose", "EvoPose+IMU"):
