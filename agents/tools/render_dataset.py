@@ -122,7 +122,8 @@ def _opencv_image(scenario: Scenario, render_world: Scenario, k: int, camera: st
 def _develop_exr(scenario: Scenario, exr: Path, k: int, camera: str) -> tuple[bytes, str]:
     veh = scenario.vehicle(camera)
     cam = veh.camera_at(scenario.time(k))
-    captured = develop_radiance(read_exr(exr), cam, camera_model_of(scenario), camera_rng(scenario, veh.index, k))
+    captured = develop_radiance(read_exr(exr), cam, camera_model_of(scenario), camera_rng(scenario, veh.index, k),
+                                scenario.render.blur_sigma)
     return captured.encoded, captured.suffix
 
 
@@ -222,7 +223,8 @@ def _render_cycles(writer: DatasetWriter, scenario: Scenario, pending: list[tupl
         committer.flush()
 
     run_job(job, root / WORK / "job.json", on_image)
-    if not keep_raw:
+    if not keep_raw:  # nothing but the images and the truth (a dataset to commit or ship)
+        shutil.rmtree(root / WORK, ignore_errors=True)
         for c in writer.cameras:
             raw = root / c / "raw"
             if raw.is_dir() and not any(raw.iterdir()):

@@ -1,9 +1,11 @@
 """Radiance -> the camera's image: the lens's distortion, then the camera model (:mod:`scenarios.camera_model`).
 
-Blender renders a pinhole image; a world camera with plumb_bob distortion gets it by resampling: each output
-(distorted) pixel takes the pinhole image at its undistorted position (the mapping OpenCV's
-``initUndistortRectifyMap`` computes). The camera model then exposes, mosaics, adds sensor noise, demosaics,
-tones and encodes, seeded per world, camera and frame.
+Blender renders a pinhole image (its pixel filter is the anti-aliasing); a world camera with plumb_bob distortion
+gets it by resampling: each output (distorted) pixel takes the pinhole image at its undistorted position (the
+mapping OpenCV's ``initUndistortRectifyMap`` computes). The world's ``blur_sigma`` blurs the light as the lens does.
+The camera model then exposes, mosaics, adds sensor noise, demosaics, tones and encodes, seeded per world, camera
+and frame. The OpenCV renderer's ``noise_sigma`` and lighting gain are not used: the camera model's sensor noise
+and auto exposure stand for them.
 """
 
 from __future__ import annotations
@@ -40,10 +42,14 @@ def camera_rng(scenario: Scenario, vehicle_index: int, frame: int) -> np.random.
     return stream_rng(scenario.seed, STREAM_DATASET_CAMERA, vehicle_index, frame)
 
 
-def develop_radiance(radiance: np.ndarray, camera: Camera, spec: CameraModelSpec,
-                     rng: np.random.Generator) -> Captured:
-    """Linear BGR radiance of the pinhole render -> the captured (encoded and decoded) image."""
-    return capture(distort(np.asarray(radiance, np.float32), camera), spec, rng)
+def develop_radiance(radiance: np.ndarray, camera: Camera, spec: CameraModelSpec, rng: np.random.Generator,
+                     blur_sigma: float = 0.0) -> Captured:
+    """Linear BGR radiance of the pinhole render -> the captured (encoded and decoded) image; ``blur_sigma``
+    (the world's ``render.blur_sigma``, pixels) blurs the light as the lens does, before the sensor."""
+    light = distort(np.asarray(radiance, np.float32), camera)
+    if blur_sigma > 0:
+        light = cv2.GaussianBlur(light, (0, 0), blur_sigma)
+    return capture(light, spec, rng)
 
 
 def radiance_of_srgb(image: np.ndarray) -> np.ndarray:
