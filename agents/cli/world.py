@@ -25,7 +25,7 @@ def render_command(
                                             help="Scenario file, or a shipped scenario name (exp1-airship, exp2).")],
     out: Annotated[Path, typer.Option("--out", "-o", help="An image to write (X.png), or a dataset directory "
                                                           "(docs/datasets.md).")] = Path("frame.png"),
-    frame: Annotated[int | None, typer.Option("--frame", "-f", min=0, help="Image: frame index [default: 0].")] = None,
+    frame: Annotated[int | None, typer.Option("--frame", "-f", min=0, help="Image: frame index (default: 0).")] = None,
     vehicle: Annotated[str | None, typer.Option(help="Image: vehicle whose camera renders (default: the "
                                                      "first).")] = None,
     truth: Annotated[Path | None, typer.Option(help="Image: ground-truth JSON (default: beside the PNG).")] = None,
@@ -34,11 +34,11 @@ def render_command(
     as_json: Annotated[bool, typer.Option("--json", help="Print the ground truth (a dataset: its summary) as "
                                                          "JSON.")] = False,
     engine: Annotated[str | None, typer.Option(help="Dataset: cycles (Blender, photoreal; `make photoreal`) or "
-                                                    "opencv [default: cycles].")] = None,
+                                                    "opencv (default: cycles).")] = None,
     frames: Annotated[int | None, typer.Option(min=1, max=999_999, help="Dataset: frames per camera (default: "
                                                                         "the world's).")] = None,
     samples: Annotated[int | None, typer.Option(min=1, max=4096, help="Dataset: Cycles samples per pixel "
-                                                                      "[default: 24].")] = None,
+                                                                      "(default: 24).")] = None,
     cameras: Annotated[str | None, typer.Option(help="Dataset: comma-separated vehicles, e.g. H1,H2 (default: "
                                                      "all).")] = None,
     no_target: Annotated[bool, typer.Option("--no-target", help="Dataset: the world without its target "
