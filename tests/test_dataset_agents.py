@@ -1,11 +1,13 @@
-"""`evopose agent --source DIR` on a rendered dataset (docs/datasets.md), as real processes: the dataset's images
-with each frame's camera and truth give exactly the renderer's poses and errors; the dataset's world is the agent's;
+"""`evopose agent --source DIR` on a rendered dataset (docs/datasets.md), as real processes: a dataset of
+`evopose render --engine opencv` (lossless) with each frame's camera and truth gives exactly the renderer's poses and
+errors; the dataset's world is the agent's;
 an absent-target dataset counts false positives; a malformed dataset or a missing camera is one line and exit 2."""
 
 from __future__ import annotations
 
 import json
 import shutil
+import subprocess
 import sys
 import time
 from pathlib import Path
@@ -15,15 +17,30 @@ import pytest
 import yaml
 
 from scenarios.render import render_frame
-from tests.fleet_procs import Proc, free_port
+from tests.fleet_procs import ROOT, Proc, free_port
 from tests.test_dataset import edit_line, write_dataset
 from tests.test_sources import FPS, FRAMES, agent_error, frames_of
 
 
 @pytest.fixture(scope="module")
+def lossless(tmp_path_factory) -> tuple[Path, Path]:
+    """A world whose camera model writes lossless PNG (exp2's, ``jpeg_quality: null``), and its frames 0-9 rendered
+    by ``evopose render --engine opencv``: the renderer's images, through the world's camera model, to the bit."""
+    folder = tmp_path_factory.mktemp("dataset_engine")
+    world = folder / "lossless.yaml"
+    world.write_text(yaml.safe_dump({"extends": "exp2", "name": "exp2-lossless",
+                                     "render": {"camera_model": {"jpeg_quality": None}}}))
+    done = subprocess.run([sys.executable, "-m", "agents.cli", "render", str(world), "--out", str(folder / "ds"),
+                           "--engine", "opencv", "--frames", str(FRAMES), "--cameras", "H1"], cwd=ROOT,
+                          capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    return world, folder / "ds"
+
+
+@pytest.fixture(scope="module")
 def datasets(tmp_path_factory):
-    """exp2's frames 0-9 as a lossless dataset (PNG), and a dataset of a world whose target is out of every view
-    (``target_visible: false``)."""
+    """exp2's frames 0-9 written by the DatasetWriter from the renderer's frames (PNG), and a dataset of a world
+    whose target is out of every view (``target_visible: false``)."""
     folder = tmp_path_factory.mktemp("dataset_agents")
     exp2 = write_dataset(folder / "exp2", frames=FRAMES)
     away = folder / "away.yaml"
@@ -49,11 +66,12 @@ def run_agents(runs: dict[str, tuple[str, ...]]) -> dict[str, tuple[int, list[di
 
 
 @pytest.fixture(scope="module")
-def runs(datasets):
+def runs(lossless, datasets):
+    world, engine = lossless
     exp2, absent = datasets
     return run_agents({
-        "render-h1": ("--vehicle", "H1", "--scenario", "exp2", "--frames", str(FRAMES)),
-        "dataset-h1": ("--vehicle", "H1", "--source", str(exp2)),
+        "render-h1": ("--vehicle", "H1", "--scenario", str(world), "--frames", str(FRAMES)),
+        "dataset-h1": ("--vehicle", "H1", "--source", str(engine)),
         "folder-h2": ("--vehicle", "H2", "--source", str(exp2 / "H2")),
         "absent-h1": ("--vehicle", "H1", "--source", str(absent)),
     })
@@ -63,7 +81,9 @@ def summary_of(records: list[dict]) -> dict:
     return next(r for r in records if r.get("event") == "summary")
 
 
-def test_an_agent_on_a_dataset_publishes_the_renderers_poses_with_its_errors(runs):
+def test_an_agent_on_an_opencv_engine_dataset_publishes_the_renderers_poses_with_its_errors(runs):
+    """The agent on the dataset takes its world from world.yaml, each frame's camera from the dataset and the truth
+    from truth.jsonl; the renderer's agent runs on the world file itself."""
     code, rendered_records, stderr = runs["render-h1"]
     assert code == 0, stderr
     code, records, stderr = runs["dataset-h1"]
@@ -79,7 +99,8 @@ def test_an_agent_on_a_dataset_publishes_the_renderers_poses_with_its_errors(run
         assert source[n]["pose"] == rendered[n]["pose"], n  # identical: lossless images, the same cameras and seeds
         assert source[n]["good"] == rendered[n]["good"]
         assert source[n]["error"] == rendered[n]["error"], n  # the dataset's truth is the renderer's
-    assert summary["scenario"] == "exp2" and summary["good"] == rendered_summary["good"] > 0
+    assert summary["scenario"] == rendered_summary["scenario"] == "exp2-lossless"
+    assert summary["good"] == rendered_summary["good"] > 0
     errors = {k: v for k, v in summary.items() if k.startswith("error_")}
     assert errors and errors == {k: v for k, v in rendered_summary.items() if k.startswith("error_")}
     assert summary["dataset_camera"] == "H1" and summary["target_visible"] and "false_positives" not in summary

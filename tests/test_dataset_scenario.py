@@ -22,9 +22,14 @@ FRAMES = 10
 
 @pytest.fixture(scope="module")
 def datasets(tmp_path_factory):
-    """exp2's first frames seen by H1 and H2 (the OpenCV renderer through the DatasetWriter), and by H1 only."""
+    """exp2's first frames seen by H1 and H2 (`evopose render --engine opencv`: the renderer, then the default
+    camera model, JPEG 4:2:0), and by H1 only (the DatasetWriter on the renderer's frames)."""
     folder = tmp_path_factory.mktemp("dataset_scenario")
-    return write_dataset(folder / "both", frames=FRAMES), write_dataset(folder / "h1", frames=3, cameras=["H1"])
+    done = subprocess.run([sys.executable, "-m", "agents.cli", "render", "exp2", "--out", str(folder / "both"),
+                           "--engine", "opencv", "--frames", str(FRAMES)], cwd=ROOT, capture_output=True, text=True,
+                          timeout=300)
+    assert done.returncode == 0, done.stderr
+    return folder / "both", write_dataset(folder / "h1", frames=3, cameras=["H1"])
 
 
 def test_a_fleet_scenario_runs_on_a_dataset(datasets):
