@@ -104,5 +104,12 @@ def test_the_dataset_is_the_given_one_or_the_first_default_that_exists(monkeypat
     assert resolve_dataset(written) == (written, f"`--photoreal {written}`")
     with pytest.raises(DatasetError, match="no such directory"):
         resolve_dataset(tmp_path / "missing")
+    h1 = write_dataset(tmp_path / "h1", frames=1, cameras=["H1"])
+    with pytest.raises(DatasetError, match="vehicle H2 of exp2-solo .* has no camera folder"):
+        resolve_dataset(h1)
+    monkeypatch.setattr(photoreal, "DEFAULT_DATASETS", (h1, written))  # the first default is unusable: skipped
+    dataset, why = resolve_dataset(None)
+    assert dataset is None and why.startswith(f"the default `{h1}` is not a usable dataset: ")
+    assert "vehicle H2 of exp2-solo (variant alone) has no camera folder in the dataset (cameras: H1)" in why
     assert dataset_info(written) == {"path": str(written), "world": "exp2", "engine": {"name": "opencv"},
                                      "frames": 1, "fps": 10.0, "cameras": ["H1", "H2"]}

@@ -29,20 +29,31 @@ SCENARIOS = ("exp2-solo", "exp2a-features", "exp2b-hints")
 SAME_POSE_SHARE = 0.95
 
 
+def check_dataset(path: Path) -> None:
+    """Raise (one line) unless every scenario of the section can run on ``path``: the dataset reads, and each camera
+    vehicle of :data:`SCENARIOS` has its folder in it."""
+    for name in SCENARIOS:
+        dataset_scenario(name, path)
+
+
 def resolve_dataset(given: Path | None) -> tuple[Path | None, str]:
     """The dataset the section runs on, and the sentence saying where it came from (or why there is none).
 
-    An explicit ``given`` is checked (a malformed one raises ``DatasetError``, before any experiment runs); of the
-    defaults, the first that exists is taken.
+    An explicit ``given`` is checked before any experiment runs (a bad one raises ``WorldError``: one line, exit 2);
+    of the defaults, the first that exists is taken, and skipped with the reason when it is not usable.
     """
-    from scenarios.dataset import open_dataset
+    from scenarios.errors import WorldError
 
     if given is not None:
-        open_dataset(given)
+        check_dataset(Path(given))
         return Path(given), f"`--photoreal {given}`"
     for candidate in DEFAULT_DATASETS:
         path = candidate if candidate.is_absolute() else ROOT / candidate
         if (path / "manifest.yaml").is_file():
+            try:
+                check_dataset(path)
+            except WorldError as err:
+                return None, f"the default `{candidate}` is not a usable dataset: {err}"
             return path, f"the default `{candidate}`"
     return None, ("no dataset: neither " + " nor ".join(f"`{p}`" for p in DEFAULT_DATASETS) + " exists. Render one "
                   "(`make photoreal`, then `evopose render exp2-photoreal --out datasets/photoreal-report`) or give "
