@@ -54,6 +54,7 @@ bench: $(STAMP)
 	$(PY) -m benchmarks.bench_capacity
 	$(PY) -m benchmarks.bench_flood
 	$(PY) -m benchmarks.bench_blas_threads
+	$(PY) -m benchmarks.bench_photoreal_features tests/data/photoreal/paper tests/data/photoreal/telephoto
 	$(PY) -m benchmarks.report
 
 # Three agent pairs for 10 minutes each (30 min): memory and CPU over time.
