@@ -30,7 +30,7 @@ from scenarios.photoreal.exr import read_exr
 from scenarios.photoreal.scene import ENGINE_DEFAULTS, describe_frame, describe_scene
 from scenarios.photoreal.truth import absent_target, view_truth
 from scenarios.render import render_frame
-from scenarios.world import Scenario
+from scenarios.world import Scenario, load_scenario
 
 ENGINES = ("cycles", "opencv")
 #: Hidden work folder of a Cycles dataset (the job, the ground texture, Blender's log).
@@ -134,8 +134,7 @@ def render_dataset(world: str | Path, out_dir: str | Path, *, engine: str = "cyc
     """Render ``world`` into the dataset directory ``out_dir`` (created, or resumed).
 
     ``progress(event)`` after each image: ``camera``, ``frame``, ``frames`` (per camera), ``done`` and ``total``
-    (images of the dataset),
-    ``rendered`` (False: it was there already), ``seconds`` (the engine's time for it).
+    (images of the dataset), ``rendered`` (False: it was there already), ``seconds`` (the engine's time for it).
     Returns a summary: the directory, frames, cameras, images rendered, engine seconds per rendered image, wall time.
 
     Raises
@@ -152,8 +151,6 @@ def render_dataset(world: str | Path, out_dir: str | Path, *, engine: str = "cyc
         from scenarios.photoreal.runner import blender_version
 
         blender = blender_version()
-    from scenarios.world import load_scenario
-
     spec = camera_model_of(load_scenario(world))
     writer = open_writer(world, out_dir, engine=engine_settings(engine, samples, blender), frames=frames,
                          cameras=list(cameras) if cameras else None, target=target,
