@@ -5,9 +5,10 @@ A model file gives, in the target frame (metres; x forward, y left, z up):
 ```yaml
 name: pioneer-2dx
 mark_radius: 0.03                   # radius of every mark disc, metres
+mark_roughness: 0.35                # optional: the marks' paint roughness (photoreal renderer)
 colours: {yellow: [0, 220, 240]}    # mark colour name -> BGR 0-255
 parts:                              # the body, for drawing and self-occlusion
-  - {box: {centre: [0, 0, 0.13], size: [0.44, 0.32, 0.18]}, colour: [40, 40, 120]}
+  - {box: {centre: [0, 0, 0.13], size: [0.44, 0.32, 0.18]}, colour: [40, 40, 120], roughness: 0.45}
   - {ellipsoid: {centre: [0, 0, 0], semi_axes: [0.9, 0.3, 0.3], segments: [24, 12]}, colour: [230, 230, 230]}
   - {polygon: [[x, y, z], ...], colour: [...], two_sided: true}
 marks:                              # the features EvoPose matches
