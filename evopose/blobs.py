@@ -87,14 +87,14 @@ def scales(prior: MarkPrior) -> np.ndarray:
     return lo * step ** np.arange(int(np.ceil(np.log(hi / lo) / np.log(step))) + 2)
 
 
-def contrast_responses(lab: np.ndarray, sigmas: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Difference-of-Gaussian stack of an L*a*b* image (H, W, 3) float32: ``dog`` (S - 1, H, W, 3), the
-    scale-normalised Laplacian per channel between levels i and i + 1 (divided by ``k - 1``), and ``levels``
-    (S, H, W, 3) the blurred images."""
+def contrast_responses(lab: np.ndarray, sigmas: np.ndarray) -> np.ndarray:
+    """Difference-of-Gaussian stack of an L*a*b* image (H, W, 3) float32, shape (S - 1, H, W, 3): the
+    scale-normalised Laplacian per channel between the blurs at ``sigmas[i]`` and ``sigmas[i + 1]`` (divided by
+    ``k - 1``)."""
     levels = np.stack([cv2.GaussianBlur(lab, (0, 0), float(s)) for s in sigmas])
     k = sigmas[1] / sigmas[0]
     dog = (levels[1:] - levels[:-1]) / np.float32(k - 1)
-    return dog, levels
+    return dog
 
 
 def _magnitude(dog: np.ndarray) -> np.ndarray:
@@ -168,7 +168,7 @@ def detect_contrast_marks(image_bgr: np.ndarray, palette: Mapping[str, tuple[int
     img = bgr.astype(np.float32) / 255.0
     lab = cv2.cvtColor(img, cv2.COLOR_BGR2Lab)
     sigmas = scales(prior)
-    dog, levels = contrast_responses(lab, sigmas)
+    dog = contrast_responses(lab, sigmas)
     mag = _magnitude(dog)                                                # (S - 1, H, W)
     # threshold per level: robust spread of the response over the image (texture and noise)
     sample = mag[:, ::3, ::3].reshape(len(mag), -1)

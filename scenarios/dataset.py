@@ -31,10 +31,11 @@ from pydantic import BaseModel
 from evopose import Camera
 from evopose.pose import matrix_from_pose
 
+from .camera_info_file import CameraInfoSpec, calibration_document
 from .dataset_files import (CAMERA_INFO, FORMAT, FRAME_DIGITS, IMAGE_SUFFIXES, MANIFEST, MAX_POSES_BYTES,
-                            MAX_POSES_LINE, MAX_TRUTH_BYTES, MAX_TRUTH_LINE, POSES, TRUTH, WORLD, CameraInfoFileSpec,
+                            MAX_POSES_LINE, MAX_TRUTH_BYTES, MAX_TRUTH_LINE, POSES, TRUTH, WORLD,
                             DatasetError, ManifestSpec, PosesLineSpec, TruthLineSpec, _check_frame_numbers,
-                            _IMAGE_NAME, camera_info_document, image_name, read_camera_info_file, read_json_lines)
+                            _IMAGE_NAME, image_name, read_camera_info_file, read_json_lines)
 from .dataset_writer import DatasetWriter
 from .documents import read_mapping, validate
 from .errors import WorldError
@@ -237,6 +238,6 @@ def open_dataset(path: str | Path) -> Dataset:
     return Dataset(root, manifest, intrinsics, poses, images, truth)
 
 
-__all__ = ["CameraInfoFileSpec", "Dataset", "DatasetError", "DatasetTruth", "DatasetWriter", "FORMAT",
-           "IMAGE_SUFFIXES", "ManifestSpec", "MarkTruth", "PosesLineSpec", "TruthLineSpec", "ViewTruth", "camera_info_document",
+__all__ = ["CameraInfoSpec", "Dataset", "DatasetError", "DatasetTruth", "DatasetWriter", "FORMAT",
+           "IMAGE_SUFFIXES", "ManifestSpec", "MarkTruth", "PosesLineSpec", "TruthLineSpec", "ViewTruth", "calibration_document",
            "image_name", "locate_dataset", "open_dataset", "read_camera_info_file", "read_json_lines"]

@@ -13,11 +13,12 @@ from typing import Annotated, Any, Literal, TypeVar
 
 import numpy as np
 import yaml
-from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 from evopose import Camera
 from evopose.pose import PARAM_NAMES, pose_from_matrix
 
+from .camera_info_file import CameraInfoSpec
 from .documents import (MAX_DEPTH, Strict, _json_depth_ok, _json_object, _no_constant, describe, one_line,
                         read_bytes, read_mapping, validate)
 from .errors import WorldError
@@ -138,77 +139,9 @@ class PosesLineSpec(Strict):
     world_from_camera: PoseLineSpec
 
 
-class RosMatrixSpec(Strict):
-    """A matrix of a ROS calibration file: ``rows`` x ``cols`` numbers in ``data``, row-major."""
-
-    rows: Annotated[int, Field(gt=0, le=16)]
-    cols: Annotated[int, Field(gt=0, le=16)]
-    data: Annotated[list[float], Field(min_length=1, max_length=256)]
-
-    @model_validator(mode="after")
-    def _size(self) -> "RosMatrixSpec":
-        if len(self.data) != self.rows * self.cols:
-            raise ValueError(f"data: expected rows x cols = {self.rows * self.cols} numbers, got {len(self.data)}")
-        return self
-
-
-class CameraInfoFileSpec(Strict):
-    """A camera's ``camera_info.yaml`` (camera_calibration_parsers' format, plumb_bob), as
-    :mod:`agents.problem.camera_info` reads it: a pinhole ``camera_matrix`` and 5 distortion coefficients."""
-
-    image_width: Annotated[int, Field(gt=0, le=8192)]
-    image_height: Annotated[int, Field(gt=0, le=8192)]
-    camera_name: str = ""
-    camera_matrix: RosMatrixSpec
-    distortion_model: Literal["plumb_bob"] = "plumb_bob"
-    distortion_coefficients: RosMatrixSpec | None = None
-    rectification_matrix: RosMatrixSpec | None = None
-    projection_matrix: RosMatrixSpec | None = None
-
-    @model_validator(mode="after")
-    def _pinhole(self) -> "CameraInfoFileSpec":
-        if (self.camera_matrix.rows, self.camera_matrix.cols) != (3, 3):
-            raise ValueError(f"camera_matrix: expected a 3x3 matrix, got {self.camera_matrix.rows}x"
-                             f"{self.camera_matrix.cols}")
-        k = np.array(self.camera_matrix.data).reshape(3, 3)
-        if k[0, 0] <= 0 or k[1, 1] <= 0:
-            raise ValueError(f"camera_matrix: fx and fy must be > 0, got {k[0, 0]:g} and {k[1, 1]:g}")
-        if np.any(np.abs([k[0, 1], k[1, 0], k[2, 0], k[2, 1], k[2, 2] - 1.0]) > 1e-9):
-            raise ValueError("camera_matrix: expected [fx, 0, cx, 0, fy, cy, 0, 0, 1] (no skew)")
-        d = self.distortion_coefficients
-        if d is not None and (min(d.rows, d.cols) != 1 or len(d.data) != 5):
-            raise ValueError(f"distortion_coefficients: plumb_bob has 5 coefficients [k1, k2, p1, p2, k3] in 1 row, "
-                             f"got {d.rows}x{d.cols}")
-        for name, shape in (("rectification_matrix", (3, 3)), ("projection_matrix", (3, 4))):
-            m = getattr(self, name)
-            if m is not None and (m.rows, m.cols) != shape:
-                raise ValueError(f"{name}: expected a {shape[0]}x{shape[1]} matrix, got {m.rows}x{m.cols}")
-        return self
-
-    def to_camera(self, world_from_camera: np.ndarray | None = None) -> Camera:
-        k = np.array(self.camera_matrix.data, float).reshape(3, 3)
-        dist = np.zeros(5) if self.distortion_coefficients is None else np.array(self.distortion_coefficients.data)
-        return Camera(k[0, 0], k[1, 1], k[0, 2], k[1, 2], self.image_width, self.image_height, dist,
-                      np.eye(4) if world_from_camera is None else world_from_camera)
-
-
-def camera_info_document(camera: Camera, name: str = "") -> dict[str, Any]:
-    """The ROS calibration-file mapping (camera_calibration_parsers' keys) of a camera's intrinsics: ``K``, plumb_bob
-    ``D``, identity ``R`` and ``P = [K | 0]`` (a monocular, unrectified camera)."""
-    fx, fy, cx, cy = (float(v) for v in (camera.fx, camera.fy, camera.cx, camera.cy))
-    return {"image_width": int(camera.width), "image_height": int(camera.height), "camera_name": name,
-            "camera_matrix": {"rows": 3, "cols": 3, "data": [fx, 0.0, cx, 0.0, fy, cy, 0.0, 0.0, 1.0]},
-            "distortion_model": "plumb_bob",
-            "distortion_coefficients": {"rows": 1, "cols": 5,
-                                        "data": [float(v) for v in np.asarray(camera.distortion).reshape(5)]},
-            "rectification_matrix": {"rows": 3, "cols": 3, "data": [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]},
-            "projection_matrix": {"rows": 3, "cols": 4,
-                                  "data": [fx, 0.0, cx, 0.0, 0.0, fy, cy, 0.0, 0.0, 0.0, 1.0, 0.0]}}
-
-
 def read_camera_info_file(path: Path) -> Camera:
     """The intrinsics of a dataset camera's ``camera_info.yaml`` (identity ``world_from_camera``)."""
-    return validate(CameraInfoFileSpec, read_mapping(path, DatasetError), path, DatasetError).to_camera()
+    return validate(CameraInfoSpec, read_mapping(path, DatasetError), path, DatasetError).to_camera()
 
 
 # -- JSON lines -------------------------------------------------------------------------------------------------

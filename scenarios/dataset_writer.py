@@ -16,11 +16,12 @@ from pydantic import BaseModel
 
 from evopose import Camera
 
+from .camera_info_file import calibration_document
 from .dataset_files import (CAMERA_INFO, FORMAT, FRAME_DIGITS, IMAGE_SUFFIXES, MANIFEST, MAX_POSES_BYTES,
                             MAX_POSES_LINE, MAX_TRUTH_BYTES, MAX_TRUTH_LINE, MODEL, POSES, TRUTH, WORLD, DatasetError,
                             ManifestSpec, MarkSpec, PoseLineSpec, PosesLineSpec, TruthLineSpec, ViewTruthSpec,
                             _check_camera, _check_frame_numbers, _dump_yaml, _json_line, _write_text,
-                            camera_info_document, image_name, read_json_lines)
+                            image_name, read_json_lines)
 from .documents import StrictLoader, describe, read_mapping, validate
 from .target import resolve_model_path
 from .world import ScenarioSpec, build_scenario, load_scenario, read_world_document, resolve_scenario_path
@@ -85,7 +86,7 @@ class DatasetWriter:
         camera_infos = {}
         for camera in cameras:
             k = (intrinsics or {}).get(camera) or scenario.vehicle(camera).camera_at(0.0)
-            camera_infos[camera] = camera_info_document(k, camera)
+            camera_infos[camera] = calibration_document(k, camera)
         if resume and (self.root / MANIFEST).exists():
             self._check_same(world_doc)
         else:

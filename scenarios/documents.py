@@ -24,7 +24,7 @@ from pathlib import Path
 from typing import Any, TypeVar
 
 import yaml
-from pydantic import BaseModel, ConfigDict, ValidationError
+from pydantic import BaseModel, ConfigDict, ValidationError, model_validator
 
 T = TypeVar("T", bound=BaseModel)
 
@@ -54,6 +54,22 @@ class Strict(BaseModel):
     """Base of every schema mapping: unknown keys are errors, numbers finite, values frozen."""
 
     model_config = ConfigDict(extra="forbid", allow_inf_nan=False, frozen=True)
+
+
+class Spec(BaseModel):
+    """Base of a file's mappings where types are not coerced (the pose-problem file, camera calibration files):
+    strict types, finite numbers, and an unknown key named with the known ones."""
+
+    model_config = ConfigDict(extra="forbid", strict=True, allow_inf_nan=False, frozen=True)
+
+    @model_validator(mode="before")
+    @classmethod
+    def _known_keys(cls, data: Any) -> Any:
+        if isinstance(data, dict):
+            unknown = [key for key in data if key not in cls.model_fields]
+            if unknown:
+                raise UnknownKey(unknown[0], list(cls.model_fields))
+        return data
 
 
 class StrictLoader(yaml.SafeLoader):

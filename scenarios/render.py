@@ -240,7 +240,7 @@ class _SceneFaces:
                 fill_linear(image, pts, self.colours[i])
 
 
-def _mark_outlines(points: np.ndarray, normals: np.ndarray, radius: float) -> np.ndarray:
+def mark_outlines(points: np.ndarray, normals: np.ndarray, radius: float) -> np.ndarray:
     """Disc outlines of the marks (target frame), shape (M, MARK_OUTLINE, 3)."""
     helper = np.where(np.abs(normals[:, :1]) < 0.9, [[1.0, 0, 0]], [[0, 1.0, 0]])
     e1 = np.cross(normals, helper)
@@ -345,7 +345,7 @@ def render_frame(scenario: Scenario, frame: int, vehicle: str | None = None, *, 
     R, p = world_from_target[:3, :3], world_from_target[:3, 3]
     normals_w = model.mark_normals @ R.T
     centres_w = model.mark_points @ R.T + p
-    outlines_w = _mark_outlines(centres_w, normals_w, model.mark_radius)
+    outlines_w = mark_outlines(centres_w, normals_w, model.mark_radius)
     eye = camera.center_world
     sight = eye - centres_w
     facing = np.sum(normals_w * sight, axis=1) > MIN_FACING_COS * np.linalg.norm(sight, axis=1)

@@ -9,7 +9,6 @@ import json
 import shutil
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
@@ -17,9 +16,10 @@ import pytest
 import yaml
 
 from scenarios.render import render_frame
-from tests.fleet_procs import ROOT, Proc, free_port
+from tests.fleet_procs import ROOT
 from tests.test_dataset import edit_line, write_dataset
-from tests.test_sources import FPS, FRAMES, agent_error, frames_of
+from tests.test_sources import FRAMES, agent_error, frames_of
+from tests.test_sources import run_agents as run_agents_on_sources
 
 
 @pytest.fixture(scope="module")
@@ -51,18 +51,9 @@ def datasets(tmp_path_factory):
 
 
 def run_agents(runs: dict[str, tuple[str, ...]]) -> dict[str, tuple[int, list[dict], str]]:
-    """As tests.test_sources.run_agents (each agent alone in its fleet, 2 frames/s, one epoch), but each run gives
-    its own vehicle and world: an agent on a dataset takes the dataset's world."""
-    epoch = time.time_ns() + int(10e9)
-    procs = {fleet: Proc([sys.executable, "-m", "agents.cli", "agent", "--fleet", fleet, "--share", "features",
-                          "--fps", str(FPS), "--epoch-ns", str(epoch), "--json", "--no-multicast", "--listen",
-                          f"tcp/127.0.0.1:{free_port()}", *args])
-             for fleet, args in runs.items()}
-    try:
-        return {fleet: (proc.wait(120), proc.all_records(), proc.popen.stderr.read()) for fleet, proc in procs.items()}
-    finally:
-        for proc in procs.values():
-            proc.kill()
+    """tests.test_sources.run_agents with each run giving its own vehicle and world: an agent on a dataset takes the
+    dataset's world."""
+    return run_agents_on_sources(runs, base=())
 
 
 @pytest.fixture(scope="module")

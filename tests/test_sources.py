@@ -63,14 +63,16 @@ def h1_media(tmp_path_factory):
     return folder, images, video, info
 
 
-def run_agents(runs: dict[str, tuple[str, ...]]) -> dict[str, tuple[int, list[dict], str]]:
+def run_agents(runs: dict[str, tuple[str, ...]], base: tuple[str, ...] = ("--vehicle", "H1", "--scenario", "exp2")
+               ) -> dict[str, tuple[int, list[dict], str]]:
     """Agents started together, each alone in its fleet (features shared with nobody: a fixed number of
     generations per frame, so the same images give the same poses); per fleet its exit code, JSON records and
     stderr. At 2 frames/s a frame's work is a small share of its period, so they take the same ticks side by
-    side (each run asserts it skipped no frame)."""
+    side (each run asserts it skipped no frame). ``base``: the arguments every run shares (the vehicle and world).
+    """
     epoch = time.time_ns() + int(10e9)
-    procs = {fleet: Proc([sys.executable, "-m", "agents.cli", "agent", "--fleet", fleet, "--vehicle", "H1",
-                          "--scenario", "exp2", "--share", "features", "--fps", str(FPS), "--epoch-ns", str(epoch),
+    procs = {fleet: Proc([sys.executable, "-m", "agents.cli", "agent", "--fleet", fleet, *base,
+                          "--share", "features", "--fps", str(FPS), "--epoch-ns", str(epoch),
                           "--json", "--no-multicast", "--listen", f"tcp/127.0.0.1:{free_port()}", *args])
              for fleet, args in runs.items()}
     try:

@@ -15,7 +15,7 @@ from pathlib import Path
 from typing import Annotated, Any
 
 import numpy as np
-from pydantic import (AfterValidator, BaseModel, BeforeValidator, ConfigDict, Field, ValidationError,
+from pydantic import (AfterValidator, BeforeValidator, Field, ValidationError,
                       ValidationInfo, create_model, field_validator, model_validator)
 
 from evopose import Bounds, Camera, Model, PoseProblem, SearchOptions, Solution, View
@@ -23,7 +23,7 @@ from evopose.pose import PARAM_NAMES, pose_from_matrix, quaternion_from_euler
 
 from scenarios.errors import WorldError
 from scenarios.target import TargetModel, load_model, resolve_model_path
-from scenarios.documents import UnknownKey, describe, read_mapping, validation_message
+from scenarios.documents import Spec, describe, read_mapping, validation_message
 
 from agents.problem.images import detect_marks, read_image
 
@@ -84,21 +84,6 @@ Label = Annotated[int, Field(ge=0, le=255)]
 Normal = Annotated[Point3, AfterValidator(_non_zero)]
 Range = Annotated[list[float], _fixed_length(2, "[lo, hi]"), AfterValidator(_moderate), AfterValidator(_ordered)]
 Distortion = Annotated[list[float], _fixed_length(5, "[k1, k2, p1, p2, k3]")]
-
-
-class Spec(BaseModel):
-    """Base of the file's mappings: strict types, finite numbers, no unknown keys."""
-
-    model_config = ConfigDict(extra="forbid", strict=True, allow_inf_nan=False, frozen=True)
-
-    @model_validator(mode="before")
-    @classmethod
-    def _known_keys(cls, data: Any) -> Any:
-        if isinstance(data, dict):
-            unknown = [key for key in data if key not in cls.model_fields]
-            if unknown:
-                raise UnknownKey(unknown[0], list(cls.model_fields))
-        return data
 
 
 class PoseSpec(Spec):

@@ -16,7 +16,7 @@ from evopose import Camera
 from evopose.pose import matrix_from_pose, pose_from_matrix
 
 from ..mesh import Mesh, box_mesh, hits
-from ..render import MARK_LIFT, MARK_OUTLINE, render_frame
+from ..render import MARK_LIFT, mark_outlines, render_frame
 from ..target import TargetModel
 from ..world import Scenario
 from .shapes import clutter_solid
@@ -45,17 +45,6 @@ def world_obstacles(scenario: Scenario, t: float) -> Mesh:
     return mesh
 
 
-def _outlines(points: np.ndarray, normals: np.ndarray, radius: float) -> np.ndarray:
-    """Disc outlines, shape (M, MARK_OUTLINE, 3)."""
-    helper = np.where(np.abs(normals[:, :1]) < 0.9, [[1.0, 0, 0]], [[0, 1.0, 0]])
-    e1 = np.cross(normals, helper)
-    e1 /= np.linalg.norm(e1, axis=1, keepdims=True)
-    e2 = np.cross(normals, e1)
-    a = np.linspace(0, 2 * np.pi, MARK_OUTLINE, endpoint=False)
-    return points[:, None, :] + radius * (np.cos(a)[None, :, None] * e1[:, None, :]
-                                          + np.sin(a)[None, :, None] * e2[:, None, :])
-
-
 def hidden_by(camera: Camera, model: TargetModel, world_from_target: np.ndarray, index: np.ndarray,
               obstacles: Mesh) -> tuple[np.ndarray, np.ndarray]:
     """For the marks ``index``: whether an obstacle hides the centre, and whether it hides any of the outline."""
@@ -64,7 +53,7 @@ def hidden_by(camera: Camera, model: TargetModel, world_from_target: np.ndarray,
     R, p = world_from_target[:3, :3], world_from_target[:3, 3]
     normals = model.mark_normals[index] @ R.T
     centres = model.mark_points[index] @ R.T + p
-    samples = np.concatenate([centres[:, None], _outlines(centres, normals, model.mark_radius)], axis=1)
+    samples = np.concatenate([centres[:, None], mark_outlines(centres, normals, model.mark_radius)], axis=1)
     samples = samples + MARK_LIFT * normals[:, None, :]
     blocked = hits(camera.center_world, samples.reshape(-1, 3), obstacles.triangles()).any(axis=1)
     blocked = blocked.reshape(len(index), -1)
