@@ -1,6 +1,11 @@
-"""`evopose record` and `evopose replay` (docs/ros2.md): a real fleet recorded into one MCAP file (ROS 2 profile read
-back by Foxglove's own ROS 2 decoder, plus the raw channels), then replayed into a fresh receiving agent, which gets
-the same messages (same senders, sequence numbers and poses; stamps moved by one offset)."""
+"""`evopose record` and `evopose replay` (docs/ros2.md): a real fleet recorded into two MCAP files (a ROS 2 profile
+file read whole by readers that are not ours, and the raw channels beside it), then replayed into a fresh receiving
+agent, which gets the same messages (same senders, sequence numbers and poses; stamps moved by one offset).
+
+The ROS 2 file is checked against the rules of rosbag2's MCAP storage plugin (ros2/rosbag2
+``rosbag2_storage_mcap/src/mcap_storage.cpp`` ``read_metadata`` and ``rosbag2_storage/src/rosbag2_storage/qos.cpp``,
+:func:`check_rosbag2_rules`), read over every channel by the ``rosbags`` rosbag2 reader and decoded message by
+message, with no topic filter, by the ``mcap`` reader with ``mcap-ros2-support`` (:func:`check_ros2_file`)."""
 
 from __future__ import annotations
 
@@ -14,9 +19,23 @@ import zenoh
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 
+import re
+import threading
+
+import yaml
+from mcap.writer import Writer
+from rosbags.rosbag2 import Reader as Rosbag2Reader
+from rosbags.typesys import Stores, get_typestore, get_types_from_msg
+
 from agents.bridges.names import topic_name
-from agents.bridges.recording import restamp
+from agents.bridges.recording import (Recorder, RecordingError, offered_qos_profiles, raw_messages, raw_path,
+                                      raw_recording, restamp, run_record)
+from agents.bridges.rmw_zenoh import DEFAULT_QOS, SENSOR_QOS, TF_QOS
+from agents.bridges.tap import RawSample
+from agents.tools.runners import PublishSpec, sample_message
+from agents.transport.session import SessionOptions
 from protocol.codec import decode_sample, encode
+from protocol.keys import Topic, topic_key
 from protocol.messages import PoseEstimate
 from tests.fleet_procs import Proc, client_session, fleet_with_router, free_port
 
@@ -27,6 +46,123 @@ N = 20
 def fleet():
     with fleet_with_router("rec-test") as fleet:
         yield fleet
+
+
+# -- the rules of rosbag2's MCAP storage plugin, and readers that are not ours -------------------------------
+
+#: rosbag2_storage qos.cpp ``convert<rclcpp::QoS>::decode``: the keys of a profile, read with ``as<...>``.
+QOS_KEYS = {"history", "depth", "reliability", "durability", "deadline", "lifespan", "liveliness",
+            "liveliness_lease_duration", "avoid_ros_namespace_conventions"}
+#: rmw/qos_string_conversions.c names, the version-9 form of the policies (version 8: their integers).
+POLICY_NAMES = {"history": {"system_default", "keep_last", "keep_all"},
+                "reliability": {"system_default", "reliable", "best_effort", "best_available"},
+                "durability": {"system_default", "transient_local", "volatile", "best_available"},
+                "liveliness": {"system_default", "automatic", "manual_by_topic", "best_available"}}
+
+
+def check_rosbag2_rules(path) -> dict:
+    """What ``MCAPStorage::read_metadata`` needs of a file: the Statistics record; every channel's schema present
+    ("Could not find schema for topic ..." otherwise), named ``pkg/msg/Type``, ``ros2msg`` or ``ros2idl``; the
+    channel's message encoding the serialization format (``cdr``); ``offered_qos_profiles`` a YAML list of
+    profiles that ``to_rclcpp_qos_vector`` decodes (all keys; the policies all integers or all names;
+    durations ``{sec, nsec}``); ``topic_type_hash`` the type's RIHS01 hash. Returns the channels by topic."""
+    with open(path, "rb") as stream:
+        reader = make_reader(stream)
+        assert reader.get_header().profile == "ros2"
+        summary = reader.get_summary()
+    assert summary is not None and summary.statistics is not None
+    channels = {c.topic: c for c in summary.channels.values()}
+    for channel in channels.values():
+        schema = summary.schemas.get(channel.schema_id)
+        assert channel.schema_id != 0 and schema is not None, f"Could not find schema for topic {channel.topic}"
+        assert re.fullmatch(r"\w+/msg/\w+", schema.name) and schema.encoding in ("ros2msg", "ros2idl"), schema
+        assert channel.message_encoding == "cdr", channel
+        assert re.fullmatch(r"RIHS01_[0-9a-f]{64}", channel.metadata["topic_type_hash"]), channel
+        profiles = yaml.safe_load(channel.metadata["offered_qos_profiles"])
+        assert isinstance(profiles, list) and profiles, channel
+        for profile in profiles:
+            assert set(profile) == QOS_KEYS, profile
+            integers = isinstance(profile["history"], int)
+            for policy, names in POLICY_NAMES.items():
+                assert profile[policy] in (range(0, 5) if integers else names), (policy, profile)
+            assert isinstance(profile["depth"], int) and isinstance(profile["avoid_ros_namespace_conventions"], bool)
+            for duration in ("deadline", "lifespan", "liveliness_lease_duration"):
+                assert set(profile[duration]) == {"sec", "nsec"}, profile
+    return channels
+
+
+def check_ros2_file(path) -> dict[str, int]:
+    """Read every channel of ``path`` with the rosbags rosbag2 reader (types from the file's own schemas) and
+    decode every message with the ``mcap`` reader and Foxglove's ROS 2 decoder, no topic filter; both must see
+    the same messages. Returns the message count per topic."""
+    channels = check_rosbag2_rules(path)
+    by_rosbags: dict[str, int] = {}
+    with Rosbag2Reader(path) as bag:
+        assert {c.topic for c in bag.connections} == set(channels)
+        typestore = get_typestore(Stores.EMPTY)
+        for connection in bag.connections:
+            assert connection.msgdef.data, connection
+            typestore.register(get_types_from_msg(connection.msgdef.data, connection.msgtype))
+            assert connection.ext.serialization_format == "cdr" and connection.ext.offered_qos_profiles
+        for connection, _, data in bag.messages():
+            typestore.deserialize_cdr(data, connection.msgtype)
+            by_rosbags[connection.topic] = by_rosbags.get(connection.topic, 0) + 1
+    by_mcap: dict[str, int] = {}
+    with open(path, "rb") as stream:
+        for _, channel, _, decoded in make_reader(stream, decoder_factories=[DecoderFactory()]).iter_decoded_messages():
+            assert decoded is not None
+            by_mcap[channel.topic] = by_mcap.get(channel.topic, 0) + 1
+    assert by_rosbags == by_mcap and set(by_mcap) == set(channels)
+    return by_mcap
+
+
+def test_offered_qos_profiles_are_what_rosbag2_writes():
+    """The integer form rosbag2 wrote before metadata version 9 (rosbag2 test_qos.cpp's fixture): Humble reads only
+    that, Jazzy and later detect it."""
+    assert yaml.safe_load(offered_qos_profiles(DEFAULT_QOS)) == [{
+        "history": 1, "depth": 10, "reliability": 1, "durability": 2, "deadline": {"sec": 0, "nsec": 0},
+        "lifespan": {"sec": 0, "nsec": 0}, "liveliness": 1, "liveliness_lease_duration": {"sec": 0, "nsec": 0},
+        "avoid_ros_namespace_conventions": False}]
+    assert yaml.safe_load(offered_qos_profiles(SENSOR_QOS))[0]["reliability"] == 2
+    assert yaml.safe_load(offered_qos_profiles(TF_QOS))[0]["depth"] == 100
+
+
+def test_every_mirrored_message_kind_in_a_ros2_file_and_the_rest_beside_it(tmp_path):
+    """All five fleet topics a vehicle sends, recorded: the ROS 2 file holds only ROS 2 channels that rosbag2's
+    rules, rosbags and Foxglove's decoder all accept; the raw file holds every sample, replay finds it from either."""
+    out = tmp_path / "all.mcap"
+    rng = np.random.default_rng(1)
+    samples = []
+    for seq in range(3):
+        for topic in (Topic.POSE, Topic.FEATURES, Topic.IMAGE, Topic.ATTITUDE, Topic.HINT):
+            header = {"sender": "uav-1", "seq": seq, "stamp_ns": 1_700_000_000_000_000_000 + seq * 100_000_000}
+            message = sample_message(PublishSpec(topic, width=64, height=48), header, rng)
+            samples.append(RawSample(topic_key("rec-x", "uav-1", topic.value), encode(message),
+                                     header["stamp_ns"] + 5_000_000))
+    with open(out, "wb") as ros_stream, open(raw_path(out), "wb") as raw_stream:
+        ros, raw = Writer(ros_stream), Writer(raw_stream)
+        ros.start(profile="ros2", library="test")
+        raw.start(profile="", library="test")
+        recorder = Recorder(ros, raw)
+        for sample in samples:
+            recorder.handle(sample)
+        ros.finish()
+        raw.finish()
+    counts = check_ros2_file(out)
+    assert counts == {"/rec_x/uav_1/target_pose": 3, "/rec_x/uav_1/camera_info": 6, "/rec_x/uav_1/image_raw": 3,
+                      "/rec_x/uav_1/imu": 3, "/rec_x/uav_1/hint": 3, "/tf": 9}
+    recorded = [(key, payload) for key, _, payload in raw_messages(raw_path(out))]
+    assert recorded == [(s.key, s.payload) for s in samples]
+    assert not list(raw_messages(out))
+    assert raw_recording(out) == raw_recording(raw_path(out)) == raw_path(out)
+
+
+def test_record_refuses_nothing_to_record_and_a_raw_name(tmp_path):
+    with pytest.raises(RecordingError, match="nothing to record"):
+        run_record(SessionOptions(), threading.Event(), "f", tmp_path / "x.mcap", ros=False, raw=False)
+    with pytest.raises(RecordingError, match=r"\*\.raw\.mcap"):
+        run_record(SessionOptions(), threading.Event(), "f", tmp_path / "x.raw.mcap")
+    assert not list(tmp_path.iterdir())
 
 
 def test_restamp_moves_only_the_stamp():
@@ -52,24 +188,25 @@ def test_record_then_replay_into_a_fresh_agent(fleet, tmp_path):
     summary = recorder.next_record(5, lambda r: r.get("event") == "stopped")
     assert code == 0 and summary["rejected"] == 0 and summary["dropped"] == 0
 
-    # the file: ROS 2 profile, ros2msg schemas, CDR that Foxglove's decoder reads; the raw channels, nothing lost
+    # the ROS 2 file: every channel read by rosbags and decoded by Foxglove's decoder; the raw file: nothing lost
+    assert summary["out"] == str(out) and summary["raw"] == str(raw_path(out))
+    counts = check_ros2_file(out)
+    assert counts["/rec_test/uav_1/target_pose"] == N and counts["/rec_test/uav_1/camera_info"] == N
+    with open(raw_path(out), "rb") as stream:
+        raw_summary = make_reader(stream).get_summary()
+    raw_counts = {c.topic: raw_summary.statistics.channel_message_counts[c.id] for c in raw_summary.channels.values()}
+    assert raw_counts[f"evopose/{fleet.fleet}/uav-1/pose"] == N
+    assert raw_counts[f"evopose/{fleet.fleet}/uav-1/features"] == N
     with open(out, "rb") as stream:
         reader = make_reader(stream, decoder_factories=[DecoderFactory()])
-        assert reader.get_header().profile == "ros2"
-        summary_section = reader.get_summary()
-        channels = {c.topic: c for c in summary_section.channels.values()}
-        counts = {c.topic: summary_section.statistics.channel_message_counts[c.id] for c in channels.values()}
-        assert counts[f"evopose/{fleet.fleet}/uav-1/pose"] == N and counts[f"evopose/{fleet.fleet}/uav-1/features"] == N
-        assert counts["/rec_test/uav_1/target_pose"] == N and counts["/rec_test/uav_1/camera_info"] == N
-        assert channels["/rec_test/uav_1/target_pose"].message_encoding == "cdr"
-        assert summary_section.schemas[channels["/tf"].schema_id].encoding == "ros2msg"
+        ros_poses = {m.publish_time: d for _, _, m, d in reader.iter_decoded_messages(
+            topics=["/rec_test/uav_1/target_pose"])}
+    with open(raw_path(out), "rb") as stream:
         recorded = {}
-        for _, channel, message in reader.iter_messages(topics=[f"evopose/{fleet.fleet}/uav-1/pose"]):
+        for _, channel, message in make_reader(stream).iter_messages(topics=[f"evopose/{fleet.fleet}/uav-1/pose"]):
             estimate = decode_sample(channel.topic, message.data)[1]
             recorded[estimate.seq] = estimate
             assert message.publish_time == estimate.stamp_ns
-        ros_poses = {m.publish_time: d for _, _, m, d in reader.iter_decoded_messages(
-            topics=["/rec_test/uav_1/target_pose"])}
     assert sorted(recorded) == list(range(N))
     for estimate in recorded.values():
         pose = ros_poses[estimate.stamp_ns].pose.pose
@@ -125,9 +262,12 @@ def test_scenario_run_records_every_run(tmp_path):
 
 
 def check_recording(run: dict, path, frames: int) -> None:
-    assert run["recording"] == str(path) and path.is_file()
-    with open(path, "rb") as stream:
-        reader = make_reader(stream, decoder_factories=[DecoderFactory()])
+    assert run["recording"] == str(path) and path.is_file() and raw_path(path).is_file()
+    ros_topics = set(check_ros2_file(path))
+    expected = {"/tf", *(topic_name(run["fleet"], v, "target_pose") for v in ("H1", "H2"))}
+    assert expected <= ros_topics, ros_topics
+    with open(raw_path(path), "rb") as stream:
+        reader = make_reader(stream)
         for vehicle in ("H1", "H2"):
             poses = {}
             for _, channel, message in reader.iter_messages(topics=[f"evopose/{run['fleet']}/{vehicle}/pose"]):
@@ -138,6 +278,3 @@ def check_recording(run: dict, path, frames: int) -> None:
             recorded = sorted(poses.items())
             for row, (_, pose) in zip(published, recorded):
                 assert np.allclose(row[1:7], pose, atol=1e-9)
-        ros_topics = {c.topic for c in reader.get_summary().channels.values()}
-        expected = {"/tf", *(topic_name(run["fleet"], v, "target_pose") for v in ("H1", "H2"))}
-        assert expected <= ros_topics, ros_topics

@@ -1,11 +1,13 @@
-"""``evopose record`` and ``evopose replay``: a fleet in one MCAP file, and back (docs/ros2.md, "Record and replay").
+"""``evopose record`` and ``evopose replay``: a fleet in two MCAP files, and back (docs/ros2.md, "Record and replay").
 
-The file has the ROS 2 profile (header profile ``ros2``): each ROS 2 message the mirror would publish
-(:mod:`agents.bridges.translate`) is a CDR message on a channel named after its ROS topic, with a ``ros2msg`` schema
-and the type hash in the channel metadata (``topic_type_hash``), so Foxglove, Lichtblick and rosbag2 tools read it.
-Beside them, the raw channels keep every fleet sample as it was on the wire, nothing lost: the channel's topic is the
-fleet key (``evopose/<fleet>/<vehicle>/<topic>``), its message encoding ``msgpack`` (hints: ``evopose-hint``, 24
-bytes), no schema; log time = receive time, publish time = the message's acquisition stamp.
+``run.mcap`` has the ROS 2 profile (header profile ``ros2``) and nothing else: each ROS 2 message the mirror would
+publish (:mod:`agents.bridges.translate`) is a CDR message on a channel named after its ROS topic, with a ``ros2msg``
+schema and the metadata rosbag2's MCAP storage plugin writes and reads (``offered_qos_profiles``, the QoS the mirror
+offers, and ``topic_type_hash``), so ``ros2 bag``, Foxglove and Lichtblick read every channel of it.
+Beside it, ``run.raw.mcap`` (:func:`raw_path`, no profile) keeps every fleet sample as it was on the wire, nothing
+lost: the channel's topic is the fleet key (``evopose/<fleet>/<vehicle>/<topic>``), its message encoding ``msgpack``
+(hints: ``evopose-hint``, 24 bytes), no schema; log time = receive time, publish time = the message's acquisition
+stamp. Schemaless channels are valid MCAP but not ROS 2 profile, which is why they have a file of their own.
 
 Replay publishes the raw channels on their keys (or another fleet's, ``fleet``) with the recorded spacing (divided by
 ``rate``). The fleet's receivers drop data older than their ``max_age``, so by default each message's ``stamp_ns``
@@ -34,7 +36,8 @@ from protocol.qos import QOS
 from agents.bridges import ros_msgs
 from agents.bridges.mirror import observer_options
 from agents.bridges.tap import FleetTap, RawSample
-from agents.bridges.translate import translate
+from agents.bridges.rmw_zenoh import QoS
+from agents.bridges.translate import RosMessage, translate
 from agents.errors import FleetError
 from agents.transport.session import SessionOptions, open_session
 
@@ -43,42 +46,71 @@ RAW_ENCODING = "msgpack"
 HINT_ENCODING = "evopose-hint"
 #: Metadata record naming the recording's fleet.
 METADATA_NAME = "evopose"
+#: rmw_qos_liveliness_policy_e AUTOMATIC (rmw/types.h): what every rmw_zenoh publisher offers.
+LIVELINESS_AUTOMATIC = 1
 
 
 class RecordingError(FleetError):
     """A recording that cannot be read or replayed."""
 
 
-class Recorder:
-    """Writes fleet samples to an open MCAP writer: the ROS 2 channels and the raw ones (one thread only)."""
+def raw_path(out: Path) -> Path:
+    """Where the raw channels of a recording ``out`` go: ``run.mcap`` -> ``run.raw.mcap``."""
+    out = Path(out)
+    if out.name.endswith(".raw.mcap"):
+        return out
+    return out.with_name((out.stem if out.suffix == ".mcap" else out.name) + ".raw.mcap")
 
-    def __init__(self, writer, *, ros: bool = True, raw: bool = True) -> None:
-        self.writer, self.ros, self.raw = writer, ros, raw
+
+def offered_qos_profiles(qos: QoS) -> str:
+    """The channel metadata ``offered_qos_profiles`` of a topic offered with ``qos``, as rosbag2 serialises it
+    (rosbag2_storage ``serialize_rclcpp_qos_vector``: a YAML list of profiles). The integer form of the policies
+    (rosbag2 metadata version 8): Humble's reader reads only that one and later readers detect it; deadline,
+    lifespan and lease duration 0 s are "unspecified" (the RMW default), which is what the mirror offers."""
+    unset = "\n    sec: 0\n    nsec: 0"
+    return (f"- history: {int(qos.history)}\n  depth: {int(qos.depth)}\n  reliability: {int(qos.reliability)}\n"
+            f"  durability: {int(qos.durability)}\n  deadline:{unset}\n  lifespan:{unset}\n"
+            f"  liveliness: {LIVELINESS_AUTOMATIC}\n  liveliness_lease_duration:{unset}\n"
+            "  avoid_ros_namespace_conventions: false\n")
+
+
+class Recorder:
+    """Writes fleet samples to open MCAP writers: the ROS 2 channels to ``ros``, the raw ones to ``raw`` (either
+    None: not written); one thread only."""
+
+    def __init__(self, ros=None, raw=None) -> None:
+        self.ros, self.raw = ros, raw
         self.written: Counter[str] = Counter()
         self.rejected = 0
         self._schemas: dict[str, int] = {}
         self._channels: dict[str, int] = {}
-        self._sequence: Counter[int] = Counter()
+        self._raw_channels: dict[str, int] = {}
+        self._sequence: Counter[tuple[int, int]] = Counter()
 
-    def _channel(self, topic: str, encoding: str, msgtype: str | None) -> int:
-        channel = self._channels.get(topic)
+    def _ros_channel(self, out: RosMessage) -> int:
+        channel = self._channels.get(out.topic)
         if channel is None:
-            schema = 0
-            metadata = {}
-            if msgtype is not None:
-                schema = self._schemas.get(msgtype)
-                if schema is None:
-                    schema = self._schemas[msgtype] = self.writer.register_schema(
-                        name=msgtype, encoding="ros2msg", data=ros_msgs.msgdef(msgtype).encode())
-                metadata = {"topic_type_hash": ros_msgs.type_hash(msgtype)}
-            channel = self._channels[topic] = self.writer.register_channel(topic=topic, message_encoding=encoding,
-                                                                           schema_id=schema, metadata=metadata)
+            schema = self._schemas.get(out.msgtype)
+            if schema is None:
+                schema = self._schemas[out.msgtype] = self.ros.register_schema(
+                    name=out.msgtype, encoding="ros2msg", data=ros_msgs.msgdef(out.msgtype).encode())
+            metadata = {"offered_qos_profiles": offered_qos_profiles(out.qos),
+                        "topic_type_hash": ros_msgs.type_hash(out.msgtype)}
+            channel = self._channels[out.topic] = self.ros.register_channel(
+                topic=out.topic, message_encoding="cdr", schema_id=schema, metadata=metadata)
         return channel
 
-    def _add(self, channel: int, log_ns: int, data: bytes, publish_ns: int, topic: str) -> None:
-        self._sequence[channel] += 1
-        self.writer.add_message(channel_id=channel, log_time=log_ns, data=data, publish_time=publish_ns,
-                                sequence=self._sequence[channel])
+    def _raw_channel(self, key: str, encoding: str) -> int:
+        channel = self._raw_channels.get(key)
+        if channel is None:
+            channel = self._raw_channels[key] = self.raw.register_channel(topic=key, message_encoding=encoding,
+                                                                          schema_id=0)
+        return channel
+
+    def _add(self, writer, channel: int, log_ns: int, data: bytes, publish_ns: int, topic: str) -> None:
+        self._sequence[(id(writer), channel)] += 1
+        writer.add_message(channel_id=channel, log_time=log_ns, data=data, publish_time=publish_ns,
+                           sequence=self._sequence[(id(writer), channel)])
         self.written[topic] += 1
 
     def handle(self, raw: RawSample) -> None:
@@ -87,51 +119,82 @@ class Recorder:
         except ProtocolError:
             self.rejected += 1  # not a valid message: kept raw only if its key is a fleet key
             key, message = parse_key(raw.key), None
-        if self.raw:
+        if self.raw is not None:
             encoding = HINT_ENCODING if key.topic is Topic.HINT else RAW_ENCODING
             stamp = message.stamp_ns if isinstance(message, Message) else raw.received_ns
-            self._add(self._channel(raw.key, encoding, None), raw.received_ns, raw.payload, stamp, raw.key)
-        if self.ros and message is not None:
+            self._add(self.raw, self._raw_channel(raw.key, encoding), raw.received_ns, raw.payload, stamp, raw.key)
+        if self.ros is not None and message is not None:
             for out in translate(key, message, raw.received_ns):
-                self._add(self._channel(out.topic, "cdr", out.msgtype), raw.received_ns, out.cdr(), out.stamp_ns,
-                          out.topic)
+                self._add(self.ros, self._ros_channel(out), raw.received_ns, out.cdr(), out.stamp_ns, out.topic)
 
 
 def run_record(options: SessionOptions, stop: threading.Event, fleet: str, out: Path, *,
                duration: float | None = None, ros: bool = True, raw: bool = True,
                emit: Callable[[dict], None] | None = None) -> dict:
-    """Record ``fleet`` into the MCAP file ``out`` until ``stop`` (or ``duration`` s); emits ``ready`` once subscribed.
+    """Record ``fleet`` until ``stop`` (or ``duration`` s): the ROS 2 channels into the MCAP file ``out``, the raw
+    ones into :func:`raw_path` of it; emits ``ready`` once subscribed.
 
-    Returns the summary: messages written per channel, samples that did not decode, samples dropped (queue full).
+    Returns the summary: the files, messages written per channel, samples that did not decode, samples dropped
+    (queue full).
     """
     from mcap.writer import Writer
 
     check_name(fleet, "fleet")
+    if not (ros or raw):
+        raise RecordingError("--no-ros and --no-raw: nothing to record")
     emit = emit or (lambda record: None)
     out = Path(out)
+    paths = {"out": out if ros else None, "raw": raw_path(out) if raw else None}
+    if paths["out"] is not None and paths["out"] == paths["raw"]:
+        raise RecordingError(f"{out}: name the ROS 2 file, not the raw one (*.raw.mcap)")
     out.parent.mkdir(parents=True, exist_ok=True)
     started = time.monotonic()
-    with open(out, "wb") as stream, open_session(observer_options(options)) as session:
-        writer = Writer(stream)
-        writer.start(profile="ros2", library="evopose record")
-        writer.add_metadata(METADATA_NAME, {"fleet": fleet, "started_ns": str(time.time_ns())})
-        recorder = Recorder(writer, ros=ros, raw=raw)
-        try:
-            with FleetTap(session, fleet, recorder.handle) as tap:
-                emit({"event": "ready", "fleet": fleet, "out": str(out)})
-                while not stop.wait(0.1):
-                    if duration is not None and time.monotonic() - started >= duration:
-                        break
-        finally:
-            writer.finish()
-    return {"event": "stopped", "out": str(out), "written": dict(recorder.written), "rejected": recorder.rejected,
-            "dropped": tap.dropped, "seconds": time.monotonic() - started}
+    streams, writers = [], {}
+    try:
+        for name, path in paths.items():
+            if path is not None:
+                streams.append(open(path, "wb"))
+                writers[name] = Writer(streams[-1])
+                writers[name].start(profile="ros2" if name == "out" else "", library="evopose record")
+                writers[name].add_metadata(METADATA_NAME, {"fleet": fleet, "started_ns": str(time.time_ns())})
+        recorder = Recorder(writers.get("out"), writers.get("raw"))
+        with open_session(observer_options(options)) as session:
+            try:
+                with FleetTap(session, fleet, recorder.handle) as tap:
+                    emit({"event": "ready", "fleet": fleet, **{k: str(v) for k, v in paths.items() if v}})
+                    while not stop.wait(0.1):
+                        if duration is not None and time.monotonic() - started >= duration:
+                            break
+            finally:
+                for writer in writers.values():
+                    writer.finish()
+    finally:
+        for stream in streams:
+            stream.close()
+    return {"event": "stopped", **{k: str(v) for k, v in paths.items() if v}, "written": dict(recorder.written),
+            "rejected": recorder.rejected, "dropped": tap.dropped, "seconds": time.monotonic() - started}
 
 
 # -- replay ------------------------------------------------------------------------------------------
 
+def raw_recording(path: Path) -> Path:
+    """The file with the raw channels of the recording ``path``: ``path`` itself when it has them (a ``*.raw.mcap``
+    or a one-file recording of older versions), else its :func:`raw_path`."""
+    path = Path(path)
+    if not raw_path(path).exists():
+        return path
+    if path.exists():
+        messages = raw_messages(path)
+        try:
+            if next(messages, None) is not None:
+                return path
+        finally:
+            messages.close()
+    return raw_path(path)
+
+
 def raw_messages(path: Path) -> Iterator[tuple[str, int, bytes]]:
-    """``(fleet key, log time ns, payload)`` of every raw channel of the recording, in log-time order."""
+    """``(fleet key, log time ns, payload)`` of every raw channel of the MCAP file ``path``, in log-time order."""
     from mcap.exceptions import McapError
     from mcap.reader import make_reader
 
@@ -174,7 +237,8 @@ def _first_stamp(path: Path) -> tuple[int | None, set[tuple[str, str, str]]]:
 def run_replay(options: SessionOptions, stop: threading.Event, path: Path, *, rate: float = 1.0,
                fleet: str | None = None, keep_stamps: bool = False, presence: bool = True, wait_s: float = 3.0,
                emit: Callable[[dict], None] | None = None) -> dict:
-    """Publish the raw channels of ``path`` back on the fleet keys with their recorded spacing / ``rate``.
+    """Publish the raw channels of ``path`` (:func:`raw_recording`) back on the fleet keys with their recorded
+    spacing / ``rate``.
 
     ``fleet`` replays under another fleet name. ``wait_s``: first wait up to that long until every key has a
     subscriber (``ready`` says whether they all did). Returns the summary: messages sent per key.
@@ -182,9 +246,11 @@ def run_replay(options: SessionOptions, stop: threading.Event, path: Path, *, ra
     if rate <= 0:
         raise RecordingError(f"--rate must be positive, got {rate}")
     emit = emit or (lambda record: None)
-    first_stamp, keys = _first_stamp(Path(path))
+    path = raw_recording(Path(path))
+    first_stamp, keys = _first_stamp(path)
     if not keys:
-        raise RecordingError(f"{path}: no raw fleet channels to replay (recorded with --no-raw?)")
+        raise RecordingError(f"{path}: no raw fleet channels to replay, nor a {raw_path(path).name} beside "
+                             "it (recorded with --no-raw?)")
     fleet = check_name(fleet, "fleet") if fleet is not None else None
     sent: Counter[str] = Counter()
     with open_session(observer_options(options)) as session:
@@ -207,7 +273,7 @@ def run_replay(options: SessionOptions, stop: threading.Event, path: Path, *, ra
         emit({"event": "ready", "keys": len(publishers), "matched": matched, "shift_ns": shift, "rate": rate})
         first_log = None
         try:
-            for key, log_ns, payload in raw_messages(Path(path)):
+            for key, log_ns, payload in raw_messages(path):
                 first_log = log_ns if first_log is None else first_log
                 if stop.wait(max(0.0, start_wall + (log_ns - first_log) / 1e9 / rate - time.monotonic())):
                     break

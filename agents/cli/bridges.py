@@ -67,14 +67,16 @@ def register(app: typer.Typer) -> None:
 
     @app.command("record")
     def record_command(fleet: Fleet,
-                       out: Annotated[Path, typer.Option("--out", "-o", help="The MCAP file to write.")],
+                       out: Annotated[Path, typer.Option("--out", "-o", help="The ROS 2 MCAP file to write (the "
+                                                         "raw channels go beside it: X.mcap -> X.raw.mcap).")],
                        duration: Duration = None,
                        ros: Annotated[bool, typer.Option("--ros/--no-ros", help="The ROS 2 channels (CDR).")] = True,
                        raw: Annotated[bool, typer.Option("--raw/--no-raw", help="The raw fleet channels (msgpack): "
                                                          "what replay publishes.")] = True,
                        as_json: Json = False, connect: Connect = None, listen: Listen = None, mode: Mode = None,
                        config: ConfigFile = None, multicast: Multicast = False) -> None:
-        """Record every key of the fleet into one MCAP file: ROS 2 profile (CDR) plus the raw channels."""
+        """Record every key of the fleet: a ROS 2 profile MCAP file (CDR, what rosbag2 reads) and the raw channels
+        beside it (X.raw.mcap, what replay publishes)."""
         from agents.bridges.recording import run_record
 
         emit = _printer(as_json)
@@ -85,7 +87,8 @@ def register(app: typer.Typer) -> None:
 
     @app.command("replay")
     def replay_command(path: Annotated[Path, typer.Argument(metavar="RECORDING", help="An MCAP file of evopose "
-                                                                                      "record.")],
+                                                                                      "record (X.mcap or X.raw.mcap)."
+                                                                                      )],
                        rate: Annotated[float, typer.Option(min=0.01, max=100, help="Speed: 2 replays twice as fast.")]
                        = 1.0,
                        fleet: Annotated[str | None, typer.Option(help="Replay under this fleet name (default: the "

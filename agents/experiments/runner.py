@@ -181,8 +181,8 @@ def start_ros2_mirror(fleet: str, domain: int, endpoint: str, use_router: bool, 
 
 
 def start_recorder(fleet: str, out: Path, endpoint: str, use_router: bool, env: dict) -> subprocess.Popen:
-    """``evopose record`` of the fleet into ``out`` (MCAP: ROS 2 channels and the raw ones), once subscribed;
-    stopped (SIGTERM: the file is finished) with the agents."""
+    """``evopose record`` of the fleet into ``out`` (MCAP: the ROS 2 channels; the raw ones beside it), once
+    subscribed; stopped (SIGTERM: the file is finished) with the agents."""
     network = ["--mode", "client", "--connect", endpoint] if use_router else ["--connect", endpoint]
     out.parent.mkdir(parents=True, exist_ok=True)
     recorder = subprocess.Popen([sys.executable, "-m", "agents.cli", "record", "--fleet", fleet, "--out", str(out),
@@ -210,7 +210,8 @@ def run_variant(scenario: FleetScenario, variant: VariantSpec, run: int, *, fram
     ``secure``: TLS, mTLS and the router's ACL, with this run's credentials in ``credentials/<fleet>`` (kept)
     or in a temporary directory (removed). ``ros2_domain``: also run ``evopose ros2`` (docs/ros2.md) on the
     fleet, publishing its ROS 2 mirror in that domain. ``record_dir``: the run's traffic is recorded into
-    ``record_dir/<fleet>.mcap`` (``evopose record``: replayable, and readable by ROS 2 tools). ``dataset``: every
+    ``record_dir/<fleet>.mcap`` (``evopose record``: readable by ROS 2 tools; the raw channels, replayable, in
+    ``record_dir/<fleet>.raw.mcap``). ``dataset``: every
     camera vehicle plays that rendered dataset (``--source``; see :func:`dataset_scenario`).
     """
     fps = fps or scenario.fps
