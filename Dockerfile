@@ -25,6 +25,7 @@ COPY evopose ./evopose
 COPY protocol ./protocol
 COPY agents ./agents
 COPY scenarios ./scenarios
+COPY geometry ./geometry
 RUN pip install -c constraints.txt .
 
 # The agents read their world from scenarios/*.yaml relative to /app (the compose commands name it so).

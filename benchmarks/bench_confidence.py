@@ -63,8 +63,8 @@ def make(group: str, seed: int, index: int):
 def parameter_errors(sp, pose: np.ndarray) -> np.ndarray:
     """Estimate minus truth per parameter (6,), angles wrapped, against the symmetric truth and the Euler triple
     (``(r, p, y)`` and ``(r + pi, pi - p, y + pi)`` are one rotation) nearest the estimate."""
-    from evopose.pose import euler_from_rotation, rotation_from_euler
-    from evopose.uncertainty import pose_difference
+    from geometry import euler_from_rotation, rotation_from_euler
+    from geometry import pose_difference
 
     truth = sp.true_pose
     R_true = rotation_from_euler(truth[3:])

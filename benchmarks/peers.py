@@ -20,7 +20,7 @@ import numpy as np
 from evopose import PoseObjective
 from evopose.fitness import FitnessKind
 from evopose.init import initial_poses
-from evopose.pose import pose_from_matrix
+from geometry import pose_from_matrix
 
 from .problems import SyntheticProblem
 

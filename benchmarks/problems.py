@@ -19,7 +19,7 @@ import numpy as np
 
 from evopose import Bounds, Camera, Model, PoseProblem, View
 from evopose.fitness import project_into_view
-from evopose.pose import random_rotations, rotation_from_euler, euler_from_rotation
+from geometry import euler_from_rotation, random_rotations, rotation_angle, rotation_from_euler
 
 KINDS = ("box", "ellipsoid", "random", "grid")
 WIDTH, HEIGHT = 640, 480
@@ -229,8 +229,7 @@ def pose_errors(estimate: np.ndarray, truth: np.ndarray, symmetries: list[np.nda
     for S in symmetries:
         R_alt = R_true @ S
         t_alt = truth[:3] + R_true @ c - R_alt @ c
-        cos = (np.trace(R_est.T @ R_alt) - 1) / 2
-        rot = float(np.arccos(np.clip(cos, -1, 1)))
+        rot = float(rotation_angle(R_est, R_alt))
         pos = float(np.linalg.norm(estimate[:3] - t_alt))
         if rot < best[0]:
             best = (rot, pos)

@@ -1,11 +1,12 @@
 """EvoPose: correspondence-free 6-DOF pose estimation by evolutionary search (the paper's eq. 1-4)."""
 
+from geometry import PARAM_NAMES, matrix_from_pose, pose_from_matrix, quaternion_from_euler, rotation_from_euler
+
 from .camera import Camera
 from .fitness import Match, PoseObjective, step_weights
 from .local import LocalSearch, LocalState
 from .loop import Evaluator, evolve
 from .options import SearchOptions
-from .pose import PARAM_NAMES, matrix_from_pose, pose_from_matrix, quaternion_from_euler, rotation_from_euler
 from .problem import Bounds, Model, PoseProblem, View
 from .refine import refine
 from .search import Ask, EvoPose, EvoPoseState, Told

@@ -13,7 +13,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .pose import invert_transform, matrix_from_pose
+from geometry import invert_transform, matrix_from_pose
+
 from .projection import FAR_AWAY_PX, MIN_DEPTH, project_points, project_poses
 
 __all__ = ["Camera", "FAR_AWAY_PX", "MIN_DEPTH"]

@@ -27,6 +27,8 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from geometry import pose_difference, wrap_angle
+
 from .fitness import PoseObjective
 from .knowledge import Knowledge, constrained_bounds
 from .local import LocalSearch
@@ -36,7 +38,7 @@ from .problem import Bounds, Model, PoseProblem, View
 from .refine import TRACK_SCHEDULE
 from .search import EvoPose, Told
 from .solver import Solution, solution_of, track
-from .uncertainty import assess, mahalanobis, pose_difference
+from .uncertainty import assess, mahalanobis
 
 #: A confirming search's confident pose within this many sigmas (its covariance) of the tracked one confirms it.
 CONFIRM_SIGMAS = 4.0
@@ -401,7 +403,7 @@ class CooperativeEstimator:
             self._motion = None
             return
         delta = np.array(solution.pose) - previous[1]
-        delta[3:] = (delta[3:] + np.pi) % (2 * np.pi) - np.pi
+        delta[3:] = wrap_angle(delta[3:])
         self._motion = (frame, delta / (frame - previous[0]))
 
     def _mismatch(self, pose: np.ndarray) -> float:

@@ -19,7 +19,8 @@ import numpy as np
 
 from scipy.spatial import cKDTree
 
-from .pose import random_rotations, rotation_from_euler
+from geometry import random_rotations, rotation_from_euler
+
 from .problem import Bounds, PoseProblem, View
 
 #: Fraction of the guided starts that moment-match a local cluster of image points rather than all of them.

@@ -8,7 +8,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .pose import PARAM_NAMES
+from geometry import PARAM_NAMES
+
 from .problem import Bounds
 
 

@@ -6,8 +6,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from geometry import ANGLE_PARAMS, PARAM_NAMES
+
 from .camera import Camera
-from .pose import ANGLE_PARAMS, PARAM_NAMES, wrap_angle
 
 TWO_PI = 2 * np.pi
 
@@ -260,8 +261,3 @@ class PoseProblem:
 
     def with_hints(self, hints: np.ndarray) -> "PoseProblem":
         return PoseProblem(self.model, self.views, self.bounds, hints)
-
-
-def angle_difference(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Signed difference ``a - b`` of angles, wrapped to [-pi, pi)."""
-    return wrap_angle(np.asarray(a) - np.asarray(b))

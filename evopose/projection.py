@@ -1,6 +1,6 @@
 """The one projection of EvoPose, compiled: ``m_j(s)`` of eq. (1), model point ``j`` seen under pose ``s``.
 
-Pinhole with OpenCV ``plumb_bob`` distortion (DESIGN.md §2). Every projection in the package goes
+Pinhole with OpenCV ``plumb_bob`` distortion (docs/design.md §2). Every projection in the package goes
 through :func:`pinhole`: :class:`evopose.camera.Camera` (points, populations), the fitness
 (:func:`evopose.fitness.project_into_view`) and the local refinement (:mod:`evopose.refine_kernel`).
 
@@ -13,6 +13,8 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
+from geometry import rotation_entries
+
 #: Points closer than this to the camera plane (metres, along the optical axis) are not projected.
 MIN_DEPTH = 1e-3
 #: Image coordinate given to points that cannot be projected (behind the camera); far from any pixel.
@@ -21,21 +23,17 @@ FAR_AWAY_PX = 1e6
 FASTMATH = {"nsz", "arcp", "contract", "afn", "reassoc"}
 
 
+#: ``R = Rz(yaw) Ry(pitch) Rx(roll)`` as nine scalars: the one convention (:func:`geometry.rotation_entries`), compiled.
+_rotation_entries = nb.njit(cache=True, fastmath=FASTMATH, nogil=True)(rotation_entries)
+
+
 @nb.njit(cache=True, fastmath=FASTMATH, nogil=True)
 def rotation_into(roll, pitch, yaw, R):  # pragma: no cover - compiled
-    """``R = Rz(yaw) @ Ry(pitch) @ Rx(roll)`` into ``R`` (3, 3), as :func:`evopose.pose.rotation_from_euler`."""
-    cr, sr = np.cos(roll), np.sin(roll)
-    cp, sp = np.cos(pitch), np.sin(pitch)
-    cy, sy = np.cos(yaw), np.sin(yaw)
-    R[0, 0] = cy * cp
-    R[0, 1] = cy * sp * sr - sy * cr
-    R[0, 2] = cy * sp * cr + sy * sr
-    R[1, 0] = sy * cp
-    R[1, 1] = sy * sp * sr + cy * cr
-    R[1, 2] = sy * sp * cr - cy * sr
-    R[2, 0] = -sp
-    R[2, 1] = cp * sr
-    R[2, 2] = cp * cr
+    """``R = Rz(yaw) @ Ry(pitch) @ Rx(roll)`` into ``R`` (3, 3), as :func:`geometry.rotation_from_euler`."""
+    e = _rotation_entries(roll, pitch, yaw)
+    R[0, 0], R[0, 1], R[0, 2] = e[0], e[1], e[2]
+    R[1, 0], R[1, 1], R[1, 2] = e[3], e[4], e[5]
+    R[2, 0], R[2, 1], R[2, 2] = e[6], e[7], e[8]
 
 
 @nb.njit(cache=True, fastmath=FASTMATH, nogil=True)

@@ -29,10 +29,11 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from geometry import rotation_angle, rotation_from_euler, wrap_angle
+
 from .fitness import Match
 from .init import initial_poses
 from .options import SearchOptions
-from .pose import rotation_angle, rotation_from_euler, wrap_angle
 from .problem import PoseProblem
 
 #: Model x image point pairs at which ``min_starts`` starts suffice; fewer pairs need proportionally more.

@@ -14,11 +14,12 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from scipy.spatial import cKDTree
 
+from geometry import matrix_from_pose
+
 from .fitness import Match, PoseObjective
 from .local import LocalSearch
 from .loop import Evaluator, Run, evolve
 from .options import SearchOptions
-from .pose import matrix_from_pose
 from .problem import PoseProblem, View
 from .refine import TRACK_HARD_SCHEDULE, TRACK_SCHEDULE, annealing, refine
 from .search import EvoPose

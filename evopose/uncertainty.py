@@ -26,13 +26,14 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
+from geometry import pose_difference
+
 from .covariance import (CovarianceEstimate, Matches, covariance, in_box_second_moment, mutual_matches,
                          projection_jacobian, untruncated_variance)
 from .fitness import POINT_NOISE_PX, PoseObjective
-from .pose import wrap_angle
 
 __all__ = ["Confidence", "ConfidenceRules", "CovarianceEstimate", "Matches", "assess", "covariance",
-           "in_box_second_moment", "mahalanobis", "mutual_matches", "pose_difference", "projection_jacobian",
+           "in_box_second_moment", "mahalanobis", "mutual_matches", "projection_jacobian",
            "same_image", "shared_pairs", "sum_of_squares", "track_confidence", "untruncated_variance"]
 
 
@@ -99,13 +100,6 @@ def sum_of_squares(objective: PoseObjective, pose: np.ndarray, matches: Matches 
         unmatched = matches.n_image[k] + matches.n_visible[k] - 2 * pairs
         total += w * (float(np.sum(matches.residuals[mine] ** 2)) + 0.5 * objective.taus[k] ** 2 * unmatched)
     return total
-
-
-def pose_difference(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """``a - b`` with the angles wrapped to [-pi, pi); shapes (..., 6)."""
-    d = np.asarray(a, float) - np.asarray(b, float)
-    d[..., 3:] = wrap_angle(d[..., 3:])
-    return d
 
 
 def mahalanobis(delta: np.ndarray, cov: np.ndarray) -> np.ndarray:

@@ -15,7 +15,7 @@ import yaml
 
 from agents.problem.problem_file import problem_to_dict
 from benchmarks.problems import SyntheticProblem, make_problem
-from evopose.pose import PARAM_NAMES
+from geometry import PARAM_NAMES
 
 EXAMPLES_DIR = Path(__file__).resolve().parent
 #: Tolerance of the "IMU" roll/pitch constraint of the airship example (radians), and its error bound.

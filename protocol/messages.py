@@ -1,6 +1,6 @@
-"""The fleet's messages as pydantic models: one class per topic, a common header (DESIGN.md §4).
+"""The fleet's messages as pydantic models: one class per topic, a common header (docs/design.md §4).
 
-Units and frames follow DESIGN.md §2: metres, radians, seconds, pixels; a pose is six numbers
+Units and frames follow docs/design.md §2: metres, radians, seconds, pixels; a pose is six numbers
 ``(x, y, z, roll, pitch, yaw)`` with ``R = Rz(yaw) Ry(pitch) Rx(roll)``; cameras use the OpenCV
 optical frame. Models are built leniently from Python and validated strictly off the wire
 (:func:`protocol.codec.decode`); unknown fields are ignored so that fields can be added without
@@ -9,10 +9,10 @@ a version bump (docs/protocol.md, "Versioning").
 
 from __future__ import annotations
 
-import math
 from typing import Annotated, ClassVar, Literal
 
 import numpy as np
+import geometry
 from pydantic import BaseModel, ConfigDict, Field, computed_field, field_validator, model_validator
 
 from .keys import Topic, check_name
@@ -225,13 +225,8 @@ class Attitude(Message):
 
 
 def quaternion_from_euler(roll: float, pitch: float, yaw: float) -> tuple[float, float, float, float]:
-    """``(x, y, z, w)`` of ``R = Rz(yaw) Ry(pitch) Rx(roll)``, with ``w >= 0``."""
-    cr, sr = math.cos(roll / 2), math.sin(roll / 2)
-    cp, sp = math.cos(pitch / 2), math.sin(pitch / 2)
-    cy, sy = math.cos(yaw / 2), math.sin(yaw / 2)
-    q = (sr * cp * cy - cr * sp * sy, cr * sp * cy + sr * cp * sy, cr * cp * sy - sr * sp * cy,
-         cr * cp * cy + sr * sp * sy)
-    return tuple(-c for c in q) if q[3] < 0 else q  # type: ignore[return-value]
+    """``(x, y, z, w)`` of ``R = Rz(yaw) Ry(pitch) Rx(roll)``, with ``w >= 0`` (:func:`geometry.quaternion_from_euler`)."""
+    return tuple(float(c) for c in geometry.quaternion_from_euler((roll, pitch, yaw)))  # type: ignore[return-value]
 
 
 class PoseEstimate(Message):

@@ -29,7 +29,7 @@ import numpy as np
 from pydantic import BaseModel
 
 from evopose import Camera
-from evopose.pose import matrix_from_pose
+from geometry import matrix_from_pose
 
 from .camera_info_file import CameraInfoSpec, calibration_document
 from .dataset_files import (CAMERA_INFO, FORMAT, FRAME_DIGITS, IMAGE_SUFFIXES, MANIFEST, MAX_POSES_BYTES,

@@ -16,7 +16,7 @@ import yaml
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 from evopose import Camera
-from evopose.pose import PARAM_NAMES, pose_from_matrix
+from geometry import PARAM_NAMES, pose_from_matrix
 
 from .camera_info_file import CameraInfoSpec
 from .documents import (MAX_DEPTH, Strict, _json_depth_ok, _json_object, _no_constant, describe, one_line,

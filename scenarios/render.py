@@ -32,7 +32,7 @@ import cv2
 import numpy as np
 
 from evopose import Camera
-from evopose.pose import matrix_from_pose, pose_from_matrix
+from geometry import matrix_from_pose, pose_from_matrix
 
 from .camera_model import capture, linear_from_srgb, srgb_from_linear
 from .clutter import clutter_mesh

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from evopose.pose import wrap_angle
+from geometry import wrap_angle
 
 #: Salt of the generators of per-run constants (IMU bias) so they differ from per-frame streams.
 RUN_CONSTANT = 0x5EED

@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from evopose.pose import matrix_from_pose, wrap_angle
+from geometry import matrix_from_pose, wrap_angle
 
 
 @dataclass(frozen=True, eq=False)

@@ -39,7 +39,7 @@ import numpy as np
 from pydantic import Field, model_validator
 
 from evopose import Bounds, Camera
-from evopose.pose import PARAM_NAMES, matrix_from_pose
+from geometry import PARAM_NAMES, matrix_from_pose
 
 from .camera_model import CameraModelSpec
 from .clutter_spec import ClutterSpec

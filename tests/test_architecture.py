@@ -18,22 +18,24 @@ ROOT = Path(__file__).resolve().parents[1]
 
 #: room (a package or sub-package) -> project packages its modules may import at module level
 ALLOWED = {
-    "evopose": {"evopose"},
-    "protocol": {"protocol"},
-    "scenarios": {"scenarios", "evopose"},
-    "agents.transport": {"agents.transport", "agents.errors", "protocol"},
+    "geometry": {"geometry"},
+    "evopose": {"evopose", "geometry"},
+    "protocol": {"protocol", "geometry"},
+    "scenarios": {"scenarios", "evopose", "geometry"},
+    "agents.transport": {"agents.transport", "agents.errors", "protocol", "geometry"},
     "agents.vehicle": {"agents.vehicle", "agents.transport", "agents.problem", "agents.errors", "evopose", "protocol",
-                       "scenarios"},
+                       "scenarios", "geometry"},
     "agents.tools": {"agents.tools", "agents.transport", "agents.problem", "agents.errors", "evopose", "protocol",
-                     "scenarios"},
-    "agents.experiments": {"agents.experiments", "agents.errors", "scenarios"},
-    "agents.problem": {"agents.problem", "agents.errors", "evopose", "scenarios"},
-    "agents.bridges": {"agents.bridges", "agents.transport", "agents.errors", "protocol", "scenarios"},
+                     "scenarios", "geometry"},
+    "agents.experiments": {"agents.experiments", "agents.errors", "scenarios", "geometry"},
+    "agents.problem": {"agents.problem", "agents.errors", "evopose", "scenarios", "geometry"},
+    "agents.bridges": {"agents.bridges", "agents.transport", "agents.errors", "protocol", "scenarios", "geometry"},
     "agents.cli": {"agents.cli", "agents.errors", "agents.experiments", "agents.vehicle.config"},
 }
-PROJECT = ("evopose", "protocol", "scenarios", "agents")
+PROJECT = ("geometry", "evopose", "protocol", "scenarios", "agents")
 #: third-party libraries a room may import at module level (the rest of the project may import any)
 THIRD_PARTY = {
+    "geometry": {"numpy"},
     "evopose": {"numpy", "scipy", "numba", "cv2"},
     "protocol": {"numpy", "pydantic", "msgpack"},
     "agents.cli": {"typer", "rich"},
@@ -99,7 +101,7 @@ def _loaded_after(statement: str) -> set[str]:
 
 def test_the_cli_imports_nothing_heavy_to_print_help():
     loaded = _loaded_after("from agents.cli.main import app")
-    assert not loaded & {"numpy", "scipy", "numba", "cv2", "zenoh", "pydantic", "evopose", "scenarios"}
+    assert not loaded & {"numpy", "scipy", "numba", "cv2", "zenoh", "pydantic", "evopose", "scenarios", "geometry"}
 
 
 def test_the_problem_file_contract_does_not_pull_in_the_renderer():

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from evopose.camera import FAR_AWAY_PX, MIN_DEPTH, Camera
-from evopose.pose import euler_from_rotation, invert_transform, matrix_from_pose
+from geometry import euler_from_rotation, invert_transform, matrix_from_pose
 
 
 def random_distortion(rng: np.random.Generator) -> np.ndarray:

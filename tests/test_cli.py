@@ -14,8 +14,8 @@ import yaml
 
 from benchmarks.problems import is_success, pose_errors
 from examples.make_examples import EXAMPLES, EXAMPLES_DIR, IMU_TOLERANCE, generate, render
-from evopose.pose import PARAM_NAMES
-from evopose.problem import angle_difference
+from geometry import PARAM_NAMES
+from geometry import angle_difference
 
 ROOT = Path(__file__).resolve().parents[1]
 DESIGN_KEYS = {"pose", "fitness", "generations", "evaluations", "seconds", "converged"}

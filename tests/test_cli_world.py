@@ -14,7 +14,7 @@ import yaml
 
 from benchmarks.problems import is_success, pose_errors
 from evopose.features import match_to_truth
-from evopose.pose import PARAM_NAMES
+from geometry import PARAM_NAMES
 from scenarios.target import load_model
 
 ROOT = Path(__file__).resolve().parents[1]

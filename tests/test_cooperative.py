@@ -10,7 +10,7 @@ from agents.vehicle.frames import FrameClock, SimulatedCamera
 from agents.vehicle.team_views import MateView, TeamViews, build_views, camera_from_info, camera_info, own_view
 from evopose import PoseObjective, View
 from evopose.cooperative import CooperativeEstimator, Knowledge
-from evopose.pose import wrap_angle
+from geometry import wrap_angle
 from scenarios.world import load_scenario
 
 

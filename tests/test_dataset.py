@@ -14,7 +14,7 @@ import yaml
 
 from agents.problem.camera_info import read_camera_info
 from evopose import Camera
-from evopose.pose import pose_from_matrix
+from geometry import pose_from_matrix
 from scenarios.dataset import DatasetError, DatasetWriter, image_name, locate_dataset, open_dataset
 from scenarios.errors import WorldError
 from scenarios.render import render_frame

@@ -12,7 +12,7 @@ from benchmarks.problems import is_success, pose_errors
 from evopose import PoseProblem, View, solve
 from evopose.features import (any_hue_ranges, colour_ranges, detect_colour_marks, detect_corners,
                               hue_of, match_to_truth, named_hue_ranges)
-from evopose.problem import angle_difference
+from geometry import angle_difference
 from scenarios.render import render_frame
 from scenarios.world import load_scenario
 

@@ -17,7 +17,7 @@ from evopose.fitness import (
     step_weights,
 )
 from evopose.kernels import MUTUAL, NO_MATCH_D2, chamfer_matches, chamfer_sums, view_terms
-from evopose.pose import rotation_from_euler
+from geometry import rotation_from_euler
 from evopose.problem import Bounds, Model, PoseProblem, View
 
 BOUNDS = Bounds([-10, -10, 0.5, -np.pi, -np.pi, -np.pi], [10, 10, 50, np.pi, np.pi, np.pi])

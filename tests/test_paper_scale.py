@@ -17,6 +17,7 @@ from agents.vehicle.frames import SimulatedCamera
 from agents.vehicle.step import FrameInputs, share, step
 from agents.vehicle.team_views import build_views, mate_view, own_view
 from evopose.cooperative import CooperativeEstimator
+from geometry import angle_difference
 from protocol import FeatureSet, decode, encode
 from scenarios.errors import ScenarioError
 from scenarios.fleet import load_fleet_scenario
@@ -88,7 +89,7 @@ def test_a_team_mates_hint_pulls_a_vehicle_out_of_a_wrong_basin():
     first = estimator.estimate(views, frame=0, candidates=wrong[None], candidate_margin=0.0)
     hinted = estimator.estimate(views, frame=1, candidates=frame.truth[None], candidate_margin=0.1)
     assert first.good
-    yaw_error = abs((hinted.pose[5] - frame.truth[5] + np.pi) % (2 * np.pi) - np.pi)
+    yaw_error = abs(angle_difference(hinted.pose[5], frame.truth[5]))
     assert hinted.good and yaw_error < np.radians(2.0)
 
 

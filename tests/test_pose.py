@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from evopose.pose import (
+from geometry import (
     ANGLE_PARAMS,
     PARAM_NAMES,
     euler_from_rotation,

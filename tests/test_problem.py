@@ -6,8 +6,9 @@ import numpy as np
 import pytest
 
 from evopose.camera import Camera
-from evopose.pose import PARAM_NAMES
-from evopose.problem import Bounds, Model, PoseProblem, View, angle_difference
+from geometry import PARAM_NAMES
+from evopose.problem import Bounds, Model, PoseProblem, View
+from geometry import angle_difference
 
 PI = np.pi
 TWO_PI = 2 * np.pi

@@ -12,7 +12,7 @@ from scipy.spatial.transform import Rotation
 from benchmarks.problems import make_problem, pose_errors
 from evopose.camera import Camera
 from evopose.fitness import PoseObjective
-from evopose.pose import euler_from_rotation, rotation_from_euler
+from geometry import euler_from_rotation, rotation_from_euler
 from evopose.problem import Bounds, PoseProblem, View
 from evopose.refine import match_residuals, refine
 

@@ -36,7 +36,7 @@ from agents.vehicle.ros_camera import TopicReader, TopicValue
 from agents.vehicle.sources import FrameSkipped, SourceCamera, SourceError
 from agents.vehicle.team_views import MAX_DECODED_PIXELS
 from evopose import Camera
-from evopose.pose import matrix_from_pose, pose_from_matrix
+from geometry import matrix_from_pose, pose_from_matrix
 from scenarios.render import render_frame
 from scenarios.world import load_scenario
 from tests.fleet_procs import client_session, fleet_with_router, free_port

@@ -10,7 +10,7 @@ import pytest
 from benchmarks.problems import in_right_basin, is_success, make_paper_scale_problem, make_problem, pose_errors
 from evopose import Bounds, Evaluator, EvoPose, PoseObjective, PoseProblem, SearchOptions, View, refine, solve, track
 from evopose.fitness import TAU_MIN_PX
-from evopose.pose import PARAM_NAMES
+from geometry import PARAM_NAMES
 from evopose.solver import POLISH_SCHEDULE
 
 

@@ -12,7 +12,7 @@ from agents.problem.problem_file import solution_to_dict
 from benchmarks.problems import (absent_target, in_right_basin, make_paper_scale_problem, make_problem, observe,
                                  pose_errors)
 from evopose import PoseObjective, PoseProblem, SearchOptions, View, refine, solve, track
-from evopose.pose import euler_from_rotation, rotation_from_euler
+from geometry import euler_from_rotation, rotation_from_euler
 from evopose.solver import POLISH_SCHEDULE
 from evopose.uncertainty import (ConfidenceRules, assess, covariance, in_box_second_moment, mutual_matches,
                                  same_image, sum_of_squares, untruncated_variance)

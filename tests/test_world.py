@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import yaml
 
-from evopose.pose import rotation_from_euler
+from geometry import rotation_from_euler
 from scenarios.errors import FrameError, ModelFileError, ScenarioError, WorldError
 from scenarios.sensors import GpsModel, ImuModel
 from scenarios.target import MODELS_DIR, load_model

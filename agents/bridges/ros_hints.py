@@ -17,6 +17,8 @@ from collections import Counter
 
 import numpy as np
 
+from geometry import euler_from_quaternion
+
 from agents.bridges.listener import RosSample
 from agents.bridges.ros_msgs import POSE_STAMPED
 from agents.bridges.names import MAP_FRAME
@@ -37,11 +39,8 @@ class RefusedPose(ValueError):
 
 
 def rpy_from_quaternion(x: float, y: float, z: float, w: float) -> tuple[float, float, float]:
-    """``(roll, pitch, yaw)`` of a unit quaternion, ``R = Rz(yaw) Ry(pitch) Rx(roll)`` (DESIGN.md §2, REP-103)."""
-    roll = math.atan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y))
-    pitch = math.asin(max(-1.0, min(1.0, 2 * (w * y - z * x))))
-    yaw = math.atan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
-    return roll, pitch, yaw
+    """``(roll, pitch, yaw)`` of a unit quaternion, ``R = Rz(yaw) Ry(pitch) Rx(roll)`` (docs/design.md §2, REP-103)."""
+    return tuple(float(a) for a in euler_from_quaternion((x, y, z, w)))  # type: ignore[return-value]
 
 
 def pose_from_pose_stamped(message) -> np.ndarray:

@@ -13,6 +13,8 @@ from functools import cache
 
 import numpy as np
 
+from geometry import quaternion_from_euler, quaternion_from_rotation, rotation_from_euler
+
 POSE_WITH_COVARIANCE_STAMPED = "geometry_msgs/msg/PoseWithCovarianceStamped"
 POSE_STAMPED = "geometry_msgs/msg/PoseStamped"
 TF_MESSAGE = "tf2_msgs/msg/TFMessage"
@@ -57,39 +59,19 @@ def deserialize(data: bytes | memoryview, msgtype: str):
     return store().deserialize_cdr(bytes(data), msgtype)
 
 
-# -- geometry (DESIGN.md §2: R = Rz(yaw) Ry(pitch) Rx(roll)) -------------------------------------------
+# -- geometry (geometry, docs/design.md §2: R = Rz(yaw) Ry(pitch) Rx(roll)) -------------------------------------------
 
 def matrix_from_rpy(roll: float, pitch: float, yaw: float) -> np.ndarray:
-    cr, sr, cp, sp, cy, sy = (math.cos(roll), math.sin(roll), math.cos(pitch), math.sin(pitch), math.cos(yaw),
-                              math.sin(yaw))
-    return np.array([[cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
-                     [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
-                     [-sp, cp * sr, cp * cr]])
+    return rotation_from_euler((roll, pitch, yaw))
 
 
 def quaternion_from_matrix(r: np.ndarray) -> tuple[float, float, float, float]:
     """``(x, y, z, w)`` of a rotation matrix, ``w >= 0``."""
-    m = np.asarray(r, dtype=float)
-    trace = m[0, 0] + m[1, 1] + m[2, 2]
-    if trace > 0:
-        s = 2.0 * math.sqrt(1.0 + trace)
-        q = ((m[2, 1] - m[1, 2]) / s, (m[0, 2] - m[2, 0]) / s, (m[1, 0] - m[0, 1]) / s, 0.25 * s)
-    elif m[0, 0] > m[1, 1] and m[0, 0] > m[2, 2]:
-        s = 2.0 * math.sqrt(1.0 + m[0, 0] - m[1, 1] - m[2, 2])
-        q = (0.25 * s, (m[0, 1] + m[1, 0]) / s, (m[0, 2] + m[2, 0]) / s, (m[2, 1] - m[1, 2]) / s)
-    elif m[1, 1] > m[2, 2]:
-        s = 2.0 * math.sqrt(1.0 + m[1, 1] - m[0, 0] - m[2, 2])
-        q = ((m[0, 1] + m[1, 0]) / s, 0.25 * s, (m[1, 2] + m[2, 1]) / s, (m[0, 2] - m[2, 0]) / s)
-    else:
-        s = 2.0 * math.sqrt(1.0 + m[2, 2] - m[0, 0] - m[1, 1])
-        q = ((m[0, 2] + m[2, 0]) / s, (m[1, 2] + m[2, 1]) / s, 0.25 * s, (m[1, 0] - m[0, 1]) / s)
-    norm = math.sqrt(sum(c * c for c in q))
-    q = tuple(c / norm for c in q)
-    return tuple(-c for c in q) if q[3] < 0 else q  # type: ignore[return-value]
+    return tuple(float(c) for c in quaternion_from_rotation(r))  # type: ignore[return-value]
 
 
 def quaternion_from_rpy(roll: float, pitch: float, yaw: float) -> tuple[float, float, float, float]:
-    return quaternion_from_matrix(matrix_from_rpy(roll, pitch, yaw))
+    return tuple(float(c) for c in quaternion_from_euler((roll, pitch, yaw)))  # type: ignore[return-value]
 
 
 def camera_rig(world_from_camera: tuple[float, ...]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

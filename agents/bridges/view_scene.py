@@ -1,7 +1,7 @@
 """What the live view draws, as pure functions: frustum lines, the target model as triangles and spheres, model
 points projected into a camera, pose errors, a blank PNG canvas (foxglove message objects are built in ``view``).
 
-Frames and poses follow DESIGN.md §2 (``world_from_target``, ``R = Rz Ry Rx``, the OpenCV optical frame).
+Frames and poses follow docs/design.md §2 (``world_from_target``, ``R = Rz Ry Rx``, the OpenCV optical frame).
 """
 
 from __future__ import annotations
@@ -14,6 +14,7 @@ from functools import cache
 import numpy as np
 
 from agents.bridges.ros_msgs import matrix_from_rpy
+from geometry import rotation_error
 
 
 def frustum_lines(camera, depth: float) -> np.ndarray:
@@ -57,9 +58,7 @@ def project(points_target: np.ndarray, world_from_target, camera) -> np.ndarray:
 def pose_errors(estimate, truth) -> tuple[float, float]:
     """``(position error m, rotation error deg)`` between two ``world_from_target`` poses (no model symmetry)."""
     position = float(np.linalg.norm(np.subtract(estimate[:3], truth[:3])))
-    relative = matrix_from_rpy(*estimate[3:6]).T @ matrix_from_rpy(*truth[3:6])
-    angle = math.acos(max(-1.0, min(1.0, (np.trace(relative) - 1) / 2)))
-    return position, math.degrees(angle)
+    return position, math.degrees(float(rotation_error(estimate, truth)))
 
 
 def _chunk(kind: bytes, data: bytes) -> bytes:

@@ -12,6 +12,8 @@ from pathlib import Path
 
 import numpy as np
 
+from geometry import angle_difference
+
 from scenarios.world import load_scenario
 
 #: Line style of each share mode.
@@ -38,7 +40,7 @@ def error_series(summary: dict, world: str) -> tuple[np.ndarray, np.ndarray, np.
     frames = poses[:, 0].astype(int)
     truth = np.array([scenario.target_pose(int(n) % scenario.frames) for n in frames])
     position = np.linalg.norm(poses[:, 1:4] - truth[:, :3], axis=1)
-    yaw = np.degrees(np.abs((poses[:, 6] - truth[:, 5] + np.pi) % (2 * np.pi) - np.pi))
+    yaw = np.degrees(np.abs(angle_difference(poses[:, 6], truth[:, 5])))
     return frames - frames[0], position, yaw, poses[:, 7] > 0
 
 

@@ -11,6 +11,8 @@ import statistics
 
 import numpy as np
 
+from geometry import angle_difference, pose_difference
+
 PARAMS = ("roll", "pitch", "yaw", "x", "y", "z")
 
 
@@ -103,8 +105,8 @@ def frame_agreement(records: list[dict], a: str, b: str) -> dict:
                 continue
             frames += 1
             both_good += bool(p[7] and q[7])
-            d = np.array(p[1:7], float) - np.array(q[1:7], float)
-            d[3:] = np.degrees((d[3:] + np.pi) % (2 * np.pi) - np.pi)
+            d = pose_difference(np.array(p[1:7], float), np.array(q[1:7], float))
+            d[3:] = np.degrees(d[3:])
             agreed += bool(np.linalg.norm(d[:3]) <= AGREE_POSITION_M and np.all(np.abs(d[3:]) <= AGREE_ANGLE_DEG))
     return {"frames": frames, "agreed": agreed, "both_good": both_good,
             "fraction": agreed / frames if frames else float("nan")}
@@ -119,7 +121,7 @@ def agreement(records: list[dict], a: str, b: str) -> dict:
             continue
         pa, pb = np.array(sa["last_pose"]), np.array(sb["last_pose"])
         position.append(float(np.linalg.norm(pa[:3] - pb[:3])))
-        d = (pa[3:] - pb[3:] + np.pi) % (2 * np.pi) - np.pi
+        d = angle_difference(pa[3:], pb[3:])
         angle.append(float(np.degrees(np.max(np.abs(d)))))
     return {"runs": len(position), "position_mean": _mean_sd(position)[0],
             "position_max": max(position, default=float("nan")), "angle_max": max(angle, default=float("nan"))}

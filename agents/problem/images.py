@@ -14,7 +14,7 @@ import numpy as np
 
 from evopose import Bounds, Camera, Model
 from evopose.features import MarkDetections, detect_colour_marks
-from evopose.pose import matrix_from_pose
+from geometry import matrix_from_pose
 from scenarios.errors import ImageError, WorldError
 from scenarios.target import TargetModel
 

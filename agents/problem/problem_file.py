@@ -19,7 +19,7 @@ from pydantic import (AfterValidator, BeforeValidator, Field, ValidationError,
                       ValidationInfo, create_model, field_validator, model_validator)
 
 from evopose import Bounds, Camera, Model, PoseProblem, SearchOptions, Solution, View
-from evopose.pose import PARAM_NAMES, pose_from_matrix, quaternion_from_euler
+from geometry import PARAM_NAMES, pose_from_matrix, quaternion_from_euler
 
 from scenarios.errors import WorldError
 from scenarios.target import TargetModel, load_model, resolve_model_path

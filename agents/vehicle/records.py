@@ -8,18 +8,7 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
-from evopose.pose import PARAM_NAMES, matrix_from_pose, pose_from_matrix, wrap_angle
-
-
-def pose_error(estimate: np.ndarray, truth: np.ndarray) -> dict:
-    """Absolute errors: x, y, z in metres and roll, pitch, yaw in degrees; ``position`` the distance."""
-    # the same rotation has two roll-pitch-yaw triples: compare the canonical ones (pitch within +-90 deg)
-    estimate, truth = (pose_from_matrix(matrix_from_pose(np.asarray(p, float))) for p in (estimate, truth))
-    d = estimate - truth
-    d[3:] = np.degrees(wrap_angle(d[3:]))
-    out = {n: float(abs(v)) for n, v in zip(PARAM_NAMES, d)}
-    out["position"] = float(np.linalg.norm(d[:3]))
-    return out
+from geometry import PARAM_NAMES
 
 
 def pose_dict(pose: np.ndarray) -> dict:

@@ -29,7 +29,7 @@ from collections.abc import Callable
 import numpy as np
 
 from evopose import Camera
-from evopose.pose import matrix_from_pose
+from geometry import matrix_from_pose
 from scenarios.world import Scenario
 
 from agents.problem.camera_info import camera_from_camera_info_message

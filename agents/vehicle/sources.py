@@ -43,7 +43,7 @@ import cv2
 import numpy as np
 
 from evopose import Camera
-from evopose.pose import matrix_from_pose
+from geometry import matrix_from_pose
 from scenarios.errors import WorldError
 from scenarios.world import Scenario
 

@@ -15,10 +15,11 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from evopose.cooperative import CooperativeEstimator, Estimate, Knowledge
-from evopose.pose import matrix_from_pose, pose_from_matrix
+from geometry import matrix_from_pose, pose_from_matrix
 
 from agents.vehicle.frames import Frame
-from agents.vehicle.records import pose_dict, pose_error
+from agents.vehicle.records import pose_dict
+from geometry import pose_error
 from agents.vehicle.team_views import MateView, build_views, encode_image
 
 

@@ -13,7 +13,8 @@ from protocol import Attitude, PoseEstimate, Topic
 from agents.transport.bus import Received
 from agents.vehicle.config import TARGET_IMU_STREAM
 from agents.vehicle.frames import NS
-from agents.vehicle.records import pose_dict, pose_error
+from agents.vehicle.records import pose_dict
+from geometry import pose_error
 from agents.vehicle.roles import Vehicle
 
 

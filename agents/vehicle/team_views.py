@@ -19,7 +19,7 @@ import numpy as np
 
 from evopose import Camera, View
 from evopose.cooperative import Knowledge
-from evopose.pose import matrix_from_pose, pose_from_matrix
+from geometry import matrix_from_pose, pose_from_matrix
 from protocol import Attitude, CameraInfo, FeatureSet, ImageFrame
 
 #: Frames kept per team-mate while waiting to pair them with the own frame.

@@ -22,7 +22,7 @@ import numpy as np
 
 from agents.problem.camera_info import read_camera_info
 from agents.problem.solve import solve_image
-from evopose.pose import PARAM_NAMES, pose_from_matrix, rotation_from_euler
+from geometry import PARAM_NAMES, pose_from_matrix, rotation_angle, rotation_from_euler
 
 from examples.chessboard.calibrate import HERE, PATTERN, SQUARE, board_points, ordered_corners, photos
 
@@ -52,7 +52,7 @@ def oracle_pose(image: np.ndarray) -> np.ndarray | None:
 def differences(estimate: np.ndarray, oracle: np.ndarray) -> tuple[float, float]:
     """Rotation difference (deg, modulo the half turn) and distance between the board centres (mm)."""
     R_est, R_ref = rotation_from_euler(estimate[3:]), rotation_from_euler(oracle[3:])
-    angles = [np.arccos(np.clip((np.trace(R_est.T @ R_ref @ S) - 1) / 2, -1, 1)) for S in (np.eye(3), HALF_TURN)]
+    angles = [rotation_angle(R_est, R_ref @ S) for S in (np.eye(3), HALF_TURN)]
     return float(np.degrees(min(angles))), float(np.linalg.norm(estimate[:3] - oracle[:3]) * 1000)
 
 

@@ -1,0 +1,151 @@
+"""The fleet on rendered datasets (docs/datasets.md): good frames, errors against the truth, confident-and-wrong.
+
+Run from the repository root on dataset directories (``evopose render WORLD --out DIR``; the photoreal sweep of
+``benchmarks.photoreal_worlds`` renders 18 plus two without the target into ``datasets/photoreal``)::
+
+    .venv/bin/python -m benchmarks.bench_photoreal_fleet datasets/photoreal/* [--features marks contrast]
+
+Every dataset runs Experiment 2's scenarios ``exp2-solo`` (each helicopter alone) and ``exp2a-features`` (feature
+sets shared, eq. 4) as real agent processes over Zenoh, every camera vehicle playing its camera's folder
+(``evopose scenario run NAME --dataset DIR --features KIND``). Each published pose is compared with the dataset's
+truth at its frame. Per helicopter: the share of frames it marked good; the frames before the first good one (a
+sequence's first frame is searched from scratch in the camera's time slices, so it is rarely confirmed at once);
+the median and largest position error over the good frames; and the **confident-and-wrong** frames, good but more
+than 0.5 m or 5 deg off (the issue's bar: none). On a dataset without the target every good frame is a false
+positive. Writes ``benchmarks/results/photoreal_fleet.md``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import sys
+import threading
+from pathlib import Path
+
+import numpy as np
+
+from agents.experiments.results import frame_agreement
+from agents.experiments.runner import dataset_scenario, run_scenario
+from geometry import pose_error
+from scenarios.dataset import open_dataset
+
+from .bench_fleet import free_endpoint
+from .report import provenance
+
+RESULTS = Path(__file__).resolve().parent / "results" / "photoreal_fleet.md"
+SCENARIOS = ("exp2-solo", "exp2a-features")
+#: A good frame further off than this is confident and wrong (issue 18's bar).
+WRONG_M, WRONG_DEG = 0.5, 5.0
+
+
+def frame_rows(dataset: Path, scenario: str, features: str) -> list[dict]:
+    """One row per helicopter of ``scenario`` run once on ``dataset`` with the ``features`` front-end."""
+    data = open_dataset(dataset)
+    fleet, frames = dataset_scenario(scenario, dataset)
+    records = run_scenario(fleet.with_features(features), frames=frames, seed=0, endpoint=free_endpoint(),
+                           stop=threading.Event(), keep_going=True, dataset=dataset)
+    rows = []
+    for record in records:
+        agreement = frame_agreement([record], "H1", "H2") if scenario == "exp2a-features" else None
+        for vehicle in data.cameras:
+            summary = record["agents"].get(vehicle)
+            row = {"dataset": dataset.name, "scale": _scale(dataset.name), "lighting": _lighting(dataset.name),
+                   "visible": data.manifest.target_visible, "scenario": scenario, "features": features,
+                   "vehicle": vehicle, "error": record.get("error")}
+            if summary is None:
+                rows.append({**row, "error": row["error"] or "no summary"})
+                continue
+            good_errors, wrong, first_good = [], 0, None
+            for published in summary["poses"]:
+                frame, pose, good = int(published[0]), np.array(published[1:7], float), bool(published[7])
+                if not good:
+                    continue
+                first_good = frame if first_good is None else first_good
+                if not data.manifest.target_visible:
+                    wrong += 1
+                    continue
+                err = pose_error(pose, data.truth(frame).target_pose)
+                good_errors.append(err["position"])
+                wrong += err["position"] > WRONG_M or max(err["roll"], err["pitch"], err["yaw"]) > WRONG_DEG
+            rows.append({**row, "frames": summary["frames"], "good": summary["good"],
+                         "first_good": first_good, "median_m": statistics.median(good_errors) if good_errors
+                         else None, "max_m": max(good_errors) if good_errors else None, "wrong": wrong,
+                         "agreed": None if agreement is None else (agreement["agreed"], agreement["frames"])})
+    return rows
+
+
+def _scale(name: str) -> str:
+    return "telephoto" if "telephoto" in name else "paper"
+
+
+def _lighting(name: str) -> str:
+    return next((light for light in ("high", "low", "overcast") if name.endswith(light)), "absent" if
+                "absent" in name else "")
+
+
+def _cm(value: float | None) -> str:
+    return "-" if value is None else f"{value * 100:.1f}"
+
+
+def markdown(rows: list[dict], command: str) -> str:
+    lines = ["# The fleet on rendered datasets", "", provenance(command), "",
+             "Per helicopter and run: good frames of all, frames before the first good one, median and largest "
+             "position error over the good frames, confident-and-wrong frames (good, > 0.5 m or > 5 deg off; on a "
+             "dataset without the target every good frame), and for shared feature sets the frames on which both "
+             "published the same pose (benchmarks/bench_photoreal_fleet.py says how).", "",
+             "## Summary", "", "| scale | front-end | scenario | helicopter-runs | good frames | median error cm "
+             "| confident and wrong |", "|---|---|---|---|---|---|---|"]
+    groups: dict[tuple, list[dict]] = {}
+    for r in rows:
+        key = (r["scale"] if r["visible"] else f"{r['scale']}, target absent", r["features"], r["scenario"])
+        groups.setdefault(key, []).append(r)
+    for (scale, features, scenario), members in sorted(groups.items()):
+        done = [r for r in members if not r["error"]]
+        frames, good = sum(r["frames"] for r in done), sum(r["good"] for r in done)
+        medians = [r["median_m"] for r in done if r["median_m"] is not None]
+        lines.append(f"| {scale} | {features} | {scenario} | {len(done)} of {len(members)} | {good}/{frames} "
+                     f"({good / max(frames, 1):.0%}) | {_cm(statistics.median(medians) if medians else None)} "
+                     f"| {sum(r['wrong'] for r in done)} |")
+    lines += ["", "## Every run", "", "| dataset | front-end | scenario | vehicle | good | first good frame "
+              "| median cm | max cm | confident and wrong | same pose |", "|---|---|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        if r["error"]:
+            lines.append(f"| {r['dataset']} | {r['features']} | {r['scenario']} | {r['vehicle']} | failed: "
+                         f"{r['error']} | | | | | |")
+            continue
+        agreed = "" if r["agreed"] is None else f"{r['agreed'][0]}/{r['agreed'][1]}"
+        lines.append(f"| {r['dataset']} | {r['features']} | {r['scenario']} | {r['vehicle']} | {r['good']}/"
+                     f"{r['frames']} | {'-' if r['first_good'] is None else r['first_good']} | {_cm(r['median_m'])} "
+                     f"| {_cm(r['max_m'])} | {r['wrong']} | {agreed} |")
+    return "\n".join(lines) + "\n"
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("datasets", nargs="+", type=Path)
+    parser.add_argument("--features", nargs="+", default=["marks", "contrast"], choices=["marks", "contrast"])
+    parser.add_argument("--scenario", nargs="+", default=list(SCENARIOS), choices=list(SCENARIOS))
+    parser.add_argument("--out", type=Path, default=RESULTS)
+    args = parser.parse_args(argv)
+    rows = []
+    for dataset in args.datasets:
+        for features in args.features:
+            for scenario in args.scenario:
+                found = frame_rows(dataset, scenario, features)
+                rows += found
+                for r in found:
+                    print(f"{dataset.name} {features} {scenario} {r['vehicle']}: "
+                          + (f"failed {r['error']}" if r["error"] else
+                             f"good {r['good']}/{r['frames']} median {_cm(r['median_m'])} cm wrong {r['wrong']}"),
+                          file=sys.stderr, flush=True)
+    command = ".venv/bin/python -m benchmarks.bench_photoreal_fleet " + " ".join(sys.argv[1:] if argv is None
+                                                                                  else argv)
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    args.out.write_text(markdown(rows, command))
+    print(args.out)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
