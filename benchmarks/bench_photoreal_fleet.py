@@ -57,8 +57,10 @@ def frame_rows(dataset: Path, scenario: str, features: str) -> list[dict]:
                 rows.append({**row, "error": row["error"] or "no summary"})
                 continue
             good_errors, wrong, first_good = [], 0, None
-            for published in summary["poses"]:
-                frame, pose, good = int(published[0]), np.array(published[1:7], float), bool(published[7])
+            # a source plays its frames in order, one per frame processed (a late one is skipped, not consumed):
+            # the i-th published pose is the dataset's frame i
+            for frame, published in enumerate(sorted(summary["poses"], key=lambda p: p[0])):
+                pose, good = np.array(published[1:7], float), bool(published[7])
                 if not good:
                     continue
                 first_good = frame if first_good is None else first_good
@@ -89,7 +91,7 @@ def _cm(value: float | None) -> str:
 
 
 def markdown(rows: list[dict], command: str) -> str:
-    lines = ["# The fleet on rendered datasets", "", provenance(command), "",
+    lines = ["# The fleet on rendered datasets", "", f"Produced by `{command}`; {provenance()}.", "",
              "Per helicopter and run: good frames of all, frames before the first good one, median and largest "
              "position error over the good frames, confident-and-wrong frames (good, > 0.5 m or > 5 deg off; on a "
              "dataset without the target every good frame), and for shared feature sets the frames on which both "

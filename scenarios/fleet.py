@@ -18,13 +18,14 @@ one or more *variants*, each a team of agents started together as separate proce
 
 Agent fields: ``vehicle``; ``role`` (default: the world's); ``share`` (none, raw, features, hint);
 ``imu`` (a ground station holds the attitude within the airship's IMU reading, eq. 3; default true);
-``hint_rate`` (Hz); ``image_encoding`` (raw, jpeg, png). Unknown keys are errors naming the field.
+``hint_rate`` (Hz); ``image_encoding`` (raw, jpeg, png); ``features``, the camera vehicle's feature front-end
+(marks, contrast, corners; default: the agent's, ``marks``). Unknown keys are errors naming the field.
 """
 
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated, Literal
+from typing import Annotated, Literal, get_args
 
 from pydantic import Field, model_validator
 
@@ -36,6 +37,9 @@ from .world import SCENARIOS_DIR, Scenario, load_scenario
 FLEET_DIR = SCENARIOS_DIR / "fleet"
 
 Share = Literal["none", "raw", "features", "hint"]
+#: The feature front-ends of ``evopose agent --features`` (agents.problem.extract.FEATURE_KINDS).
+Features = Literal["marks", "contrast", "corners"]
+FEATURE_KINDS: tuple[str, ...] = get_args(Features)
 Name = Annotated[str, Field(pattern=r"^[A-Za-z0-9_][A-Za-z0-9_.\-]{0,63}$")]
 
 
@@ -46,6 +50,7 @@ class AgentSpec(Strict):
     imu: bool = True
     hint_rate: Annotated[float, Field(gt=0, le=10_000)] = 200.0
     image_encoding: Literal["raw", "jpeg", "png"] = "raw"
+    features: Features | None = None
 
     def cli_args(self) -> list[str]:
         """The ``evopose agent`` options of this agent (without fleet, network and run settings)."""
@@ -58,6 +63,8 @@ class AgentSpec(Strict):
             args += ["--hint-rate", f"{self.hint_rate:g}"]
         if self.share == "raw" and self.image_encoding != "raw":
             args += ["--image-encoding", self.image_encoding]
+        if self.features is not None:
+            args += ["--features", self.features]
         return args
 
 
@@ -109,6 +116,17 @@ class FleetScenario:
     @property
     def fps(self) -> float:
         return self.spec.fps or self.world.spec.fps
+
+    def with_features(self, kind: str) -> "FleetScenario":
+        """The same scenario with every camera vehicle's feature front-end set to ``kind`` (``scenario run
+        --features``): for example the contrast front-end on a camera's or a photoreal dataset's images."""
+        document = self.spec.model_dump()
+        for variant in document["variants"]:
+            for agent in variant["agents"]:
+                if agent["vehicle"] != self.world.spec.target.name:
+                    agent["features"] = kind
+        spec = validate(FleetScenarioSpec, document, f"--features {kind}", ScenarioError)
+        return FleetScenario(spec, self.world, self.path, self.world_path)
 
     def variant(self, name: str) -> VariantSpec:
         for v in self.spec.variants:

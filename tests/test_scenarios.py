@@ -168,7 +168,7 @@ def test_scenario_list_and_show(capsys):
     assert main(["scenario", "show", "exp2b-hints", "--json"]) == 0
     shown = json.loads(capsys.readouterr().out)
     assert shown["variants"][0]["agents"][0] == {"vehicle": "H1", "role": None, "share": "hint", "imu": True,
-                                                  "hint_rate": 200.0, "image_encoding": "raw"}
+                                                  "hint_rate": 200.0, "image_encoding": "raw", "features": None}
 
 
 def test_a_crashed_agent_ends_the_run_with_one_line_and_stops_the_others():
@@ -188,3 +188,15 @@ def test_a_crashed_agent_ends_the_run_with_one_line_and_stops_the_others():
     assert code == 2 and err.startswith("error: run 0 of exp2a-features/H1+H2: H2 exited -9"), err
     assert err.count("\n") == 1
     assert running_with(endpoint) == []
+
+
+def test_features_override_sets_every_camera_vehicles_front_end_and_a_bad_kind_is_one_line(capsys):
+    scenario = load_fleet_scenario("exp2a-features").with_features("contrast")
+    args = {a.vehicle: a.cli_args() for a in scenario.spec.variants[0].agents}
+    assert args["H1"][-2:] == ["--features", "contrast"] and args["H2"][-2:] == ["--features", "contrast"]
+    assert "--features" not in args["pioneer"]  # the target has no camera
+    with pytest.raises(ScenarioError, match="features"):
+        load_fleet_scenario("exp2a-features").with_features("hues")
+    assert main(["scenario", "run", "exp2a-features", "--features", "hues"]) == 2
+    err = capsys.readouterr().err
+    assert "--features" in err and "marks, contrast, corners" in err and err.count("\n") == 1

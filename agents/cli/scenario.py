@@ -115,6 +115,10 @@ def run_command(
         "--dataset", metavar="DIR", help="Run on a rendered dataset (docs/datasets.md): each camera vehicle plays "
                                          "its camera's folder (evopose agent --source DIR), on the dataset's world "
                                          "and frames.")] = None,
+    features: Annotated[str | None, typer.Option(
+        "--features", metavar="KIND", help="Every camera vehicle's feature front-end: marks (preset hue bands), "
+                                           "contrast (camera images: docs/datasets.md) or corners (default: the "
+                                           "scenario's).")] = None,
 ) -> None:
     """Start every agent of the scenario as its own process, run, stop them all, print the results."""
     if credentials is not None and not secure:
@@ -142,6 +146,13 @@ def run_command(
         if frames is not None and frames > dataset_frames:
             raise typer.BadParameter(f"the dataset has {dataset_frames} frames, not {frames}", param_hint="--frames")
         frames = frames or dataset_frames
+    if features is not None:
+        from scenarios.fleet import FEATURE_KINDS
+
+        if features not in FEATURE_KINDS:
+            raise typer.BadParameter(f"must be one of {', '.join(FEATURE_KINDS)}, got {features!r}",
+                                     param_hint="--features")
+        scenario = scenario.with_features(features)
     console = Console(stderr=True)
     with stop_on_signals() as stop:
         if as_json:
