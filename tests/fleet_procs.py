@@ -15,6 +15,8 @@ import time
 from collections.abc import Iterator
 from pathlib import Path
 
+from agents.runs import pose_rows
+
 ROOT = Path(__file__).resolve().parents[1]
 
 
@@ -155,10 +157,10 @@ def peer_session(endpoint: str):
 
 
 def good_from_first(summary: dict) -> tuple[int, bool]:
-    """From an agent's summary (its last published poses, ``[frame, x, y, z, roll, pitch, yaw, good]``): how many
+    """From an agent's summary (its last published poses, :class:`agents.runs.PoseRow`): how many
     frames came before the first good one, and whether every frame after it was good (a pose once confident is
     not lost: the real-time search may take a few frames, then the vehicle holds the target)."""
-    flags = [bool(p[7]) for p in summary["poses"]]
+    flags = [row.good for row in pose_rows(summary)]
     if True not in flags:
         return len(flags), False
     first = flags.index(True)

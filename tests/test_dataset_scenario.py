@@ -14,6 +14,7 @@ import pytest
 import yaml
 
 from agents.cli.main import main
+from agents.runs import pose_rows
 from tests.fleet_procs import ROOT, free_port
 from tests.test_dataset import write_dataset
 
@@ -51,8 +52,8 @@ def test_a_fleet_scenario_runs_on_a_dataset(datasets):
     rows = {r["vehicle"]: r for r in result["rows"]}
     assert set(rows) == {"H1", "H2"} and all(math.isfinite(r["x"]) and r["good_fraction"] > 0 for r in rows.values())
     # features: both search both images, so both publish the same pose on the frames they pair
-    h1 = {p[0]: p[1:7] for p in run["agents"]["H1"]["poses"]}
-    h2 = {p[0]: p[1:7] for p in run["agents"]["H2"]["poses"]}
+    h1 = {row.frame: row.pose for row in pose_rows(run["agents"]["H1"])}
+    h2 = {row.frame: row.pose for row in pose_rows(run["agents"]["H2"])}
     assert sum(h1[k] == h2[k] for k in h1.keys() & h2.keys()) >= FRAMES // 2
 
 

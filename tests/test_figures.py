@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from agents.experiments import figures
+from agents.runs import PoseRow
 from scenarios.world import load_scenario
 
 WORLD = "exp2-paper-scale-driving"
@@ -20,7 +21,7 @@ def published(frames: range, offset=(0.0, 0.0, 0.0), yaw_offset: float = 0.0, go
         truth = scenario.target_pose(n % scenario.frames).copy()
         truth[:3] += offset
         truth[5] += yaw_offset
-        rows.append([n, *truth, good])
+        rows.append(PoseRow(n, tuple(truth), good).to_json())
     return rows
 
 

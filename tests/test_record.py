@@ -32,6 +32,7 @@ from agents.bridges.recording import (Recorder, RecordingError, offered_qos_prof
                                       raw_recording, restamp, run_record)
 from agents.bridges.rmw_zenoh import DEFAULT_QOS, SENSOR_QOS, TF_QOS
 from agents.bridges.tap import RawSample
+from agents.runs import pose_rows
 from agents.tools.runners import PublishSpec, sample_message
 from agents.transport.session import SessionOptions
 from protocol.codec import decode_sample, encode
@@ -273,8 +274,8 @@ def check_recording(run: dict, path, frames: int) -> None:
             for _, channel, message in reader.iter_messages(topics=[f"evopose/{run['fleet']}/{vehicle}/pose"]):
                 estimate = decode_sample(channel.topic, message.data)[1]
                 poses[estimate.stamp_ns] = estimate.pose
-            published = run["agents"][vehicle]["poses"]  # [frame, x, y, z, roll, pitch, yaw, good] per frame
+            published = pose_rows(run["agents"][vehicle])
             assert len(poses) == len(published) == frames
             recorded = sorted(poses.items())
             for row, (_, pose) in zip(published, recorded):
-                assert np.allclose(row[1:7], pose, atol=1e-9)
+                assert np.allclose(row.pose, pose, atol=1e-9)

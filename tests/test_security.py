@@ -33,6 +33,7 @@ from cryptography.hazmat.primitives.serialization import load_pem_private_key
 from cryptography.x509.oid import NameOID
 
 from agents.cli.main import main
+from agents.runs import pose_rows
 from agents.transport.credentials import create_credentials, fleet_keys
 from agents.transport.session import (MAX_MESSAGE_BYTES, PEER_LISTEN, ROUTER_LISTEN, SessionOptions,
                                      listen_endpoints, make_config)
@@ -240,7 +241,7 @@ def test_a_secure_team_converges_as_usual() -> None:
     for vehicle in ("H1", "H2"):
         summary = run["agents"][vehicle]
         # converged (how many frames that takes depends on the machine's load; the end state does not)
-        assert summary["estimates"] == 10 and summary["good"] >= 1 and summary["poses"][-1][-1], summary
+        assert summary["estimates"] == 10 and summary["good"] >= 1 and pose_rows(summary)[-1].good, summary
         assert summary["error_position"] < 0.05 and summary["last_error"]["position"] < 0.05, summary
         # the team-mate's feature sets came through the router and were used as views (eq. 4)
         assert summary["traffic"]["received"].get("features", 0) >= 1 and summary["multi_view_frames"] >= 1

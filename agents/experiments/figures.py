@@ -1,8 +1,8 @@
 """The report's figures: Fig. 6 (fitness of the best per generation), error over time per vehicle, the driving
 Pioneer's track from above with each helicopter's estimates, and bandwidth per share mode.
 
-Errors over time come from the poses each agent published (its summary's ``poses``: ``[frame, x, y, z, roll, pitch,
-yaw, good]``) against the world's truth at that frame (the fleet clock's frame ``n`` shows the world's frame
+Errors over time come from the poses each agent published (its summary's ``poses``, read as
+:class:`agents.runs.PoseRow`) against the world's truth at that frame (the fleet clock's frame ``n`` shows the world's frame
 ``n mod frames``, as the agents' simulated cameras do).
 """
 
@@ -12,8 +12,8 @@ from pathlib import Path
 
 import numpy as np
 
+from agents.runs import pose_rows, pose_table
 from geometry import angle_difference
-
 from scenarios.world import load_scenario
 
 #: Line style of each share mode.
@@ -32,16 +32,15 @@ def _pyplot():
 def error_series(summary: dict, world: str) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Frame numbers (from the first published), position error (m), yaw error (deg) and good flags, each (K,),
     of one agent's published poses against ``world``'s truth."""
-    poses = np.asarray(summary.get("poses") or [], float).reshape(-1, 8)
-    if not len(poses):
+    frames, poses, good = pose_table(pose_rows(summary))
+    if not len(frames):
         empty = np.zeros(0)
         return empty, empty, empty, np.zeros(0, bool)
     scenario = load_scenario(world)
-    frames = poses[:, 0].astype(int)
     truth = np.array([scenario.target_pose(int(n) % scenario.frames) for n in frames])
-    position = np.linalg.norm(poses[:, 1:4] - truth[:, :3], axis=1)
-    yaw = np.degrees(np.abs(angle_difference(poses[:, 6], truth[:, 5])))
-    return frames - frames[0], position, yaw, poses[:, 7] > 0
+    position = np.linalg.norm(poses[:, :3] - truth[:, :3], axis=1)
+    yaw = np.degrees(np.abs(angle_difference(poses[:, 5], truth[:, 5])))
+    return frames - frames[0], position, yaw, good
 
 
 def _first_run(records: list[dict], scenario: str, world: str) -> dict | None:
@@ -107,9 +106,9 @@ def tracks_from_above(records: list[dict], path: Path, world: str, vehicles: tup
         ax.plot(truth[:, 0], truth[:, 1], "k-", lw=2, label="truth")
         record = _first_run(records, scenario_name, world)
         for vehicle in vehicles:
-            poses = np.asarray(record["agents"].get(vehicle, {}).get("poses") or [], float).reshape(-1, 8)
+            _, poses, _ = pose_table(pose_rows(record["agents"].get(vehicle, {})))
             if len(poses):
-                ax.plot(poses[:, 1], poses[:, 2], ".", ms=3, label=f"{vehicle} estimates")
+                ax.plot(poses[:, 0], poses[:, 1], ".", ms=3, label=f"{vehicle} estimates")
         for vehicle in scenario.vehicles:
             position = vehicle.camera_at(0.0).world_from_camera[:3, 3]
             ax.annotate(f"{vehicle.name} ({position[0]:.0f}, {position[1]:.0f}) m", (0.02, 0.97 - 0.06 * vehicle.index),

@@ -11,6 +11,7 @@ import statistics
 
 import numpy as np
 
+from agents.runs import pose_rows
 from geometry import angle_difference, pose_difference
 
 PARAMS = ("roll", "pitch", "yaw", "x", "y", "z")
@@ -98,14 +99,14 @@ def frame_agreement(records: list[dict], a: str, b: str) -> dict:
         sa, sb = record["agents"].get(a), record["agents"].get(b)
         if not (sa and sb):
             continue
-        pb = {int(p[0]): p for p in sb.get("poses", [])}
-        for p in sa.get("poses", []):
-            q = pb.get(int(p[0]))
+        pb = {q.frame: q for q in pose_rows(sb)}
+        for p in pose_rows(sa):
+            q = pb.get(p.frame)
             if q is None:
                 continue
             frames += 1
-            both_good += bool(p[7] and q[7])
-            d = pose_difference(np.array(p[1:7], float), np.array(q[1:7], float))
+            both_good += p.good and q.good
+            d = pose_difference(p.pose, q.pose)
             d[3:] = np.degrees(d[3:])
             agreed += bool(np.linalg.norm(d[:3]) <= AGREE_POSITION_M and np.all(np.abs(d[3:]) <= AGREE_ANGLE_DEG))
     return {"frames": frames, "agreed": agreed, "both_good": both_good,

@@ -8,6 +8,7 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
+from agents.runs import POSE_COLUMNS, PoseRow
 from geometry import PARAM_NAMES
 
 
@@ -65,13 +66,14 @@ class RunRecord:
     errors: ErrorTotals = field(default_factory=ErrorTotals)
     frame_seconds: deque = field(default_factory=lambda: deque(maxlen=RECENT))
     mate_latency_s: deque = field(default_factory=lambda: deque(maxlen=RECENT))  # team-mates' data: arrival - stamp
-    #: the last :data:`RECENT` published poses as ``[frame, x, y, z, roll, pitch, yaw, good]`` (team agreement)
-    poses: deque = field(default_factory=lambda: deque(maxlen=RECENT))
+    #: the last :data:`RECENT` published poses (team agreement, errors over time)
+    poses: deque[PoseRow] = field(default_factory=lambda: deque(maxlen=RECENT))
 
     def summary(self) -> dict:
         out = {k: v for k, v in asdict(self).items()
                if k not in ("errors", "frame_seconds", "mate_latency_s", "poses")}
-        out["poses"] = [list(p) for p in self.poses]
+        out["pose_columns"] = list(POSE_COLUMNS)
+        out["poses"] = [p.to_json() for p in self.poses]
         out.update(self.errors.summary())
         if self.frame_seconds:
             out["frame_seconds_median"] = statistics.median(self.frame_seconds)

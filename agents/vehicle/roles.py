@@ -25,6 +25,7 @@ from protocol import MESSAGE_TYPES, Attitude, Topic
 from scenarios.world import Scenario
 
 from agents.errors import TeamNotMetError
+from agents.runs import PoseRow
 from agents.transport.bus import FleetBus, Received
 from agents.vehicle.config import IDLE_GENERATIONS, AgentConfig
 from agents.vehicle.frames import NS, FrameClock
@@ -385,7 +386,7 @@ class CameraVehicle(Vehicle):
             if rec.first_confirmed_s is None:
                 rec.first_confirmed_s = time.perf_counter() - self._image_ready
         rec.last_pose, rec.last_error = list(result.outbox[0].fields["pose"]), error
-        rec.poses.append([result.event["frame"], *rec.last_pose, bool(good)])
+        rec.poses.append(PoseRow(result.event["frame"], tuple(rec.last_pose), bool(good)))
 
     # -- between frames ---------------------------------------------------------------------------
 

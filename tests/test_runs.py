@@ -1,0 +1,49 @@
+"""Typed run records: a published pose row is written by the agent and read back by name (agents/runs.py)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from agents.experiments.results import frame_agreement
+from agents.runs import POSE_COLUMNS, PoseRow, pose_rows, pose_table
+from agents.vehicle.records import RunRecord
+
+
+def test_an_agent_summary_carries_its_columns_and_its_rows_read_back_by_name():
+    record = RunRecord()
+    record.poses.append(PoseRow(7, (1.0, 2.0, 3.0, 0.1, -0.2, 0.3), True))
+    record.poses.append(PoseRow(8, (1.5, 2.0, 3.0, 0.1, -0.2, 0.3), False))
+    summary = json.loads(json.dumps(record.summary()))  # what goes to disk
+    assert summary["pose_columns"] == list(POSE_COLUMNS) == ["frame", "x", "y", "z", "roll", "pitch", "yaw", "good"]
+    assert summary["poses"][0] == [7, 1.0, 2.0, 3.0, 0.1, -0.2, 0.3, True]  # readable: one row, named columns
+    rows = pose_rows(summary)
+    assert rows == list(record.poses)
+    frames, poses, good = pose_table(rows)
+    assert list(frames) == [7, 8] and poses.shape == (2, 6) and poses[1, 0] == 1.5 and list(good) == [True, False]
+
+
+def test_a_summary_written_before_the_column_header_reads_the_same():
+    old = {"poses": [[3, 0, 0, 1, 0, 0, 0.5, 1], [4, 0, 0, 1, 0, 0, 0.5, 0]]}
+    assert pose_rows(old) == [PoseRow(3, (0.0, 0.0, 1.0, 0.0, 0.0, 0.5), True),
+                              PoseRow(4, (0.0, 0.0, 1.0, 0.0, 0.0, 0.5), False)]
+    assert pose_rows({}) == []
+
+
+@pytest.mark.parametrize("summary, message", [
+    ({"pose_columns": ["frame", "x"], "poses": []}, "not readable here"),
+    ({"poses": [[1, 2, 3]]}, "a pose row is [frame, x, y, z, roll, pitch, yaw, good]"),
+    ({"poses": [{"frame": 1}]}, "a pose row is"),
+])
+def test_a_row_of_another_shape_is_one_precise_error(summary, message):
+    with pytest.raises(ValueError, match=message.replace("[", r"\[").replace("]", r"\]")):
+        pose_rows(summary)
+
+
+def test_frame_agreement_pairs_rows_by_frame_and_wraps_angles():
+    a = [PoseRow(k, (0.0, 0.0, 1.0, 0.0, 0.0, np.pi - 0.0005), True).to_json() for k in range(5)]
+    b = [PoseRow(k, (0.0, 0.0, 1.0, 0.0, 0.0, -np.pi + 0.0005), k != 2).to_json() for k in range(1, 6)]
+    out = frame_agreement([{"agents": {"H1": {"poses": a}, "H2": {"poses": b}}}], "H1", "H2")
+    assert out["frames"] == 4 and out["agreed"] == 4 and out["both_good"] == 3
