@@ -61,10 +61,10 @@ def make(group: str, seed: int, index: int):
 
 
 def parameter_errors(sp, pose: np.ndarray) -> np.ndarray:
-    """Estimate minus truth per parameter (6,), angles wrapped, against the symmetric truth and the Euler triple
-    (``(r, p, y)`` and ``(r + pi, pi - p, y + pi)`` are one rotation) nearest the estimate."""
+    """Estimate minus truth (6,) in the covariance's coordinates (position, then the rotation about the fixed axes:
+    docs/protocol.md, "Covariance"), against the symmetric truth nearest the estimate."""
+    from evopose.covariance import deviation
     from geometry import euler_from_rotation, rotation_from_euler
-    from geometry import pose_difference
 
     truth = sp.true_pose
     R_true = rotation_from_euler(truth[3:])
@@ -74,10 +74,9 @@ def parameter_errors(sp, pose: np.ndarray) -> np.ndarray:
         R_alt = R_true @ S
         t_alt = truth[:3] + R_true @ c - R_alt @ c
         rpy = euler_from_rotation(R_alt)
-        for triple in (rpy, np.array([rpy[0] + np.pi, np.pi - rpy[1], rpy[2] + np.pi])):
-            d = pose_difference(np.asarray(pose, float), np.r_[t_alt, triple])
-            if best is None or np.linalg.norm(d[3:]) < np.linalg.norm(best[3:]):
-                best = d
+        d = deviation(np.asarray(pose, float), np.r_[t_alt, rpy])
+        if best is None or np.linalg.norm(d[3:]) < np.linalg.norm(best[3:]):
+            best = d
     return best
 
 

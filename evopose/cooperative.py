@@ -38,7 +38,7 @@ from .problem import Bounds, Model, PoseProblem, View
 from .refine import TRACK_SCHEDULE
 from .search import EvoPose, Told
 from .solver import Solution, solution_of, track
-from .uncertainty import assess, mahalanobis
+from .uncertainty import assess, deviation, mahalanobis
 
 #: A confirming search's confident pose within this many sigmas (its covariance) of the tracked one confirms it.
 CONFIRM_SIGMAS = 4.0
@@ -247,7 +247,7 @@ class CooperativeEstimator:
         found = solution_of(search.problem, self.options, run, run.seconds)
         if not (found.converged and found.confident):
             return solution
-        distance = mahalanobis(pose_difference(found.pose, search.anchor), found.covariance)[0]
+        distance = mahalanobis(deviation(found.pose, search.anchor), found.covariance)[0]
         if distance <= CONFIRM_SIGMAS:  # the search's confident answer is the pose tracked then: confident again
             return solution.with_(confident=True, confidence=found.confidence)
         moved = pose_difference(solution.pose, search.anchor)  # the target's motion since the search began

@@ -1,10 +1,14 @@
 """What the matched points say about a pose: the mutual pairs (eq. 1's distance, one to one) and the covariance
-of ``s = (x, y, z, roll, pitch, yaw)`` at an optimum (issue 11).
+of a pose ``s = (x, y, z, roll, pitch, yaw)`` at an optimum (issue 11).
 
 The covariance is the Gauss-Newton one of the matched point residuals over all views (eq. 4: view ``k``
 weighted by its ``W_k``), ``s^2 (J^T W J)^-1``, with ``s^2`` the residual variance; the search box and the
-eq. (3) constraints enter as a uniform prior (:func:`covariance`). Metres and radians, in the order of ROS
-``PoseWithCovariance``. :mod:`evopose.uncertainty` builds the verdict ``confident`` on it.
+eq. (3) constraints enter as a uniform prior (:func:`covariance`). Both act on the Euler angles, so it is
+computed over ``s`` and then expressed in the ROS ``PoseWithCovariance`` convention (docs/protocol.md,
+"Covariance"): metres and radians, the rotation block over small rotations about the fixed X, Y, Z axes
+(:func:`fixed_axis_covariance`), the one convention of the solver's output, ``PoseEstimate`` and the ROS
+messages. :mod:`evopose.uncertainty` builds the verdict ``confident`` on it, with pose differences in the same
+coordinates (:func:`deviation`).
 """
 
 from __future__ import annotations
@@ -13,6 +17,9 @@ from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
+from scipy.spatial.transform import Rotation
+
+from geometry import rotation_from_euler
 
 from .fitness import POINT_NOISE_PX, PoseObjective, matches
 
@@ -109,6 +116,47 @@ def projection_jacobian(objective: PoseObjective, pose: np.ndarray, matches: Mat
     return J
 
 
+def fixed_axis_jacobian(rpy: np.ndarray) -> np.ndarray:
+    """``d omega / d (roll, pitch, yaw)``, shape (..., 3, 3): the small rotation ``omega`` about the fixed X, Y, Z
+    axes (``R(rpy + d) = exp([omega]x) R(rpy)`` to first order) of an Euler increment ``d``.
+
+    With ``R = Rz(yaw) Ry(pitch) Rx(roll)`` (docs/protocol.md) a yaw increment turns about Z, a pitch increment
+    about ``Rz e_y`` and a roll increment about ``Rz Ry e_x``: the columns of the Jacobian.
+    """
+    rpy = np.asarray(rpy, float)
+    cp, sp = np.cos(rpy[..., 1]), np.sin(rpy[..., 1])
+    cy, sy = np.cos(rpy[..., 2]), np.sin(rpy[..., 2])
+    J = np.zeros(rpy.shape[:-1] + (3, 3))
+    J[..., 0, 0], J[..., 1, 0], J[..., 2, 0] = cy * cp, sy * cp, -sp
+    J[..., 0, 1], J[..., 1, 1] = -sy, cy
+    J[..., 2, 2] = 1.0
+    return J
+
+
+def fixed_axis_covariance(euler: np.ndarray, pose: np.ndarray) -> np.ndarray:
+    """A covariance (6, 6) of ``(x, y, z, roll, pitch, yaw)`` increments at ``pose`` (6,) in the ROS convention:
+    ``T Sigma T^T`` with ``T = diag(I, J)``, ``J`` = :func:`fixed_axis_jacobian`; not finite stays inf-filled."""
+    euler = np.asarray(euler, float)
+    if not np.all(np.isfinite(euler)):
+        return np.full((6, 6), np.inf)
+    T = np.eye(6)
+    T[3:, 3:] = fixed_axis_jacobian(np.asarray(pose, float).reshape(6)[3:])
+    out = T @ euler @ T.T
+    return 0.5 * (out + out.T)
+
+
+def deviation(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """How pose ``a`` differs from ``b`` (shapes (..., 6)) in the coordinates of the covariance: ``a - b`` in
+    position, and the rotation vector of ``R_a R_b^T`` (a rotation about the fixed axes, radians, at most pi)."""
+    a, b = np.asarray(a, float), np.asarray(b, float)
+    a, b = np.broadcast_arrays(a, b)
+    out = np.empty(a.shape)
+    out[..., :3] = a[..., :3] - b[..., :3]
+    relative = rotation_from_euler(a[..., 3:]) @ np.swapaxes(rotation_from_euler(b[..., 3:]), -1, -2)
+    out[..., 3:] = Rotation.from_matrix(relative.reshape(-1, 3, 3)).as_rotvec().reshape(a.shape[:-1] + (3,))
+    return out
+
+
 @dataclass(frozen=True, eq=False)
 class CovarianceEstimate:
     """The Gauss-Newton covariance at an optimum and what it rests on.
@@ -116,17 +164,22 @@ class CovarianceEstimate:
     Attributes
     ----------
     matrix : array, shape (6, 6)
-        Covariance of ``(x, y, z, roll, pitch, yaw)``, metres and radians; inf-filled when not computable
-        (fewer residuals than free parameters, or a singular normal matrix).
+        The covariance in the ROS ``PoseWithCovariance`` convention (docs/protocol.md): position in metres, then
+        small rotations about the fixed X, Y, Z axes in radians; inf-filled when not computable (fewer residuals
+        than free parameters, or a singular normal matrix).
     residual_variance : float
         ``s^2`` per pixel coordinate (pixels^2); inf when not computable.
     dof : int
         ``2m - n_free``.
+    euler : array, shape (6, 6)
+        The same over increments of ``(x, y, z, roll, pitch, yaw)``, the parameters the box and eq. (3) bound
+        (a fixed one has variance 0 here); ``matrix`` is :func:`fixed_axis_covariance` of it.
     """
 
     matrix: np.ndarray
     residual_variance: float
     dof: int
+    euler: np.ndarray | None = None
 
     @property
     def ok(self) -> bool:
@@ -160,11 +213,12 @@ def untruncated_variance(s2: float, tau2: float, iterations: int = 20) -> float:
 
 
 def _unknown() -> CovarianceEstimate:
-    return CovarianceEstimate(np.full((6, 6), np.inf), np.inf, 0)
+    return CovarianceEstimate(np.full((6, 6), np.inf), np.inf, 0, np.full((6, 6), np.inf))
 
 
 def covariance(objective: PoseObjective, pose: np.ndarray, matches: Matches | None = None) -> CovarianceEstimate:
-    """Covariance of ``pose`` (6,) from the matched residuals and the box / eq. (3) priors.
+    """Covariance of ``pose`` (6,) from the matched residuals and the box / eq. (3) priors, computed over the
+    Euler parameters (``euler``) and given in the ROS convention (``matrix``, :func:`fixed_axis_covariance`).
 
     ``Sigma = (J^T W J / s^2 + P)^-1`` over the free parameters, ``W`` the eq. (4) view weights (normalised),
     ``s^2 = sum_pairs W |r|^2 / (2m - n_free)`` corrected for the truncation at tau
@@ -186,7 +240,7 @@ def covariance(objective: PoseObjective, pose: np.ndarray, matches: Matches | No
     use = w > 0
     dof = 2 * int(np.count_nonzero(use)) - n_free
     if n_free == 0:
-        return CovarianceEstimate(np.zeros((6, 6)), 0.0, dof)
+        return CovarianceEstimate(np.zeros((6, 6)), 0.0, dof, np.zeros((6, 6)))
     if dof < 1:
         return _unknown()
     J = projection_jacobian(objective, pose, matches)[use][:, :, free]  # (m, 2, n_free)
@@ -209,7 +263,7 @@ def covariance(objective: PoseObjective, pose: np.ndarray, matches: Matches | No
     inner = 0.5 * (inner + inner.T) if box is None else box
     full = np.zeros((6, 6))
     full[np.ix_(free, free)] = inner
-    return CovarianceEstimate(full, s2, dof)
+    return CovarianceEstimate(fixed_axis_covariance(full, pose), s2, dof, full)
 
 
 #: Samples of the likelihood drawn by :func:`in_box_second_moment`, and how many must fall in the box.

@@ -72,8 +72,9 @@ class Solution:
     reinitialised : bool
         (track) the fit was lost and the search started over.
     covariance : array, shape (6, 6)
-        Covariance of ``(x, y, z, roll, pitch, yaw)`` (metres, radians; ROS ``PoseWithCovariance`` order) from the
-        fitness landscape at the pose (:func:`evopose.uncertainty.covariance`); inf-filled when not computable.
+        Covariance of the pose in the ROS ``PoseWithCovariance`` convention (docs/protocol.md, "Covariance":
+        metres, then radians of small rotations about the fixed X, Y, Z axes) from the fitness landscape at the
+        pose (:func:`evopose.uncertainty.covariance`); inf-filled when not computable.
     confident : bool
         In the right basin with high probability: enough marks matched one to one, a tight fit, and no distinct
         pose found by the search fits nearly as well (:func:`evopose.uncertainty.assess`; for :func:`track`, see

@@ -2,7 +2,8 @@
 
 An estimate of ``s = (x, y, z, roll, pitch, yaw)`` gets
 
-* a **covariance** (6, 6), metres and radians, in the order of ROS ``PoseWithCovariance``, from the fitness
+* a **covariance** (6, 6) in the convention of ROS ``PoseWithCovariance`` (docs/protocol.md, "Covariance":
+  metres, then small rotations about the fixed X, Y, Z axes in radians), from the fitness
   landscape at the optimum (:func:`evopose.covariance.covariance`): the Gauss-Newton normal matrix ``J^T W J``
   of the matched point residuals over all views (eq. 4: view ``k`` weighted by its ``W_k``), scaled by the
   residual variance ``s^2 = sum r^2 / (2m - n_free)``; the matched points are the mutual nearest neighbours
@@ -26,13 +27,11 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
-from geometry import pose_difference
-
-from .covariance import (CovarianceEstimate, Matches, covariance, in_box_second_moment, mutual_matches,
+from .covariance import (CovarianceEstimate, Matches, covariance, deviation, in_box_second_moment, mutual_matches,
                          projection_jacobian, untruncated_variance)
 from .fitness import POINT_NOISE_PX, PoseObjective
 
-__all__ = ["Confidence", "ConfidenceRules", "CovarianceEstimate", "Matches", "assess", "covariance",
+__all__ = ["Confidence", "ConfidenceRules", "CovarianceEstimate", "Matches", "assess", "covariance", "deviation",
            "in_box_second_moment", "mahalanobis", "mutual_matches", "projection_jacobian",
            "same_image", "shared_pairs", "sum_of_squares", "track_confidence", "untruncated_variance"]
 
@@ -103,7 +102,9 @@ def sum_of_squares(objective: PoseObjective, pose: np.ndarray, matches: Matches 
 
 
 def mahalanobis(delta: np.ndarray, cov: np.ndarray) -> np.ndarray:
-    """``sqrt(delta^T cov^+ delta)`` for differences (..., 6); parameters with zero variance are left out.
+    """``sqrt(delta^T cov^+ delta)`` for differences (..., 6) in the covariance's coordinates (the ROS convention:
+    :func:`evopose.covariance.deviation`); parameters with zero variance are left out, and so are directions
+    without variance (a parameter fixed by eq. 3 is one such direction among the fixed-axis rotations).
 
     inf when the covariance is not finite.
     """
@@ -111,7 +112,7 @@ def mahalanobis(delta: np.ndarray, cov: np.ndarray) -> np.ndarray:
     if not np.all(np.isfinite(cov)):
         return np.full(len(delta), np.inf)
     keep = np.diag(cov) > 0
-    inv = np.linalg.pinv(cov[np.ix_(keep, keep)])
+    inv = np.linalg.pinv(cov[np.ix_(keep, keep)], rcond=1e-12, hermitian=True)
     d = delta[:, keep]
     return np.sqrt(np.maximum(np.einsum("ni,ij,nj->n", d, inv, d), 0.0))
 
@@ -169,7 +170,7 @@ def assess(objective: PoseObjective, pose: np.ndarray, alternatives: np.ndarray 
     s_alt, runner_up = np.inf, None
     if cov.ok and alternatives is not None and len(alternatives):
         alternatives = np.atleast_2d(alternatives)
-        far = mahalanobis(pose_difference(alternatives, pose), cov.matrix) > rules.distinct_sigmas
+        far = mahalanobis(deviation(alternatives, pose), cov.matrix) > rules.distinct_sigmas
         for alt in alternatives[far]:
             if same_image(objective, pose, alt):
                 continue  # a symmetry of the model: no image tells the two apart, they are one answer
@@ -235,7 +236,7 @@ def track_confidence(previous_pose: np.ndarray, previous_cov: np.ndarray, previo
         reason = "previous not confident"
     if not reason:
         gate = np.asarray(previous_cov, float) + cov.matrix + np.diag(np.asarray(motion, float) ** 2)
-        if mahalanobis(pose_difference(pose, previous_pose), gate)[0] > rules.track_sigmas:
+        if mahalanobis(deviation(pose, previous_pose), gate)[0] > rules.track_sigmas:
             reason = "jumped"
     return Confidence(reason == "", cov, current.n_pairs, current.unmatched, current.margin, current.runner_up,
                       reason, current.sum_of_squares, current.runner_up_sum_of_squares)

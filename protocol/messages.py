@@ -237,8 +237,9 @@ class PoseEstimate(Message):
     fitness over its value when nothing matches); ``inputs`` names the team-mates whose
     data (images, features, hints, attitude) went into the estimate. ``confident``: no distinct pose fits
     nearly as well and enough marks are matched (:mod:`evopose.uncertainty`); ``covariance``: the 6x6
-    covariance of ``(x, y, z, roll, pitch, yaw)``, row-major, metres and radians (the order of ROS
-    ``PoseWithCovariance``), absent when it could not be computed.
+    covariance in the convention of ROS ``PoseWithCovariance`` (docs/protocol.md, "Covariance": position, then
+    small rotations about the fixed axes), row-major, metres and radians, absent when it could
+    not be computed.
     """
 
     TOPIC: ClassVar[Topic] = Topic.POSE

@@ -413,7 +413,7 @@ def solution_to_dict(solution: Solution) -> dict:
     """The solver's output object (DESIGN.md §3), plus ``stop_reason``, ``view_terms`` and ``view_weights``.
 
     ``confident`` is the calibrated verdict (:attr:`evopose.Solution.confident`); ``covariance`` the 6x6
-    covariance of (x, y, z, roll, pitch, yaw), metres and radians, ROS ``PoseWithCovariance`` order, row by row;
+    covariance in the ROS ``PoseWithCovariance`` convention (docs/protocol.md, "Covariance"), row by row;
     an entry that is not finite (no covariance could be computed) is null, never NaN or Infinity.
     """
     pose = np.asarray(solution.pose, float)
