@@ -21,13 +21,15 @@ import zenoh.ext
 
 from agents.bridges import names, ros_msgs
 from agents.bridges.listener import Ros2Listener
-from agents.bridges.rmw_zenoh import (DEFAULT_QOS, TF_QOS, Attachment, EntityKind, Node, QoS, Reliability,
-                                      decode_attachment, dds_type_name, encode_attachment, endpoint_token, gid,
-                                      node_token, parse_token, ros_type_name, topic_key)
+from agents.bridges.rmw_zenoh import (DEFAULT_QOS, LEGACY_DURABILITY, SENSOR_QOS, TF_QOS, Attachment, Durability,
+                                      EntityKind, Node, QoS, Reliability, decode_attachment, dds_type_name,
+                                      encode_attachment, endpoint_token, gid, node_token, parse_token, ros_type_name,
+                                      topic_key)
+from agents.bridges.ros2_node import Ros2Node
 from agents.bridges.translate import estimate_messages
 from protocol.codec import decode_sample
 from protocol.messages import PoseEstimate
-from tests.fleet_procs import Fleet, client_session, fleet_with_router, free_port
+from tests.fleet_procs import Fleet, client_session, fleet_with_router, free_port, peer_session
 
 GOLDEN = Path(__file__).resolve().parent / "golden" / "ros2_pose.cdr"
 STAMP_NS = 1_700_000_000_123_456_789
@@ -78,6 +80,33 @@ def test_qos_strings_leave_rmw_zenoh_defaults_empty():
     assert QoS(depth=5, reliability=Reliability.BEST_EFFORT).keyexpr() == "2::,5:,:,:,,"
     for qos in (DEFAULT_QOS, TF_QOS, QoS(depth=5, reliability=Reliability.BEST_EFFORT)):
         assert QoS.parse(qos.keyexpr()) == qos
+
+
+def durability_as_read_by(chunk: str, default: Durability) -> Durability:
+    """rmw_zenoh_cpp ``keyexpr_to_qos``: the second ':'-field, or the release's default when empty."""
+    field = chunk.split(":")[1]
+    return default if field == "" else Durability(int(field))
+
+
+def test_legacy_tokens_write_out_the_durability_jazzy_0_2_0_to_0_2_2_would_misread():
+    """Before ros2/rmw_zenoh#521 (Jazzy 0.2.3) the default durability was transient local: an empty field told
+    0.2.0-0.2.2 our volatile publishers keep a history. ``--legacy-attachment`` tokens write it out, which those,
+    0.2.3 and today's all read as volatile; today's tokens keep leaving it empty."""
+    assert DEFAULT_QOS.keyexpr(legacy=True) == ":2:,10:,:,:,,"
+    assert SENSOR_QOS.keyexpr(legacy=True) == "2:2:,5:,:,:,,"
+    for qos in (DEFAULT_QOS, TF_QOS, SENSOR_QOS):
+        assert QoS.parse(qos.keyexpr(legacy=True)) == QoS.parse(qos.keyexpr()) == qos
+        assert durability_as_read_by(qos.keyexpr(), LEGACY_DURABILITY) is Durability.TRANSIENT_LOCAL  # the bug
+        for default in (LEGACY_DURABILITY, Durability.VOLATILE):
+            assert durability_as_read_by(qos.keyexpr(legacy=True), default) is Durability.VOLATILE
+    with peer_session(f"tcp/127.0.0.1:{free_port()}") as session:
+        for legacy, chunk in ((True, ":2:,10:,:,:,,"), (False, "::,10:,:,:,,")):
+            with Ros2Node(session, Node("n", "/legacy"), legacy_attachment=legacy) as node:
+                publisher = node.publisher("/legacy/t", "std_msgs/msg/String", STRING_HASH)
+                subscription = node.subscription("/legacy/u", "std_msgs/msg/String", STRING_HASH)
+                declared = {str(reply.ok.key_expr) for reply in session.liveliness().get("@ros2_lv/0/**")}
+                assert publisher.token_key.endswith("/" + chunk) and publisher.token_key in declared
+                assert subscription.token_key.endswith("/" + chunk) and subscription.token_key in declared
 
 
 def test_the_attachment_is_what_zenoh_cpps_serializer_writes():

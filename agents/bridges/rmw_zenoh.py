@@ -11,6 +11,9 @@ available to test against.
   each name mangled (``/`` -> ``%``; the default enclave and namespace ``/`` become ``%``).
 - QoS string: ``<reliability>:<durability>:<history>,<depth>:<deadline s>,<ns>:<lifespan s>,<ns>:<liveliness>,<s>,<ns>``
   with every value equal to rmw_zenoh's default left empty (``::,10:,:,:,,`` is KEEP_LAST 10, RELIABLE, VOLATILE).
+  The default durability was TRANSIENT_LOCAL until #521 (Jazzy 0.2.3, March 2025): Jazzy 0.2.0-0.2.2 read an empty
+  durability as transient local, so ``legacy`` tokens write it out (``:2:,10:,:,:,,``), which every release reads
+  as volatile.
 - Attachment of every published sample (zenoh-cpp ``ext::Serializer``): ``int64`` sequence number (from 1),
   ``int64`` source timestamp (ns since the epoch), both little-endian, then the 16-byte GID as a sequence: its
   length as LEB128 (one byte, 16) and the bytes: 33 bytes. The keyed layout of rmw_zenoh_cpp 0.2.0-0.2.3 (Jazzy,
@@ -66,18 +69,21 @@ class QoS:
     durability: Durability = Durability.VOLATILE
     history: History = History.KEEP_LAST
 
-    def keyexpr(self) -> str:
-        """The token's QoS chunk, as ``qos_to_keyexpr`` writes it."""
+    def keyexpr(self, *, legacy: bool = False) -> str:
+        """The token's QoS chunk, as ``qos_to_keyexpr`` writes it; ``legacy``: the durability always written out,
+        for Jazzy 0.2.0-0.2.2, whose default (an empty field) was transient local (:data:`LEGACY_DURABILITY`)."""
         def differs(value: int, default: int) -> str:
             return "" if value == default else str(int(value))
 
         d = RMW_ZENOH_DEFAULT
-        return (f"{differs(self.reliability, d.reliability)}:{differs(self.durability, d.durability)}:"
+        durability = str(int(self.durability)) if legacy else differs(self.durability, d.durability)
+        return (f"{differs(self.reliability, d.reliability)}:{durability}:"
                 f"{differs(self.history, d.history)},{differs(self.depth, d.depth)}:,:,:,,")
 
     @classmethod
     def parse(cls, text: str) -> "QoS":
-        """Inverse of :meth:`keyexpr` (the deadline, lifespan and liveliness parts are ignored)."""
+        """Inverse of :meth:`keyexpr` (the deadline, lifespan and liveliness parts are ignored); an empty field is
+        today's default (a token of Jazzy 0.2.0-0.2.2 with an empty durability meant :data:`LEGACY_DURABILITY`)."""
         parts = text.split(":")
         if len(parts) < 6:
             raise ValueError(f"QoS chunk {text!r} needs 6 ':'-separated parts")
@@ -91,6 +97,8 @@ class QoS:
 
 #: rmw_zenoh's defaults (qos.cpp): KEEP_LAST 42, RELIABLE, VOLATILE; the reference of the QoS string.
 RMW_ZENOH_DEFAULT = QoS(depth=42)
+#: The default durability of rmw_zenoh_cpp before #521 (qos.cpp ``RMW_ZENOH_DEFAULT_DURABILITY``; Jazzy 0.2.0-0.2.2).
+LEGACY_DURABILITY = Durability.TRANSIENT_LOCAL
 #: rclcpp's default publisher QoS (KEEP_LAST 10, RELIABLE, VOLATILE): ``::,10:,:,:,,``.
 DEFAULT_QOS = QoS(depth=10)
 #: tf2_ros.TransformBroadcaster's QoS (KEEP_LAST 100).
@@ -148,11 +156,12 @@ def node_token(domain: int, zid: str, node_id: int, node: Node) -> str:
 
 
 def endpoint_token(kind: EntityKind, domain: int, zid: str, node_id: int, entity_id: int, node: Node, topic: str,
-                   msgtype: str, type_hash: str, qos: QoS) -> str:
-    """The liveliness token key of a publisher (``MP``) or subscription (``MS``) of ``node``."""
+                   msgtype: str, type_hash: str, qos: QoS, *, legacy: bool = False) -> str:
+    """The liveliness token key of a publisher (``MP``) or subscription (``MS``) of ``node`` (``legacy``: for Jazzy
+    0.2.0-0.2.3, the durability written out, :meth:`QoS.keyexpr`)."""
     return "/".join((ADMIN_SPACE, str(int(domain)), zid, str(node_id), str(entity_id), EntityKind(kind).value,
                      mangle(node.enclave), mangle(node.namespace), mangle(node.name), mangle(topic),
-                     mangle(dds_type_name(msgtype)), mangle(type_hash), qos.keyexpr()))
+                     mangle(dds_type_name(msgtype)), mangle(type_hash), qos.keyexpr(legacy=legacy)))
 
 
 def gid(token_key: str) -> bytes:

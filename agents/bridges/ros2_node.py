@@ -26,7 +26,7 @@ def _endpoint(entity, kind: EntityKind, owner: "Ros2Node", entity_id: int, topic
     entity.topic, entity.msgtype, entity.type_hash, entity.qos = topic, msgtype, type_hash, qos
     entity.key = topic_key(owner.domain, topic, msgtype, type_hash)
     entity.token_key = endpoint_token(kind, owner.domain, owner.zid, owner.node_id, entity_id, owner.node, topic,
-                                      msgtype, type_hash, qos)
+                                      msgtype, type_hash, qos, legacy=owner.legacy_attachment)
     entity.gid = gid(entity.token_key)
 
 
@@ -96,7 +96,8 @@ class Ros2Node:
     node_id : int
         The node's id in this process's context (rmw_zenoh counts nodes and entities from 0).
     legacy_attachment : bool
-        Attach the keyed layout of rmw_zenoh_cpp 0.2.0-0.2.3 instead of today's.
+        For Jazzy's rmw_zenoh_cpp 0.2.0-0.2.3: attach the keyed layout instead of today's, and write each token's
+        durability out (0.2.0-0.2.2 read an empty one as transient local; :meth:`QoS.keyexpr`).
     """
 
     def __init__(self, session: zenoh.Session, node: Node, *, domain: int = 0, node_id: int = 0,

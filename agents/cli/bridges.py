@@ -43,8 +43,10 @@ def register(app: typer.Typer) -> None:
     def ros2_command(fleet: Fleet,
                      domain: Annotated[int, typer.Option(min=0, max=232, help="ROS_DOMAIN_ID.")] = 0,
                      legacy_attachment: Annotated[bool, typer.Option(
-                         "--legacy-attachment", help="Attach the keyed layout of rmw_zenoh_cpp 0.2.0-0.2.3 (Jazzy "
-                                                     "before April 2025) instead of today's.")] = False,
+                         "--legacy-attachment", help="For Jazzy's rmw_zenoh_cpp 0.2.0-0.2.3 (before April 2025): "
+                                                     "the keyed attachment layout, and each token's durability "
+                                                     "written out (0.2.0-0.2.2 read an empty one as transient "
+                                                     "local).")] = False,
                      hints_from: Annotated[str | None, typer.Option(
                          "--hints-from", metavar="TOPIC", help="Also send each geometry_msgs/msg/PoseStamped of this "
                                                                "ROS topic (the target's pose in map) to the fleet as a "
