@@ -300,6 +300,51 @@ def test_scenario_run_with_ros2_mirrors_every_camera_vehicle_and_the_truth():
         fleet.close()
 
 
+def rmw_zenohd_config(endpoint: str) -> zenoh.Config:
+    """The router as ``ros2 run rmw_zenoh_cpp rmw_zenohd`` configures it (rmw_zenoh_cpp/config/
+    DEFAULT_RMW_ZENOH_ROUTER_CONFIG.json5): router mode, multicast scouting off, gossip on (one hop, peers
+    autoconnect), timestamps, and ``peers_failover_brokering: false`` (ros2/rmw_zenoh#341: it does not route
+    between two peers, which it takes to be connected to each other); listening on ``endpoint`` instead of
+    ``tcp/[::]:7447``. (Zenoh 1.9 and later ignore that key and warn; rmw_zenohd's own Zenoh read it.)"""
+    config = zenoh.Config()
+    config.insert_json5("mode", '"router"')
+    config.insert_json5("listen/endpoints", f'["{endpoint}"]')
+    config.insert_json5("scouting", '{multicast: {enabled: false}, gossip: {enabled: true, multihop: false, '
+                                    'autoconnect: {router: [], peer: ["router", "peer"]}}}')
+    config.insert_json5("timestamping", '{enabled: {router: true, peer: true, client: false}, '
+                                        'drop_future_timestamp: false}')
+    config.insert_json5("queries_default_timeout", "10000")
+    config.insert_json5("routing", '{router: {peers_failover_brokering: false}, peer: {mode: "peer_to_peer"}}')
+    return config
+
+
+def test_the_mirror_as_a_client_of_a_router_configured_as_rmw_zenohd():
+    """docs/ros2.md "Connecting ROS 2 nodes": behind rmw_zenohd the mirror runs as a Zenoh client of the router (a
+    router always routes to and from its clients); a ROS 2 node there, a peer listening on loopback as rmw_zenoh
+    nodes do, finds the mirror's publishers through their liveliness tokens and receives the fleet's poses."""
+    port = free_port()
+    endpoint = f"tcp/127.0.0.1:{port}"
+    fleet = Fleet(port, "zenohd-test")  # every process it starts: --mode client --connect endpoint
+    pose_topic = "/zenohd_test/uav_1/target_pose"
+    try:
+        with zenoh.open(rmw_zenohd_config(endpoint)):
+            mirror = fleet.start("ros2", "--fleet", fleet.fleet, "--json")
+            ready = mirror.next_record(20, lambda r: r.get("event") == "ready")
+            with zenoh.open(peer_config(endpoint)) as session, Ros2Listener(session) as ros:
+                assert ros.wait_for(lambda r: any(e.key == ready["node"] for e in r.entities(EntityKind.NODE)), 20)
+                fleet.start("publish", "--fleet", fleet.fleet, "--vehicle", "uav-1", "--topic", "pose", "--rate",
+                            "20", "--count", "400", "--wait", "10")
+                assert ros.wait_for(lambda r: len(r.samples(pose_topic)) >= 5, 60), (ros.errors, ros.topics())
+                assert not ros.errors
+                publisher = {e.topic: e for e in ros.entities(EntityKind.PUBLISHER)}[pose_topic]
+                samples = ros.samples(pose_topic)
+        assert publisher.zid == ready["zid"] and publisher.qos == DEFAULT_QOS
+        assert all(s.attachment.source_gid == publisher.gid for s in samples)
+        assert all(s.message.header.frame_id == "map" for s in samples)
+    finally:
+        fleet.close()
+
+
 def peer_config(endpoint: str) -> zenoh.Config:
     config = zenoh.Config()
     config.insert_json5("connect/endpoints", f'["{endpoint}"]')
