@@ -1,15 +1,23 @@
-"""`evopose view` (docs/ros2.md, "Live view"): a real fleet, the foxglove-sdk WebSocket server, and a client speaking
-foxglove.websocket.v1 (the `websockets` package; the SDK names it foxglove.sdk.v1) that subscribes to every advertised
-channel and receives them all. Also the pure drawing helpers."""
+"""`evopose view` (docs/ros2.md, "Live view"): a real fleet, the foxglove-sdk WebSocket server behind the view's relay,
+and clients that subscribe to every advertised channel and receive them all: one with the `websockets` package
+offering both subprotocols, and the official `@foxglove/ws-protocol` client from npm offering only its default,
+foxglove.websocket.v1, which decodes a message of every channel with the channel's own schema (skipped, with the
+reason, without node and npm). Also the shipped layout and the pure drawing helpers."""
 
 from __future__ import annotations
 
 import asyncio
+import hashlib
 import json
 import math
+import os
+import shutil
 import struct
+import subprocess
+import tempfile
 import time
 import zlib
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -17,7 +25,7 @@ import websockets
 
 from agents.bridges.view_scene import blank_png, frustum_lines, pose_errors, project
 from protocol.messages import CameraInfo
-from tests.fleet_procs import Fleet, free_port
+from tests.fleet_procs import ROOT, Fleet, Proc, free_port
 
 UNKNOWN_CHANNEL = "Unknown channel ID: "
 SUBPROTOCOLS = ["foxglove.sdk.v1", "foxglove.websocket.v1"]
@@ -100,3 +108,82 @@ def test_a_websocket_client_receives_every_channel_of_a_live_fleet(fleet):
     assert channels["/metrics"]["encoding"] == "json"
     metrics = [json.loads(p) for p in payloads["/metrics"]]
     assert all(m["vehicle"] == "uav_1" and 0 <= m["mismatch"] <= 1 for m in metrics)
+
+
+# -- the official client, and what Lichtblick reads -------------------------------------------------------------
+
+NODE_DIR = ROOT / "tests" / "node"
+LAYOUT = ROOT / "docs" / "foxglove-layout.json"
+
+
+def ws_protocol_client() -> Path:
+    """A directory with tests/node's client and its pinned npm packages (``npm ci``, once per lock file, in the
+    temporary directory); skips the test, saying why, without node and npm or when npm cannot install them."""
+    node, npm = shutil.which("node"), shutil.which("npm")
+    if node is None or npm is None:
+        pytest.skip("node and npm not found (Debian: apt-get install nodejs npm): the official @foxglove/ws-protocol "
+                    "client cannot run")
+    lock = (NODE_DIR / "package-lock.json").read_bytes()
+    home = Path(os.environ.get("EVOPOSE_NODE_CACHE", tempfile.gettempdir())) / (
+        "evopose-ws-protocol-" + hashlib.sha256(lock).hexdigest()[:12])
+    if not (home / "node_modules" / "@foxglove" / "ws-protocol" / "package.json").is_file():
+        home.mkdir(parents=True, exist_ok=True)
+        for name in ("package.json", "package-lock.json"):
+            shutil.copy(NODE_DIR / name, home / name)
+        try:
+            done = subprocess.run([npm, "ci", "--no-audit", "--no-fund", "--ignore-scripts"], cwd=home,
+                                  capture_output=True, text=True, timeout=300)
+        except subprocess.TimeoutExpired:
+            pytest.skip("npm ci of @foxglove/ws-protocol took over 300 s (no registry?)")
+        if done.returncode != 0:
+            last = (done.stderr.strip().splitlines() or ["?"])[-1]
+            pytest.skip(f"npm could not install @foxglove/ws-protocol: {last}")
+    shutil.copy(NODE_DIR / "ws_protocol_client.cjs", home / "ws_protocol_client.cjs")
+    return home
+
+
+def test_the_official_ws_protocol_client_decodes_every_channel_with_its_default_subprotocol(fleet):
+    """@foxglove/ws-protocol's FoxgloveClient over `ws`, offering only foxglove.websocket.v1 (as Lichtblick does):
+    the relay accepts it, and it decodes a message of every channel (protobuf from the advertised descriptors,
+    JSON for /metrics) into what was sent."""
+    home = ws_protocol_client()
+    view = fleet.start("view", "--fleet", fleet.fleet, "--port", "0", "--json")
+    ready = view.next_record(60, lambda r: r.get("event") == "ready")
+    for vehicle, topic in (("uav-1", "pose"), ("uav-1", "features"), ("target", "pose")):
+        fleet.start("publish", "--fleet", fleet.fleet, "--vehicle", vehicle, "--topic", topic, "--rate", "20",
+                    "--count", "1200", "--wait", "10")
+    client = Proc(["node", str(home / "ws_protocol_client.cjs"), ready["url"], ",".join(sorted(EXPECTED)), "90"])
+    fleet.procs.append(client)
+    assert client.wait(120) == 0, (client.all_records()[-3:], client.stderr_now()[-2000:])
+    records = client.all_records()
+    assert records[0] == {"event": "open", "subprotocol": "foxglove.websocket.v1"}
+    decoded = {r["topic"]: r for r in records if r["event"] == "decoded"}
+    assert EXPECTED <= set(decoded)
+    assert {t: decoded[t]["schemaName"] for t in ("/tf", "/scene", "/uav_1/features", "/uav_1/image")} == {
+        "/tf": "foxglove.FrameTransforms", "/scene": "foxglove.SceneUpdate",
+        "/uav_1/features": "foxglove.ImageAnnotations", "/uav_1/image": "foxglove.CompressedImage"}
+    assert decoded["/metrics"]["schemaName"] == "evopose.Metrics" and decoded["/metrics"]["encoding"] == "json"
+    metrics = decoded["/metrics"]["message"]
+    assert metrics["vehicle"] == "uav_1" and 0 <= metrics["mismatch"] <= 1
+    frames = {t["child_frame_id"]: t["parent_frame_id"] for t in decoded["/tf"]["message"]["transforms"]}
+    assert set(frames.values()) <= {"map", "uav_1/base_link"} and frames
+    calibration = decoded["/uav_1/camera_calibration"]["message"]
+    assert (calibration["frame_id"], calibration["width"], calibration["height"]) == ("uav_1/camera_optical", 640, 480)
+    assert decoded["/uav_1/image"]["message"]["format"] == "png"
+    assert decoded["/scene"]["message"]["entities"][0]["frame_id"] in {"uav_1/target_estimate", "target/truth",
+                                                                      "uav_1/camera_optical"}
+
+
+def test_the_shipped_layout_names_its_panels_and_plots_only_what_the_view_sends():
+    """docs/foxglove-layout.json: every panel's title in the keys Foxglove (``foxglovePanelTitle``) and Lichtblick
+    (``lichtblickPanelTitle``) read, no ``title`` that neither does; every plotted /metrics field in the schema."""
+    from agents.bridges.view import METRICS_SCHEMA, METRICS_SCHEMA_NAME
+
+    layout = json.loads(LAYOUT.read_text(encoding="utf-8"))
+    assert METRICS_SCHEMA["title"] == METRICS_SCHEMA_NAME
+    for panel, config in layout["configById"].items():
+        assert "title" not in config, panel
+        assert config["foxglovePanelTitle"] == config["lichtblickPanelTitle"] and config["foxglovePanelTitle"], panel
+        for path in config.get("paths", []):
+            topic, _, field = path["value"].partition("}.")
+            assert topic.startswith("/metrics{") and field in METRICS_SCHEMA["properties"], path

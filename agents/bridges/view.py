@@ -1,5 +1,8 @@
 """``evopose view``: a live Foxglove view of a fleet over a foxglove-sdk WebSocket server (docs/ros2.md, "Live view").
 
+The SDK server listens on loopback; clients connect to :class:`agents.bridges.view_relay.SubprotocolRelay`, which
+accepts both ``foxglove.sdk.v1`` and ``foxglove.websocket.v1`` (Lichtblick, ``@foxglove/ws-protocol``).
+
 Channels (open ``docs/foxglove-layout.json`` in Foxglove for the panels):
 
 - ``/tf`` (foxglove.FrameTransforms): ``map -> <V>/base_link -> <V>/camera_optical``, ``map -> <V>/target_estimate``,
@@ -10,8 +13,8 @@ Channels (open ``docs/foxglove-layout.json`` in Foxglove for the panels):
 - ``/<V>/image`` (foxglove.CompressedImage): the shared image, else a blank canvas of the camera's size;
 - ``/<V>/features`` (foxglove.ImageAnnotations): the feature points (green), the model projected at V's estimate
   (red) and at the truth (blue);
-- ``/metrics`` (JSON): per estimate: vehicle, fitness, mismatch, converged, confident, position and rotation error
-  to the truth.
+- ``/metrics`` (JSON, schema ``evopose.Metrics``): per estimate: vehicle, fitness, mismatch, converged, confident,
+  position and rotation error to the truth.
 
 Vehicle names and frames follow :mod:`agents.bridges.names`. Errors are against the truth of the same stamp (else the
 newest), without the model's symmetries.
@@ -19,6 +22,7 @@ newest), without the model's symmetries.
 
 from __future__ import annotations
 
+import json
 import threading
 import time
 from collections import OrderedDict
@@ -38,7 +42,10 @@ from agents.bridges.translate import is_truth
 from agents.bridges.view_scene import blank_png, frustum_lines, mesh_triangles, pose_errors, project
 from agents.transport.session import SessionOptions, open_session
 
+#: The name of the /metrics JSON schema (every channel's schema has a name: Foxglove and Lichtblick show it).
+METRICS_SCHEMA_NAME = "evopose.Metrics"
 METRICS_SCHEMA = {
+    "title": METRICS_SCHEMA_NAME,
     "type": "object",
     "properties": {
         "vehicle": {"type": "string"}, "stamp_ns": {"type": "integer"}, "fitness": {"type": "number"},
@@ -61,7 +68,9 @@ class FleetView:
         self._fg, self._ch, self.context, self.model = foxglove, channels, context, model
         self.tf = channels.FrameTransformsChannel("/tf", context=context)
         self.scene = channels.SceneUpdateChannel("/scene", context=context)
-        self.metrics = foxglove.Channel("/metrics", schema=METRICS_SCHEMA, context=context)
+        self.metrics = foxglove.Channel("/metrics", schema=foxglove.Schema(
+            name=METRICS_SCHEMA_NAME, encoding="jsonschema", data=json.dumps(METRICS_SCHEMA).encode()),
+            message_encoding="json", context=context)
         self._cameras: dict[str, tuple] = {}
         self._estimates: dict[str, tuple[float, ...]] = {}
         self._truth: OrderedDict[int, tuple[float, ...]] = OrderedDict()
@@ -221,20 +230,24 @@ def run_view(options: SessionOptions, stop: threading.Event, fleet: str, *, host
 
     from protocol.keys import check_name
 
+    from agents.bridges.view_relay import SubprotocolRelay
+
     check_name(fleet, "fleet")
     emit = emit or (lambda record: None)
     target_model = load_target_model(model)
     context = foxglove.Context()
     view = FleetView(context, target_model)
-    server = foxglove.start_server(name=f"evopose {fleet}", host=host, port=port, context=context)
+    server = foxglove.start_server(name=f"evopose {fleet}", host="127.0.0.1", port=0, context=context)
+    relay = SubprotocolRelay(host, port, server.port)
     started = time.monotonic()
     try:
+        port = relay.start()
         with open_session(observer_options(options)) as session, FleetTap(session, fleet, view.handle) as tap:
-            emit({"event": "ready", "fleet": fleet, "host": host, "port": server.port,
-                  "url": f"ws://{host}:{server.port}"})
+            emit({"event": "ready", "fleet": fleet, "host": host, "port": port, "url": f"ws://{host}:{port}"})
             while not stop.wait(0.1):
                 if duration is not None and time.monotonic() - started >= duration:
                     break
     finally:
+        relay.stop()
         server.stop()
     return {"event": "stopped", "logged": view.logged, "dropped": tap.dropped, "seconds": time.monotonic() - started}
