@@ -109,8 +109,8 @@ def run_command(
                                                       "docs/ros2.md).")] = False,
     ros2_domain: Annotated[int, typer.Option(min=0, max=232, help="ROS_DOMAIN_ID of --ros2.")] = 0,
     record: Annotated[Path | None, typer.Option("--record", metavar="DIR", help="Record each run's traffic into "
-                                                "DIR/<fleet>.mcap (evopose record: ROS 2 channels and the raw "
-                                                "ones, for evopose replay).")] = None,
+                                                "DIR/<fleet>.mcap (evopose record: the ROS 2 channels; the raw "
+                                                "ones, for evopose replay, in DIR/<fleet>.raw.mcap).")] = None,
     dataset: Annotated[Path | None, typer.Option(
         "--dataset", metavar="DIR", help="Run on a rendered dataset (docs/datasets.md): each camera vehicle plays "
                                          "its camera's folder (evopose agent --source DIR), on the dataset's world "
