@@ -1,4 +1,4 @@
-"""A run's records, typed: each pose an agent published, as its summary keeps it (docs/design.md §7).
+"""A run's records, typed: each pose an agent published, as its summary keeps it (docs/design.md §6).
 
 An agent's summary (``evopose agent``'s last JSON line, and each vehicle of a scenario run's record) keeps its last
 published poses under ``"poses"``, one JSON array per frame in the order of ``"pose_columns"``

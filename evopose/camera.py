@@ -1,6 +1,6 @@
 """Pinhole cameras with OpenCV ``plumb_bob`` distortion, projecting whole populations at once.
 
-Frames (DESIGN.md §2): the camera uses the OpenCV optical frame (x right, y down,
+Frames (docs/design.md §2): the camera uses the OpenCV optical frame (x right, y down,
 z forward); its extrinsic is ``world_from_camera``. A candidate pose is
 ``world_from_target``, so a model point reaches the image through
 ``camera_from_target = inv(world_from_camera) @ world_from_target``. The pixels come from the one

@@ -1,4 +1,4 @@
-"""Write the example pose-problem files (DESIGN.md §3) in ``examples/`` from seeded synthetic problems.
+"""Write the example pose-problem files (docs/design.md §3) in ``examples/`` from seeded synthetic problems.
 
 Run from the repository root: ``python -m examples.make_examples`` (or ``make examples``).
 Each file starts with a comment giving the true pose, so a reader can compare it with

@@ -2,7 +2,7 @@
 
 Every subclass carries a short machine-readable ``reason`` (used as a counter name by receivers)
 and the ``topic`` it concerns, when known. Receivers catch :class:`ProtocolError`, count
-``err.reason`` and keep running: a bad message is never fatal (DESIGN.md §4).
+``err.reason`` and keep running: a bad message is never fatal (docs/design.md §4).
 """
 
 from __future__ import annotations

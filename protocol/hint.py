@@ -1,7 +1,7 @@
 """The 24-byte pose hint: six little-endian IEEE-754 float32 ``(x, y, z, roll, pitch, yaw)``.
 
 No header, no version: who sent it is in the key (``evopose/<fleet>/<vehicle>/hint``) and it is
-``world_from_target`` in metres and radians (DESIGN.md §2). Byte ``4*i`` starts value ``i``.
+``world_from_target`` in metres and radians (docs/design.md §2). Byte ``4*i`` starts value ``i``.
 """
 
 from __future__ import annotations

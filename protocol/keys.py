@@ -1,4 +1,4 @@
-"""Every Zenoh key expression of the fleet, in one place (DESIGN.md §4).
+"""Every Zenoh key expression of the fleet, in one place (docs/design.md §4).
 
 Data keys are ``evopose/<fleet>/<vehicle>/<topic>``; presence is the liveliness token
 ``evopose/<fleet>/@alive/<vehicle>``. Fleet and vehicle names are one key chunk each:

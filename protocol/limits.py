@@ -1,4 +1,4 @@
-"""Per-topic payload size limits, in bytes, checked before any decoding (DESIGN.md §4).
+"""Per-topic payload size limits, in bytes, checked before any decoding (docs/design.md §4).
 
 A receiver compares ``len(payload)`` with :data:`SIZE_LIMITS` first and rejects a longer payload
 without allocating or parsing it; msgpack is then unpacked with per-object limits no larger

@@ -1,4 +1,4 @@
-"""The pose-problem file (DESIGN.md §3): loading, validation messages, round trip, output object."""
+"""The pose-problem file (docs/design.md §3): loading, validation messages, round trip, output object."""
 
 from __future__ import annotations
 

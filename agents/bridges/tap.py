@@ -1,5 +1,5 @@
 """A raw tap on every data key of a fleet: the Zenoh callback copies (key, payload, receive time) into a bounded
-queue, one worker thread hands them to the bridge (DESIGN.md §4: no slow work inside a callback).
+queue, one worker thread hands them to the bridge (docs/design.md §4: no slow work inside a callback).
 
 The tap does not announce itself (no liveliness token): it is an observer, not a team-mate.
 """

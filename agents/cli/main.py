@@ -47,7 +47,7 @@ bridge_commands.register(app)
 @app.command("solve")
 def solve_command(
     problem: Annotated[Path | None, typer.Argument(metavar="[PROBLEM]", show_default=False,
-                                                   help="Pose-problem file, YAML or JSON (DESIGN.md §3).")] = None,
+                                                   help="Pose-problem file, YAML or JSON (docs/design.md §3).")] = None,
     as_json: Annotated[bool, typer.Option("--json", help="Print one JSON object instead of a table.")] = False,
     seed: Annotated[int | None, typer.Option(min=0, help="Random seed; overrides the file's seed.")] = None,
     time_budget: Annotated[float | None, typer.Option(min=0, help="Wall-time budget in seconds.")] = None,

@@ -1,1 +1,1 @@
-"""The pose-problem file contract (DESIGN.md §3): its schema, images, and solving from a file or an image."""
+"""The pose-problem file contract (docs/design.md §3): its schema, images, and solving from a file or an image."""

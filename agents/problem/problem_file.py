@@ -1,4 +1,4 @@
-"""The pose-problem file of DESIGN.md §3: its schema, loading it into an :class:`evopose.PoseProblem`, and the output.
+"""The pose-problem file of docs/design.md §3: its schema, loading it into an :class:`evopose.PoseProblem`, and the output.
 
 A problem file (YAML or JSON) holds a model, one or more views (eq. 4), the search box,
 optional eq. (3) constraints, hint poses, a seed and search options. Angles are radians,
@@ -217,7 +217,7 @@ OptionsSpec = create_model(
 
 
 class ProblemSpec(Spec):
-    """A whole pose-problem file (DESIGN.md §3)."""
+    """A whole pose-problem file (docs/design.md §3)."""
 
     model: ModelSpec
     views: Annotated[list[ViewSpec], Field(min_length=1, max_length=MAX_VIEWS)]
@@ -349,7 +349,7 @@ def read_problem(path: str | Path) -> ProblemInputs:
 
 
 def load_problem(path: str | Path) -> tuple[PoseProblem, SearchOptions, int | None]:
-    """Read a YAML or JSON pose-problem file (DESIGN.md §3); see :func:`parse_problem`.
+    """Read a YAML or JSON pose-problem file (docs/design.md §3); see :func:`parse_problem`.
 
     Raises
     ------
@@ -410,7 +410,7 @@ def problem_to_dict(problem: PoseProblem, constraints: dict[str, tuple[float, fl
 
 
 def solution_to_dict(solution: Solution) -> dict:
-    """The solver's output object (DESIGN.md §3), plus ``stop_reason``, ``view_terms`` and ``view_weights``.
+    """The solver's output object (docs/design.md §3), plus ``stop_reason``, ``view_terms`` and ``view_weights``.
 
     ``confident`` is the calibrated verdict (:attr:`evopose.Solution.confident`); ``covariance`` the 6x6
     covariance in the ROS ``PoseWithCovariance`` convention (docs/protocol.md, "Covariance"), row by row;

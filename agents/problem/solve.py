@@ -17,7 +17,7 @@ from agents.problem.problem_file import ProblemFileError, ProblemInputs, read_pr
 
 def solve_file(path: str | Path, *, seed: int | None = None, time_budget: float | None = None,
                fitness: FitnessKind | None = None, overlay: str | Path | None = None) -> dict:
-    """Solve the pose-problem file at ``path`` (DESIGN.md §3) and return the output object.
+    """Solve the pose-problem file at ``path`` (docs/design.md §3) and return the output object.
 
     ``seed``, ``time_budget`` and ``fitness`` override the file's ``seed`` and ``options`` when given.
     Views may give an ``image`` instead of ``points`` (marks are extracted first). ``overlay`` writes a

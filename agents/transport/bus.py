@@ -1,4 +1,4 @@
-"""FleetBus: one vehicle's view of the fleet over ONE Zenoh session (DESIGN.md §4).
+"""FleetBus: one vehicle's view of the fleet over ONE Zenoh session (docs/design.md §4).
 
 Sending: one publisher per topic with the topic's QoS (``protocol.QOS``): BLOCK for hints,
 features, attitude and poses (hints also ``express``), DROP for images; every message gets the

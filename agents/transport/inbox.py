@@ -1,7 +1,7 @@
 """What the fleet bus admits, in bounded memory: the hand-off queue from the receivers to the worker, a per-sender
 rate budget that drops floods before they are decoded, and a bounded set of senders.
 
-Anything received is untrusted (DESIGN.md §4): a flood of valid messages from one sender, or messages under a
+Anything received is untrusted (docs/design.md §4): a flood of valid messages from one sender, or messages under a
 new sender name each time, must cost a counter, not the vehicle's frame rate or its memory.
 """
 

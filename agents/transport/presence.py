@@ -1,6 +1,6 @@
 """Is a vehicle's name already taken in its fleet? Asked once, before the vehicle declares its own presence.
 
-A vehicle is present while its liveliness token ``evopose/<fleet>/@alive/<vehicle>`` exists (DESIGN.md §4).
+A vehicle is present while its liveliness token ``evopose/<fleet>/@alive/<vehicle>`` exists (docs/design.md §4).
 A second agent with the same name would mix its messages with the first one's under one key (receivers
 would count them as lost or reordered, and take either pose as the vehicle's), so it must refuse to start:
 :func:`ensure_name_free` raises :class:`DuplicateVehicleError` (one line, exit code 2 at the CLI).

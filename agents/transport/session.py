@@ -2,7 +2,7 @@
 
 Precedence: the file (``config_file``, else the ``ZENOH_CONFIG`` environment variable), then the
 command-line options on top of it. Open the session in the process that uses it: a Zenoh session does
-not survive ``fork`` (DESIGN.md §4).
+not survive ``fork`` (docs/design.md §4).
 
 Safe defaults (docs/security.md), where Zenoh's own are wide open:
 
