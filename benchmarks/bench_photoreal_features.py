@@ -51,7 +51,8 @@ def evaluate(directory: Path) -> list[dict]:
             prior = mark_prior(camera, world.model.mark_radius, world.model.size, area.lo[:3], area.hi[:3])
             match_px = 1.5 if prior.radius_px[1] < 3 else 3.0
             for name in FRONT_ENDS:
-                det = (detect_contrast_marks(image, world.model.palette, prior) if name == "contrast"
+                det = (detect_contrast_marks(image, world.model.palette, prior, body=world.model.body_colour)
+                       if name == "contrast"
                        else detect_colour_marks(image, colour_ranges(world.model.palette)))
                 found, _ = match_to_truth(det.points, uv[whole], match_px)
                 correct, _ = match_to_truth(det.points, uv, match_px)

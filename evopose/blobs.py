@@ -20,8 +20,12 @@ scale a mark has at the target's distance. So (docs/design.md, "The feature fron
    lies on the line from the background through the observed spot (a blend ``p = a c + (1 - a) b``), in
    linear light; a confidence from the margin to the second colour. A spot that fits no paint colour (a
    body corner, a shadow) is dropped.
-5. **Context**: the marks of one target lie within its image extent; with the prior's extent the densest
-   such cluster is kept and far specks are dropped.
+5. **Context**: the marks lie on the target's body. Given the body's paint colour (the model's), a candidate
+   must lie on or inside a patch of that paint seen under any light (:func:`paint_pixels`: the dichromatic
+   reflection model, paint plus the light's own colour; :func:`body_region`); clutter in the marks' own hues lies
+   on the ground and is dropped.
+   The marks of one target lie within its image extent; with the prior's extent the densest such cluster is
+   kept and far specks are dropped.
 
 Images are OpenCV BGR ``uint8`` (H, W, 3); points ``(u, v)`` pixels with pixel centres at integers.
 """
@@ -54,6 +58,14 @@ BLACK_SLACK = 0.02
 MIN_RELATIVE_BRIGHTNESS = 0.2
 #: Weight of the chroma axes against lightness in the response (CIE Lab units).
 CHROMA_WEIGHT = 1.0
+#: Body context (:func:`paint_pixels`): the largest residual of a paint pixel's fit, relative to the pixel, and the
+#: least share of its light the paint carries (a low sun's gloss on a red body's top face leaves it ~0.45; grey
+#: ground ~0.05).
+PAINT_RESIDUAL, PAINT_SHARE = 0.12, 0.3
+#: With the body context, where the prior's largest mark radius is under :data:`SMALL_SPOT_PX`, a spot may misfit
+#: its label this much: the encoder's 4:2:0 chroma (2 x 2 px blocks) leaves such a mark's colour far off its
+#: paint's line, and the body, not the label, rejects the clutter.
+MAX_LABEL_MISFIT_ON_BODY, SMALL_SPOT_PX = 1.0, 3.0
 
 
 @dataclass(frozen=True)
@@ -152,14 +164,56 @@ class ContrastMarks(MarkDetections):
     contrast: np.ndarray = None  # type: ignore[assignment]
 
 
+def paint_pixels(lin: np.ndarray, body_linear: np.ndarray) -> np.ndarray:
+    """Which pixels (bool (H, W)) show the body's paint, under any light: the dichromatic reflection model, a
+    pixel ``p = a c + b w`` of the paint's colour ``c`` (the body lit by the sun, or only by the sky in a shadow)
+    and the light's own colour ``w`` (neutral in a white-balanced image: the gloss reflecting the sky), ``a, b >=
+    0``. Paint when the fit leaves at most :data:`PAINT_RESIDUAL` of the pixel and the paint carries at least
+    :data:`PAINT_SHARE` of its light (grey ground fits ``w`` alone; the marks' hues fit neither)."""
+    c = body_linear.astype(np.float32)
+    basis = np.stack([c, np.ones(3, np.float32)], axis=1)                       # (3, 2): [c, w]
+    coef = lin @ np.linalg.pinv(basis).T.astype(np.float32)                       # (H, W, 2)
+    a, b = coef[..., 0], coef[..., 1]
+    # b < 0: the best fit without gloss is the paint alone
+    alone = np.maximum((lin @ c) / max(float(c @ c), 1e-12), 0)
+    a, b = np.where(b < 0, alone, a), np.maximum(b, 0)
+    fit = a[..., None] * c + b[..., None]
+    norm = np.linalg.norm(lin, axis=2)
+    residual = np.linalg.norm(lin - fit, axis=2)
+    share = a * float(c.sum()) / np.maximum(a * float(c.sum()) + 3 * b, 1e-9)
+    return (a > 0) & (residual <= PAINT_RESIDUAL * norm) & (share >= PAINT_SHARE) & (norm > 0.005)
+
+
+def body_region(lin: np.ndarray, body_linear: np.ndarray, mark_px: float) -> np.ndarray:
+    """Where the target's marks can be (bool (H, W)): the pixels of the body's paint (:func:`paint_pixels`) less
+    single specks; closed with a disc of the largest mark's radius ``mark_px`` and its holes filled (a mark inside
+    a face is a hole in the paint, a mark on a face's outline a notch), then grown by half that radius, at least
+    2 px (a mark on the outline of a face lies half outside its paint; a 2-3 px mark's pixels are mixed with what
+    lies beside the body). ``lin`` (H, W, 3) linear BGR, ``body_linear`` (3,)."""
+    paint = cv2.morphologyEx(paint_pixels(lin, body_linear).astype(np.uint8), cv2.MORPH_OPEN,
+                             np.ones((2, 2), np.uint8))
+    r = max(int(np.ceil(mark_px)), 1)
+    disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * r + 1, 2 * r + 1))
+    closed = cv2.morphologyEx(paint, cv2.MORPH_CLOSE, disc)
+    # fill the holes: everything the outside (flooded from a padded border) does not reach
+    padded = cv2.copyMakeBorder(closed, 1, 1, 1, 1, cv2.BORDER_CONSTANT, value=0)
+    outside = padded.copy()
+    cv2.floodFill(outside, np.zeros((padded.shape[0] + 2, padded.shape[1] + 2), np.uint8), (0, 0), 2)
+    filled = (outside[1:-1, 1:-1] != 2).astype(np.uint8)
+    g = max(2, int(np.ceil(mark_px / 2)))
+    return cv2.dilate(filled, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * g + 1, 2 * g + 1))) > 0
+
+
 def detect_contrast_marks(image_bgr: np.ndarray, palette: Mapping[str, tuple[int, int, int]],
-                          prior: MarkPrior = MarkPrior(), *, k_sigma: float = K_SIGMA,
-                          max_edge_ratio: float = MAX_EDGE_RATIO, max_misfit: float = MAX_LABEL_MISFIT,
-                          max_marks: int = 256) -> ContrastMarks:
+                          prior: MarkPrior = MarkPrior(), *, body: tuple[int, int, int] | None = None,
+                          k_sigma: float = K_SIGMA, max_edge_ratio: float = MAX_EDGE_RATIO,
+                          max_misfit: float | None = None, max_marks: int = 256) -> ContrastMarks:
     """The model's marks in a camera image (uint8 (H, W, 3) BGR) by their contrast (see the module's docstring).
 
     ``palette``: the model's mark colours, name -> BGR (sRGB, 0-255); ``prior``: the marks' radius range and the
-    target's extent in pixels. Returns the marks sorted by label then row."""
+    target's extent in pixels; ``body``: the body's paint (BGR), the context the marks must lie on (None: no
+    body context). ``max_misfit``: default :data:`MAX_LABEL_MISFIT`, with a body :data:`MAX_LABEL_MISFIT_ON_BODY`
+    when every mark is under :data:`SMALL_SPOT_PX`. Returns the marks sorted by label then row."""
     bgr = _to_bgr(image_bgr)
     names = tuple(palette)
     if not names:
@@ -211,8 +265,12 @@ def detect_contrast_marks(image_bgr: np.ndarray, palette: Mapping[str, tuple[int
         off = -np.linalg.solve(np.array([[dxx, dxy], [dxy, dyy]]), np.array([gx, gy]))
         pts[i] = (x + np.clip(off[0], -0.5, 0.5), y + np.clip(off[1], -0.5, 0.5))
     lvl, ys, xs, radius, pts = lvl[ok], ys[ok], xs[ok], radius[ok], pts[ok]
-    # colours: the spot (finest blur at the centre) and its ring (median around, outside the mark), linear light
     lin = _srgb_to_linear(img)
+    if body is not None:  # context: on or beside the body's paint
+        region = body_region(lin, _srgb_to_linear(np.array(body, np.float32) / 255.0), prior.radius_px[1])
+        on = region[ys, xs]
+        lvl, ys, xs, radius, pts = lvl[on], ys[on], xs[on], radius[on], pts[on]
+    # colours: the spot (finest blur at the centre) and its ring (median around, outside the mark), linear light
     spot = np.array([lin[y, x] if r < 1.5 else cv2.GaussianBlur(lin[max(y - 2, 0):y + 3, max(x - 2, 0):x + 3],
                                                                 (0, 0), 0.5 * r)[min(y, 2), min(x, 2)]
                      for y, x, r in zip(ys.tolist(), xs.tolist(), radius.tolist())]).reshape(-1, 3)
@@ -229,6 +287,9 @@ def detect_contrast_marks(image_bgr: np.ndarray, palette: Mapping[str, tuple[int
     scene = float(np.median(lin[::4, ::4].sum(axis=2)))
     labels, misfit, conf = label_colours(spot.astype(float), ring.astype(float), pal.astype(float),
                                          MIN_RELATIVE_BRIGHTNESS * scene)
+    if max_misfit is None:
+        max_misfit = MAX_LABEL_MISFIT_ON_BODY if body is not None and prior.radius_px[1] < SMALL_SPOT_PX \
+            else MAX_LABEL_MISFIT
     good = misfit <= max_misfit
     lvl, ys, xs, radius, pts, labels, conf = lvl[good], ys[good], xs[good], radius[good], pts[good], labels[good], \
         conf[good]
@@ -293,7 +354,8 @@ def _densest_cluster(pts: np.ndarray, weight: np.ndarray, radius: float) -> np.n
     return np.nonzero(np.linalg.norm(pts - mean, axis=1) <= radius)[0]
 
 
-__all__ = ["ContrastMarks", "MarkPrior", "contrast_responses", "detect_contrast_marks", "label_colours", "scales"]
+__all__ = ["ContrastMarks", "MarkPrior", "body_region", "contrast_responses", "detect_contrast_marks", "label_colours",
+           "paint_pixels", "scales"]
 
 
 def mark_prior(camera, mark_radius: float, target_extent: float, lo: np.ndarray, hi: np.ndarray,

@@ -147,6 +147,21 @@ class TargetModel:
         pts = self.body.vertices if len(self.body.vertices) else self.mark_points
         return float(np.max(np.ptp(pts, axis=0)))
 
+    @property
+    def body_colour(self) -> tuple[int, int, int] | None:
+        """The colour (BGR) covering most of the body's surface, or None without a body: the paint a camera sees
+        around the marks (the contrast front-end's context, :func:`evopose.blobs.detect_contrast_marks`)."""
+        if not len(self.body):
+            return None
+        area: dict[tuple[int, int, int], float] = {}
+        for face, colour in zip(self.body.faces, self.body.colours):
+            p = self.body.vertices[face]
+            # a convex planar polygon's area: half the norm of the sum of its fan's cross products
+            a = 0.5 * float(np.linalg.norm(np.cross(p[1:-1] - p[0], p[2:] - p[0]).sum(axis=0)))
+            key = tuple(int(c) for c in colour)
+            area[key] = area.get(key, 0.0) + a
+        return max(area, key=area.get)
+
     def evopose_model(self) -> Model:
         """The marks as an :class:`evopose.Model` for the solver: points, normals, and each mark's colour as its
         label (:meth:`colour_labels`; used by views whose points carry colour labels too)."""

@@ -3,6 +3,8 @@ fitting each paint colour on the line ring -> spot; judged against the renderer'
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import cv2
 import numpy as np
 import pytest
@@ -101,3 +103,55 @@ def test_labels_fit_a_blend_with_the_ring_at_any_brightness():
             spot = ring + coverage * (light * cyan - ring)
             label, misfit, confidence = label_colours(spot, ring, palette)
             assert label[0] == 1 and misfit[0] < 0.05 and confidence[0] > 0.5
+
+
+def test_with_the_body_context_a_mark_coloured_ball_on_the_ground_is_dropped_and_the_marks_on_the_body_kept():
+    image = _canvas((110, 115, 120))                                  # grey ground
+    cv2.rectangle(image, (40, 30), (100, 80), (40, 40, 150), -1)      # the red body
+    image[30:55, 40:101] = np.clip(image[30:55, 40:101] * 0.6 + 45, 0, 255)   # a glossy top face: paint + sky
+    for centre, colour in (((55, 40), "cyan"), ((85, 68), "yellow")):        # two marks on the body
+        cv2.circle(image, centre, 3, PALETTE[colour], -1, cv2.LINE_AA)
+    cv2.circle(image, (130, 60), 4, PALETTE["yellow"], -1, cv2.LINE_AA)      # a yellow ball on the ground
+    prior = MarkPrior((2.0, 5.0))
+    without = detect_contrast_marks(image, PALETTE, prior)
+    with_body = detect_contrast_marks(image, PALETTE, prior, body=(40, 40, 150))
+    ball = lambda det: [p for p in det.points if np.hypot(*(p - (130, 60))) < 3]   # noqa: E731
+    assert ball(without)                       # without context the ball is a yellow mark
+    assert not ball(with_body)
+    kept = match_to_truth(with_body.points, np.array([[55.0, 40.0], [85.0, 68.0]]), 1.5)[0]
+    assert len(kept) == 2 and sorted(with_body.colours()) == ["cyan", "yellow"]
+
+
+def test_paint_pixels_take_the_body_in_sun_in_shadow_and_under_gloss_but_not_grey_ground_or_marks():
+    from evopose.blobs import _srgb_to_linear, paint_pixels
+
+    red = _srgb_to_linear(np.array([40, 40, 150], np.float32) / 255)
+    pixels = np.array([[red, 0.2 * red, 0.4 * red + 0.06,                # sunlit, sky-lit shadow, gloss
+                        [0.25, 0.3, 0.35], [0.007, 0.72, 0.87], [0.72, 0.64, 0.007]]], np.float32)  # ground, marks
+    assert paint_pixels(pixels, red).tolist() == [[True, True, True, False, False, False]]
+
+
+@pytest.mark.parametrize("name, recall, precision", [("paper", 0.6, 0.35), ("telephoto", 0.9, 0.65)])
+def test_on_the_committed_photoreal_frames_the_contrast_front_end_with_the_body_finds_the_marks(name, recall,
+                                                                                             precision):
+    # Blender Cycles frames (tests/data/photoreal, docs/datasets.md): the issue's bars (paper scale 0.8 / 0.8,
+    # telephoto 0.95) are not met yet; these are the levels measured (BENCHMARKS.md), so a regression fails
+    from scenarios.dataset import open_dataset
+
+    data = open_dataset(Path(__file__).parent / "data" / "photoreal" / name)
+    world, area = data.world(), data.world().bounds()
+    found = marks = correct = detections = 0
+    for cam in data.cameras:
+        for k in range(data.frames):
+            image = cv2.imread(str(data.image_path(cam, k)), cv2.IMREAD_COLOR)
+            truth = data.truth(k).cameras[cam].marks
+            uv = np.array([m.uv for m in truth]).reshape(-1, 2)
+            whole = np.array([m.fully_visible for m in truth], bool)
+            prior = mark_prior(data.camera(cam, k), world.model.mark_radius, world.model.size, area.lo[:3],
+                               area.hi[:3])
+            match_px = 1.5 if prior.radius_px[1] < 3 else 3.0
+            det = detect_contrast_marks(image, world.model.palette, prior, body=world.model.body_colour)
+            found += len(match_to_truth(det.points, uv[whole], match_px)[0])
+            correct += len(match_to_truth(det.points, uv, match_px)[0])
+            marks, detections = marks + int(whole.sum()), detections + len(det)
+    assert found / marks >= recall and correct / detections >= precision

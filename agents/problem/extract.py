@@ -68,12 +68,12 @@ def feature_extractor(kind: str, target: TargetModel, area: Bounds | None = None
         return hue_marks
     if kind != "contrast":
         raise ValueError(f"features must be one of {', '.join(FEATURE_KINDS)}, got {kind!r}")
-    palette, size = dict(target.palette), target.size
+    palette, size, body = dict(target.palette), target.size, target.body_colour
 
     def contrast_marks(image: np.ndarray, camera: Camera | None = None) -> tuple[np.ndarray, np.ndarray]:
         prior = MarkPrior() if camera is None or area is None else mark_prior(
             camera, target.mark_radius, size, area.lo[:3], area.hi[:3])
-        found = detect_contrast_marks(image, palette, prior)
+        found = detect_contrast_marks(image, palette, prior, body=body)
         return found.points, found.labels
 
     return contrast_marks
