@@ -76,12 +76,13 @@ def pose_of(record: dict) -> np.ndarray:
     return np.array([record["pose"][n] for n in ("x", "y", "z", "roll", "pitch", "yaw")])
 
 
-def test_feature_sharing_keeps_the_camera_rate_and_both_publish_the_same_pose(teams):
+def test_feature_sharing_pairs_both_views_and_both_publish_the_same_pose(teams):
     team = teams("features")
     s = pair(team, "features", 20)
     for vehicle in ("H1", "H2"):
         summary = s[vehicle]
-        # the camera rate itself is measured in BENCHMARKS.md (bench_fleet: sustained fps, skipped frames)
+        # the camera rate is a timing: tested in process (tests/test_vehicle_realtime.py), measured in BENCHMARKS.md
+        # (bench_fleet: sustained fps, skipped frames)
         first, held = good_from_first(summary)
         assert summary["frames"] == summary["estimates"] == 20 and first <= SEARCH_FRAMES and held, summary["poses"]
         assert summary["multi_view_frames"] >= 15
@@ -99,7 +100,7 @@ def test_feature_sharing_keeps_the_camera_rate_and_both_publish_the_same_pose(te
         assert np.linalg.norm(d[:3]) <= 0.01 and np.degrees(np.abs(d[3:])).max() <= 0.1, (n, d)
 
 
-def test_hints_are_24_bytes_flow_above_100_hz_and_improve_on_flying_alone(teams):
+def test_hints_are_24_bytes_flow_above_100_hz_and_leave_the_pose_as_good_as_alone(teams):
     alone = pair(teams("alone"), "none", 30)
     hinted = pair(teams("hints"), "hint", 30)
     for vehicle in ("H1", "H2"):
@@ -111,8 +112,11 @@ def test_hints_are_24_bytes_flow_above_100_hz_and_improve_on_flying_alone(teams)
         assert traffic["received"]["hint"] > 100 * seconds * 0.9
         assert "hint" not in alone[vehicle]["traffic"]["sent"]
     # Table II (b): a hint is taken only when it fits the own image about as well, and the pose is then refined
-    # on the own image, so at the telephoto scale neither helicopter is worse with hints (the paper's gain for
-    # H2 is a wrong-basin rescue, tested at paper scale in test_paper_scale.py)
+    # on the own image, so at the telephoto scale hints do not change the pose: bench_fleet (BENCHMARKS.md) measures
+    # the same error alone and hinted (H1 2.62 / 2.62 mm, H2 41.93 / 41.93 mm at 10 fps); H2's 42 mm is its view's
+    # precision, not a wrong basin a hint could rescue. The bound is the run-to-run spread of 30 frames, not a
+    # claim of improvement; the paper's gain for H2 (a wrong-basin rescue) is tested at paper scale
+    # (test_paper_scale.py).
     for vehicle in ("H1", "H2"):
         assert hinted[vehicle]["error_position"] < 1.25 * alone[vehicle]["error_position"], (vehicle, hinted, alone)
 
@@ -146,7 +150,7 @@ def test_ground_station_holds_the_airship_attitude_and_sends_it_its_pose(teams):
     assert airship["error_position"] < 0.15
 
 
-def test_a_killed_teammate_is_not_waited_for_and_is_used_again_when_back(teams):
+def test_a_killed_teammate_is_dropped_from_the_views_and_used_again_when_back(teams):
     team = teams("kill", margin_s=4.0)
     h1 = team.start("H1", "--share", "features", "--max-age", "0.5", wait_for="H2", listen=True)
     h2 = team.start("H2", "--share", "features", wait_for="H1")

@@ -35,23 +35,32 @@ def test_error_series_is_the_distance_to_the_truth_at_each_frame():
     assert all(len(a) == 0 for a in figures.error_series({"poses": []}, WORLD))
 
 
-def test_every_figure_is_drawn_from_run_records(tmp_path):
-    def record(scenario: str, world: str, run: int = 0) -> dict:
-        agents = {v: {"poses": published(range(100, 130), (0.01 * (run + 1), 0, 0))} for v in ("H1", "H2")}
+def test_every_figure_is_drawn_from_its_run_records(tmp_path):
+    """Each figure is an image of the records it was given: other records (errors 0.5 m instead of 1-2 cm, other
+    byte rates, another fitness history) draw another image."""
+    def record(scenario: str, world: str, run: int, error_m: float) -> dict:
+        agents = {v: {"poses": published(range(100, 130), (error_m * (run + 1), 0, 0))} for v in ("H1", "H2")}
         return {"scenario": scenario, "world": world, "variant": "H1+H2", "run": run, "agents": agents}
 
-    records = [record(s, WORLD, r) for s in ("exp2-solo", "exp2a-features", "exp2b-hints") for r in (0, 1)]
-    rows = [{"scenario": s, "vehicle": "H1", "world": WORLD, "history": [3.0, 2.0, 1.0],
-             "traffic": {t: {"bytes_per_s": b}}}
-            for s, t, b in (("exp2-raw", "image", 9.2e6), ("exp2a-features", "features", 4000.0),
-                            ("exp2b-hints", "hint", 4800.0))]
-    paths = [figures.error_over_time(records, tmp_path / "error.png", WORLD),
-             figures.tracks_from_above(records, tmp_path / "tracks.png", WORLD),
-             figures.bandwidth(rows, tmp_path / "bandwidth.png", [WORLD]),
-             figures.figure_6({"H1 + H2": rows[1]}, tmp_path / "fig6.png", WORLD)]
-    for path in paths:
-        image = cv2.imread(str(path))
-        assert image is not None and image.shape[0] > 300 and image.std() > 10, path
+    def rows(scale: float) -> list[dict]:
+        return [{"scenario": s, "vehicle": "H1", "world": WORLD, "history": [3.0 * scale, 2.0, 1.0],
+                 "traffic": {t: {"bytes_per_s": b * scale}}}
+                for s, t, b in (("exp2-raw", "image", 9.2e6), ("exp2a-features", "features", 4000.0),
+                                ("exp2b-hints", "hint", 4800.0))]
+
+    def draw(error_m: float, scale: float, folder) -> list:
+        folder.mkdir()
+        records = [record(s, WORLD, r, error_m) for s in ("exp2-solo", "exp2a-features", "exp2b-hints") for r in (0, 1)]
+        paths = [figures.error_over_time(records, folder / "error.png", WORLD),
+                 figures.tracks_from_above(records, folder / "tracks.png", WORLD),
+                 figures.bandwidth(rows(scale), folder / "bandwidth.png", [WORLD]),
+                 figures.figure_6({"H1 + H2": rows(scale)[1]}, folder / "fig6.png", WORLD)]
+        return [cv2.imread(str(path)) for path in paths]
+
+    first, other = draw(0.01, 1.0, tmp_path / "a"), draw(0.5, 3.0, tmp_path / "b")
+    for name, a, b in zip(("error", "tracks", "bandwidth", "fig6"), first, other):
+        assert a is not None and a.shape[0] > 300 and a.std() > 10, name
+        assert a.shape != b.shape or np.abs(a.astype(int) - b).sum() > 0, f"{name} does not depend on its records"
 
 
 @pytest.mark.parametrize("missing", ["exp2a-features", "exp2b-hints"])

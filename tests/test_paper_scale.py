@@ -22,6 +22,7 @@ from protocol import FeatureSet, decode, encode
 from scenarios.errors import ScenarioError
 from scenarios.fleet import load_fleet_scenario
 from scenarios.world import load_scenario
+from tests.fleet_procs import free_port
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -96,7 +97,7 @@ def test_a_team_mates_hint_pulls_a_vehicle_out_of_a_wrong_basin():
 def test_two_agents_at_paper_scale_publish_the_same_pose():
     """Real processes over Zenoh on loopback: exp2a-features on exp2-paper-scale."""
     out = subprocess.run([sys.executable, "-m", "agents.cli", "scenario", "run", "exp2a-features", "--world",
-                          "exp2-paper-scale", "--frames", "20", "--json", "--listen", "tcp/127.0.0.1:17461"],
+                          "exp2-paper-scale", "--frames", "20", "--json", "--listen", f"tcp/127.0.0.1:{free_port()}"],
                          cwd=ROOT, capture_output=True, text=True, timeout=300)
     assert out.returncode == 0, out.stderr[-2000:]
     result = json.loads(out.stdout.strip().splitlines()[-1])

@@ -5,6 +5,7 @@ real router; the ROS side is the project's own rmw_zenoh publisher (no live ROS 
 from __future__ import annotations
 
 import math
+import threading
 import time
 from types import SimpleNamespace
 
@@ -62,30 +63,39 @@ def test_a_ros_node_hints_the_fleet_through_a_pose_stamped_topic(fleet):
     assert (ready["hints_from"], ready["hint_vehicle"]) == (TOPIC, "lab")
     received: list[np.ndarray] = []
     sent = [np.array([0.1 * k, -0.2, 0.05, 0.01 * k, -0.02, 0.6 + 0.1 * k]) for k in range(5)]
+    #: the last valid pose, published after the refused ones: the bridge forwards in order, so once it arrives
+    #: every hint the bridge could forward has arrived, and anything refused would have come before it
+    marker = np.array([9.0, 9.0, 9.0, 0.0, 0.0, 0.0])
+    matched, marker_in = threading.Event(), threading.Event()
+
+    def on_hint(sample) -> None:
+        received.append(decode_hint(sample.payload.to_bytes()))
+        if np.allclose(received[-1], marker):
+            marker_in.set()
+
     with client_session(fleet.endpoint) as session, \
-            session.declare_subscriber(f"evopose/{fleet.fleet}/lab/hint",
-                                       lambda s: received.append(decode_hint(s.payload.to_bytes()))), \
+            session.declare_subscriber(f"evopose/{fleet.fleet}/lab/hint", on_hint), \
             Ros2Node(session, Node("hinter", "/lab")) as node:
         publisher = node.publisher(TOPIC, ros_msgs.POSE_STAMPED, ros_msgs.type_hash(ros_msgs.POSE_STAMPED), DEFAULT_QOS)
-        deadline = time.monotonic() + 20
-        while not publisher.matched and time.monotonic() < deadline:  # the bridge found the publisher's token
-            time.sleep(0.05)
-        assert publisher.matched
+        # the bridge found the publisher's token and subscribed: zenoh's matching status says so
+        listener = publisher._publisher.declare_matching_listener(lambda s: matched.set() if s.matching else None)
+        if publisher.matched:
+            matched.set()
+        assert matched.wait(20)
+        listener.undeclare()
         now = time.time_ns()
         for pose in sent:
             publisher.publish(ros_msgs.serialize(ros_msgs.pose_stamped(pose, now, "map")))
         publisher.publish(ros_msgs.serialize(ros_msgs.pose_stamped(sent[0], now, "odom")))          # another frame
         publisher.publish(ros_msgs.serialize(ros_msgs.pose_stamped((math.nan, 0, 0, 0, 0, 0), now, "map")))
         publisher.publish(b"\x00\x01\x00\x00garbage")                                                  # not CDR
-        deadline = time.monotonic() + 20
-        while len(received) < len(sent) and time.monotonic() < deadline:
-            time.sleep(0.05)
-        time.sleep(0.5)  # what else would arrive (nothing may)
+        publisher.publish(ros_msgs.serialize(ros_msgs.pose_stamped(marker, now, "map")))
+        assert marker_in.wait(20)
     code, _ = bridge.stop(timeout=20)
     summary = bridge.next_record(10, lambda r: r.get("event") == "stopped")
     assert code == 0
-    assert len(received) == len(sent)
-    for got, want in zip(received, sent):
+    assert len(received) == len(sent) + 1
+    for got, want in zip(received, [*sent, marker]):
         assert np.allclose(got, want, atol=1e-6)  # hints are float32 on the wire
-    assert summary["hints"] == {"forwarded": 5, "refused": {"frame": 1, "non-finite": 1},
+    assert summary["hints"] == {"forwarded": 6, "refused": {"frame": 1, "non-finite": 1},
                                 "undecodable": 1, "dropped": 0}, summary
