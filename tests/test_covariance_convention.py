@@ -19,7 +19,8 @@ from evopose.covariance import (covariance, deviation, fixed_axis_covariance, fi
 from geometry import euler_from_rotation, rotation_from_euler
 from scipy.spatial.transform import Rotation
 
-#: Yaw 0.6 rad (the issue's example), some pitch and roll: the Euler and fixed-axis blocks differ by 10-40 %.
+#: Yaw 0.6 rad (the issue's example), some pitch and roll: roll / pitch / yaw sigmas of 10 / 30 / 20 mrad are X / Y / Z
+#: sigmas of 16 / 27 / 19 mrad.
 POSE = np.array([1.0, -2.0, 12.0, 0.2, 0.35, 0.6])
 
 
