@@ -16,9 +16,7 @@ from __future__ import annotations
 
 import argparse
 import os
-import platform
 import sys
-import time
 from pathlib import Path
 
 import cv2
@@ -27,6 +25,8 @@ import numpy as np
 from evopose.blobs import detect_contrast_marks, mark_prior
 from evopose.features import colour_ranges, detect_colour_marks, match_to_truth
 from scenarios.dataset import open_dataset
+
+from .report import provenance
 
 DEFAULT_OUT = Path(__file__).resolve().parent / "results" / "photoreal_features.md"
 FRONT_ENDS = ("marks", "contrast")
@@ -69,8 +69,8 @@ def evaluate(directory: Path) -> list[dict]:
 
 def markdown(rows: list[dict], command: str) -> str:
     lines = ["# Feature front-ends on rendered datasets", "",
-             f"Produced by `{command}` on {platform.machine()} / Python {platform.python_version()} / OpenCV "
-             f"{cv2.__version__}, {time.strftime('%Y-%m-%d')}, load average {os.getloadavg()[0]:.1f}.", "",
+             f"Produced by `{command}`; {provenance()}, OpenCV {cv2.__version__}, load average "
+             f"{os.getloadavg()[0]:.1f}.", "",
              "Recall over fully visible marks, precision over all detections, labels over matched detections "
              "(benchmarks/bench_photoreal_features.py says how).", "",
              "| dataset | world | engine | camera | front-end | frames | marks | detections | match px | recall "
