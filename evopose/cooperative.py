@@ -16,18 +16,21 @@ the best so far, its mutated children and any newly arrived hints, refined and s
 (:class:`evopose.local.LocalSearch` through :func:`evopose.loop.evolve`, the loop :func:`evopose.solve`
 uses) — so an agent can publish a new best (a hint) many times per camera frame, as in the paper's
 Experiment 2(b).
-Pure numpy: no I/O, no Zenoh.
+The estimator's memory is one frozen :class:`EstimatorState`; :class:`Cooperation` (frozen: model, box,
+options, seed) turns a state and a frame into the next state and an :class:`Estimate`, as the search is ask/tell
+(docs/architecture.md, "State has one writer"). :class:`CooperativeEstimator` holds one state for callers that
+want an object. Pure numpy: no I/O, no Zenoh.
 """
 
 from __future__ import annotations
 
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from geometry import pose_difference, wrap_angle
+from geometry import pose_difference
 
 from .fitness import PoseObjective
 from .knowledge import Knowledge, constrained_bounds
@@ -38,6 +41,8 @@ from .problem import Bounds, Model, PoseProblem, View
 from .refine import TRACK_SCHEDULE
 from .search import EvoPose, Told
 from .solver import Solution, solution_of, track
+from .estimator_state import (Estimate, EstimatorState, Verdict, _injected, _remember_motion, _Search,
+                              verdict)
 from .uncertainty import assess, deviation, mahalanobis
 
 #: A confirming search's confident pose within this many sigmas (its covariance) of the tracked one confirms it.
@@ -50,100 +55,35 @@ GENERATION_CHILDREN = 4
 CHILD_STEP_POSITION, CHILD_STEP_ANGLE = 0.002, 0.005
 
 
-@dataclass(frozen=True)
-class Estimate:
-    """One frame's result of :class:`CooperativeEstimator`.
+@dataclass(frozen=True, eq=False)
+class Cooperation:
+    """Solve, then track, the target's pose from the own and the team's data (eq. 1-4 and hints): the transitions
+    ``(state, frame) -> (state', Estimate)`` of one vehicle's estimator.
+
+    Real time: :meth:`estimate` and :meth:`generation` take a time budget. A search from scratch that does not
+    finish within it is kept in the state and resumed by the next call (on the views it started with, as the
+    paper's Experiment 1 searches one snapshot); meanwhile each call returns the best so far, not good. Once the
+    search finishes with a good pose, that pose is tracked (eq. 2) onto the newest views.
 
     Attributes
-    ----------
-    solution : Solution
-        ``solution.pose`` is ``world_from_target`` ``(x, y, z, roll, pitch, yaw)``, shape (6,).
-    mismatch : float
-        :attr:`evopose.fitness.Match.mismatch` of the pose in [0, 1], 0 best: eq. (4) with the weights in
-        force over its value when nothing matches (robust fitness; 1 when it cannot be judged).
-    solved : bool
-        The pose was searched from scratch (first frame, or tracking was lost).
-    good_at : float or None
-        The ``time.perf_counter()`` instant at which the best individual was first *good* — for the paper's
-        "time to a good pose": fitness under a threshold (here the search's confident mismatch, or almost
-        every visible mark matched one to one). A search goes on after that to confirm the pose.
-    """
-
-    solution: Solution
-    mismatch: float
-    solved: bool
-    good_at: float | None = None
-
-    @property
-    def pose(self) -> np.ndarray:
-        return self.solution.pose
-
-    @property
-    def good(self) -> bool:
-        return bool(self.solution.converged)
-
-
-@dataclass(frozen=True, eq=False)
-class _Search:
-    """A global search in progress (the first pose, or after tracking was lost), resumed slice by slice."""
-
-    optimiser: EvoPose
-    run: Run
-    problem: PoseProblem
-    frame: int
-    #: perf_counter when it started, and when its best was first good (or None)
-    started: float
-    good_at: float | None = None
-    #: a confirming search: the tracked pose at the frame it started (its answer is compared with this)
-    anchor: np.ndarray | None = None
-
-
-class CooperativeEstimator:
-    """Solve, then track, the target's pose from the own and the team's data (eq. 1-4 and hints).
-
-    Real time: :meth:`estimate` and :meth:`generation` take a time budget. A search from scratch that
-    does not finish within it is kept and resumed by the next call (on the views it started with, as the
-    paper's Experiment 1 searches one snapshot); meanwhile each call returns the best so far, not good.
-    Once the search finishes with a good pose, that pose is tracked (eq. 2) onto the newest views.
-
-    Parameters
     ----------
     model : Model
         Target marks in the target frame, shape (M, 3).
     bounds : Bounds
         The operating area (search box), world frame.
-    options : SearchOptions, optional
+    options : SearchOptions
     seed : int
-        Seeds every search; a search started at frame ``n`` uses ``(seed, n)``, so two vehicles given the
-        same inputs compute the same pose.
+        Seeds every search; a search started at frame ``n`` uses ``(seed, n)``, so two vehicles given the same
+        inputs compute the same pose.
     lost_mismatch : float
         Tracking is lost (and the pose searched again) when the mismatch exceeds this.
     """
 
-    def __init__(self, model: Model, bounds: Bounds, options: SearchOptions | None = None, *, seed: int = 0,
-                 lost_mismatch: float = 0.5) -> None:
-        self.model, self.bounds = model, bounds
-        self.options = options or SearchOptions()
-        self.seed, self.lost_mismatch = seed, lost_mismatch
-        self.last: Solution | None = None
-        self._search: _Search | None = None
-        #: how the last frame's views evaluate candidates between frames (its objective: the last eq. 4 weights)
-        self._evaluator: Evaluator | None = None
-        self._best_fitness = np.inf  # of ``last`` under ``_evaluator.objective``
-        self._rng = np.random.default_rng([seed, 1])
-        self._confirm: _Search | None = None  # a search confirming a tracked pose that is not confident
-        self._frame = 0  # the frame being estimated
-        self._good: tuple[int, np.ndarray] | None = None  # (frame, pose) of the last good estimate
-        self._motion: tuple[int, np.ndarray] | None = None  # (frame, pose change per frame) at the last good one
-
-    def reset(self) -> None:
-        """Forget the last pose and any search in progress: the next frame is searched from scratch."""
-        self.last, self._evaluator, self._search, self._confirm = None, None, None, None
-
-    @property
-    def searching(self) -> bool:
-        """A search from scratch is in progress (the estimates are the best so far, not good)."""
-        return self._search is not None
+    model: Model
+    bounds: Bounds
+    options: SearchOptions = field(default_factory=SearchOptions)
+    seed: int = 0
+    lost_mismatch: float = 0.5
 
     def problem(self, views: Sequence[View], knowledge: Sequence[Knowledge] = (),
                 hints: np.ndarray | None = None) -> PoseProblem:
@@ -151,19 +91,11 @@ class CooperativeEstimator:
         hints = np.zeros((0, 6)) if hints is None else np.atleast_2d(np.asarray(hints, float)).reshape(-1, 6)
         return PoseProblem(self.model, tuple(views), constrained_bounds(self.bounds, knowledge), hints)
 
-    @property
-    def current_best(self) -> np.ndarray | None:
-        """The own best pose now (6,): the tracked pose, the best so far of a search in progress, or None."""
-        if self._search is not None:
-            state = self._search.run.state
-            return np.array(state.best_pose) if len(state.population) else None
-        return None if self.last is None else np.array(self.last.pose)
-
-    def estimate(self, views: Sequence[View], *, knowledge: Sequence[Knowledge] = (),
+    def estimate(self, st: EstimatorState, views: Sequence[View], *, knowledge: Sequence[Knowledge] = (),
                  hints: np.ndarray | None = None, frame: int = 0, budget_s: float | None = None,
                  candidates: np.ndarray | None = None, candidate_margin: float = 0.0,
-                 generations: int | None = None) -> Estimate:
-        """The pose at one frame from ``views`` (own and team-mates'), ``knowledge`` and ``hints``.
+                 generations: int | None = None) -> tuple[EstimatorState, Estimate]:
+        """The next state and the pose at one frame from ``views`` (own and team-mates'), ``knowledge``, ``hints``.
 
         Parameters
         ----------
@@ -185,7 +117,7 @@ class CooperativeEstimator:
         candidate_margin : float
             0: the fittest wins (feature sets: every vehicle must choose the same). > 0 (hints): a candidate
             whose mismatch on the own views is within this of the own best's is preferred, because the own
-            views cannot tell them apart and the team-mate, seeing from elsewhere, can — so no vehicle stays in
+            views cannot tell them apart and the team-mate, seeing from elsewhere, can: so no vehicle stays in
             a wrong basin that its team-mate's pose would fix.
         generations : int, optional
             A search from scratch runs this many generations in this call (``budget_s`` still caps it): slices
@@ -195,87 +127,85 @@ class CooperativeEstimator:
             raise ValueError("estimate needs at least one view")
         problem = self.problem(views, knowledge, hints)
         deadline = None if budget_s is None else time.perf_counter() + budget_s
-        self._frame = frame
-        start = self._start(problem, candidates, candidate_margin)
+        st = replace(st, frame=frame)
+        start = self.start(st, problem, candidates, candidate_margin)
         if start is not None:
-            own_last = self.last is not None and self._search is None and np.array_equal(start, self.last.pose)
-            previous = (self.last if own_last
-                        else self._solution_at(start, problem, self._rivals(start, candidates)))
-            predicted = self._predicted(frame, start)
+            own_last = st.last is not None and st.search is None and np.array_equal(start, st.last.pose)
+            previous = (st.last if own_last
+                        else self._solution_at(start, problem, self._rivals(st, start, candidates)))
+            predicted = self._predicted(st, frame, start)
             extra = problem.hints if predicted is None else np.concatenate([problem.hints, predicted[None]])
             solution = track(previous.with_(pose=start), list(views), problem=problem, options=self.options,
                              seed=np.random.default_rng([self.seed, frame]), lost_mismatch=self.lost_mismatch,
                              hints=extra if len(extra) else None, search_when_lost=False)
             if solution.converged:
-                self._search = None
-                solution = self._confirmed(solution, problem, frame, deadline, generations)
-                return self._keep(solution, problem, False, time.perf_counter())
-            if self._search is None:  # lost: search again, with the lost pose as a hint
-                self.last = None
+                st, solution = self._confirmed(replace(st, search=None), solution, problem, frame, deadline,
+                                               generations)
+                return self._keep(st, solution, problem, False, time.perf_counter())
+            if st.search is None:  # lost: search again, with the lost pose as a hint
+                st = replace(st, last=None)
                 problem = problem.with_hints(np.concatenate([problem.hints, solution.pose[None]]))
-        if self._search is None:
+        if st.search is None:
             optimiser = EvoPose(problem, self.options, np.random.default_rng([self.seed, frame]))
             run = Run(optimiser.start(), Told(0, np.inf, False, None), Evaluator.for_search(problem, self.options),
                       0.0)
-            self._search = _Search(optimiser, run, problem, frame, time.perf_counter())
-        elif hints is not None and np.size(hints):
-            self._search = replace(self._search, run=replace(
-                self._search.run, state=self._search.optimiser.inject(self._search.run.state, hints)))
-        return self._advance(deadline, problem, generations)
+            st = replace(st, search=_Search(optimiser, run, problem, frame, time.perf_counter()))
+        else:
+            st = replace(st, search=_injected(st.search, hints))
+        return self._advance(st, deadline, problem, generations)
 
-    def _confirmed(self, solution: Solution, problem: PoseProblem, frame: int, deadline: float | None,
-                   generations: int | None) -> Solution:
+    def _confirmed(self, st: EstimatorState, solution: Solution, problem: PoseProblem, frame: int,
+                   deadline: float | None, generations: int | None) -> tuple[EstimatorState, Solution]:
         """A tracked pose that is not confident (its chain of warm starts broke, or began at a team-mate's best)
         is confirmed by a global search in slices beside the tracking: confident when that search, which sees
         every basin, finds this pose confidently; replaced when it finds another basin confidently."""
         if solution.confident:
-            self._confirm = None
-            return solution
-        if self._confirm is None:
+            return replace(st, confirm=None), solution
+        search = st.confirm
+        if search is None:
             optimiser = EvoPose(problem, self.options, np.random.default_rng([self.seed, frame, 2]))
             evaluator = Evaluator.for_search(problem, self.options)
-            self._confirm = _Search(optimiser, Run(optimiser.start(), Told(0, np.inf, False, None), evaluator, 0.0),
-                                    problem, frame, time.perf_counter(), anchor=np.array(solution.pose))
-        search = self._confirm
+            search = _Search(optimiser, Run(optimiser.start(), Told(0, np.inf, False, None), evaluator, 0.0),
+                             problem, frame, time.perf_counter(), anchor=np.array(solution.pose))
         until = None if generations is None else search.run.told.generation + generations
         run = evolve(search.optimiser, search.run.state, search.run.evaluator, deadline=deadline,
                      elapsed_before=search.run.seconds, until_generation=until, time_budget=self.options.time_budget)
         if not run.finished:
-            self._confirm = replace(search, run=run)
-            return solution
-        self._confirm = None
+            return replace(st, confirm=replace(search, run=run)), solution
+        st = replace(st, confirm=None)
         found = solution_of(search.problem, self.options, run, run.seconds)
         if not (found.converged and found.confident):
-            return solution
+            return st, solution
         distance = mahalanobis(deviation(found.pose, search.anchor), found.covariance)[0]
         if distance <= CONFIRM_SIGMAS:  # the search's confident answer is the pose tracked then: confident again
-            return solution.with_(confident=True, confidence=found.confidence)
+            return st, solution.with_(confident=True, confidence=found.confidence)
         moved = pose_difference(solution.pose, search.anchor)  # the target's motion since the search began
         relocated = track(found.with_(pose=found.pose + moved), list(problem.views), problem=problem,
                           options=self.options,
                           seed=np.random.default_rng([self.seed, frame, 3]), lost_mismatch=self.lost_mismatch,
                           search_when_lost=False)
-        return relocated if relocated.converged else solution
+        return st, (relocated if relocated.converged else solution)
 
-    def _predicted(self, frame: int, start: np.ndarray) -> np.ndarray | None:
+    @staticmethod
+    def _predicted(st: EstimatorState, frame: int, start: np.ndarray) -> np.ndarray | None:
         """Eq. (2) with a constant-velocity guess: ``start`` moved on by the motion between the last two good
         estimates, for a target that moves between frames (None without two of them)."""
-        if self._motion is None or frame <= self._motion[0]:
+        if st.motion is None or frame <= st.motion[0]:
             return None
-        velocity = self._motion[1]
-        return start + velocity * (frame - self._motion[0])
+        return start + st.motion[1] * (frame - st.motion[0])
 
-    def _start(self, problem: PoseProblem, candidates: np.ndarray | None, margin: float = 0.0) -> np.ndarray | None:
+    def start(self, st: EstimatorState, problem: PoseProblem, candidates: np.ndarray | None,
+              margin: float = 0.0) -> np.ndarray | None:
         """The pose to track from: the fittest (eq. 4 of ``problem``) of the own best and ``candidates``; without
         candidates, the last pose while tracking, else None. Ties go to the lexicographically smallest pose,
         so every vehicle with the same inputs chooses the same. With ``margin`` > 0 the fittest candidate wins
         over the own best when its mismatch is at most ``margin`` higher."""
-        tracking = None if self.last is None or self._search is not None else np.array(self.last.pose)
+        tracking = None if st.last is None or st.search is not None else np.array(st.last.pose)
         if candidates is None or not np.size(candidates):
             return tracking
         pool = np.atleast_2d(np.asarray(candidates, float)).reshape(-1, 6)
         pool = problem.bounds.project(pool[np.all(np.isfinite(pool), axis=1)])
-        own = self.current_best
+        own = st.current_best
         if not len(pool):
             return tracking
         objective = PoseObjective(problem, self.options.fitness, self.options.tau)
@@ -304,20 +234,22 @@ class CooperativeEstimator:
                         options=self.options, covariance=confidence.covariance.matrix,
                         confident=confidence.confident, confidence=confidence)
 
-    def _rivals(self, start: np.ndarray, candidates: np.ndarray | None) -> np.ndarray:
+    @staticmethod
+    def _rivals(st: EstimatorState, start: np.ndarray, candidates: np.ndarray | None) -> np.ndarray:
         """Other answers to weigh a start against: the other candidates and the own search's population."""
         rivals = [np.zeros((0, 6))]
         if candidates is not None and np.size(candidates):
             rivals.append(np.atleast_2d(np.asarray(candidates, float)).reshape(-1, 6))
-        if self._search is not None and len(self._search.run.state.population):
-            rivals.append(np.asarray(self._search.run.state.population, float))
+        if st.search is not None and len(st.search.run.state.population):
+            rivals.append(np.asarray(st.search.run.state.population, float))
         pool = np.concatenate(rivals)
         return pool[np.any(np.abs(pool - start) > 1e-9, axis=1)]
 
-    def _advance(self, deadline: float | None, current: PoseProblem | None, generations: int | None = None) -> Estimate:
+    def _advance(self, st: EstimatorState, deadline: float | None, current: PoseProblem | None,
+                 generations: int | None = None) -> tuple[EstimatorState, Estimate]:
         """Resume the search in progress until ``deadline`` (or for ``generations``); a finished good search is
         tracked onto ``current``."""
-        search = self._search
+        search = st.search
         good_at = search.good_at
 
         def watch(state) -> None:
@@ -331,11 +263,11 @@ class CooperativeEstimator:
                      time_budget=self.options.time_budget)
         solution = solution_of(search.problem, self.options, run, run.seconds)
         if not run.finished:
-            self._search = replace(search, run=run, good_at=good_at)
-            return Estimate(solution, self._mismatch_in(solution), False, None)
-        self._search = None
+            st = replace(st, search=replace(search, run=run, good_at=good_at))
+            return st, Estimate(solution, self._mismatch_in(solution), False, None)
+        st = replace(st, search=None)
         if not solution.converged:
-            return self._keep(solution, search.problem, True, None)
+            return self._keep(st, solution, search.problem, True, None)
         if current is not None and current is not search.problem:  # a frame later: onto the newest views
             tracked = track(solution, list(current.views), problem=current, options=self.options,
                             seed=np.random.default_rng([self.seed, search.frame, 1]),
@@ -343,38 +275,38 @@ class CooperativeEstimator:
             if tracked.converged:
                 solution = tracked.with_(generations=solution.generations, history=solution.history,
                                          from_hint=solution.from_hint)
-        return self._keep(solution, current or search.problem, True, good_at)
+        return self._keep(st, solution, current or search.problem, True, good_at)
 
-    def generation(self, hints: np.ndarray | None = None, budget_s: float | None = None) -> Estimate | None:
-        """Improve the estimate between frames; None before the first estimate.
+    def generation(self, st: EstimatorState, hints: np.ndarray | None = None,
+                   budget_s: float | None = None) -> tuple[EstimatorState, Estimate | None]:
+        """Improve the estimate between frames; no estimate before the first one.
 
         With a search from scratch in progress: resume it for up to ``budget_s`` (hints join its population).
         Otherwise one generation on the last frame's views: the best, mutated children and ``hints`` (H, 6),
         refined; the fittest becomes the best if it is better.
         """
-        if self._search is not None:
-            if hints is not None and np.size(hints):
-                self._search = replace(self._search, run=replace(
-                    self._search.run, state=self._search.optimiser.inject(self._search.run.state, hints)))
+        if st.search is not None:
+            st = replace(st, search=_injected(st.search, hints))
             deadline = time.perf_counter() + (budget_s if budget_s is not None else 0.0)
-            return self._advance(deadline, None)
-        if self.last is None or self._evaluator is None:
-            return None
-        bounds = self.last.problem.bounds if self.last.problem is not None else self.bounds
-        local = LocalSearch(bounds, self._rng, children=GENERATION_CHILDREN,
+            return self._advance(st, deadline, None)
+        if st.last is None or st.evaluator is None:
+            return st, None
+        bounds = st.last.problem.bounds if st.last.problem is not None else self.bounds
+        local = LocalSearch(bounds, np.random.default_rng([self.seed, 1, st.idle]), children=GENERATION_CHILDREN,
                             child_step=(CHILD_STEP_POSITION, CHILD_STEP_ANGLE))
-        state = local.start(self.last.pose, self._best_fitness)
+        state = local.start(st.last.pose, st.best_fitness)
         if hints is not None and np.size(hints):
             state = local.inject(state, hints)
-        run = evolve(local, state, self._evaluator)
+        run = evolve(local, state, st.evaluator)
+        st = replace(st, idle=st.idle + 1)
         if run.told.improved:
             best = run.state
-            self._best_fitness = best.best_fitness
-            self.last = self.last.with_(pose=np.array(best.best_pose), fitness=best.best_fitness,
-                                        view_terms=self._evaluator.objective.view_terms(best.best_pose[None])[0],
-                                        from_hint=best.best_from_hint, generations=self.last.generations + 1,
-                                        history=[*self.last.history[-HISTORY_KEPT + 1:], best.best_fitness])
-        return Estimate(self.last, self._mismatch(self.last.pose), False)
+            last = st.last.with_(pose=np.array(best.best_pose), fitness=best.best_fitness,
+                                 view_terms=st.evaluator.objective.view_terms(best.best_pose[None])[0],
+                                 from_hint=best.best_from_hint, generations=st.last.generations + 1,
+                                 history=[*st.last.history[-HISTORY_KEPT + 1:], best.best_fitness])
+            st = replace(st, last=last, best_fitness=best.best_fitness)
+        return st, Estimate(st.last, self._mismatch(st, st.last.pose), False)
 
     def _mismatch_in(self, solution: Solution) -> float:
         """The mismatch of an unfinished search's best under its own problem."""
@@ -382,35 +314,72 @@ class CooperativeEstimator:
         mismatch = objective.mismatch(objective(np.atleast_2d(solution.pose))[0])
         return 1.0 if mismatch is None else float(np.clip(mismatch, 0.0, 1.0))
 
-    def _keep(self, solution: Solution, problem: PoseProblem, solved: bool, good_at: float | None) -> Estimate:
+    def _keep(self, st: EstimatorState, solution: Solution, problem: PoseProblem, solved: bool,
+              good_at: float | None) -> tuple[EstimatorState, Estimate]:
         objective = PoseObjective(solution.problem or problem, self.options.fitness, self.options.tau)
         if len(solution.view_weights) == objective.n_views and np.any(solution.view_weights > 0):
             objective = objective.with_weights(solution.view_weights)  # the step rule's (eq. 4)
-        self._evaluator = Evaluator(objective, exploit=(TRACK_SCHEDULE,))
-        self._best_fitness = float(objective(np.atleast_2d(solution.pose))[0])
-        mismatch = self._mismatch(solution.pose)
-        self._remember_motion(solution if solution.converged else None)
-        self.last = solution if solution.converged else None
-        if self.last is None:
-            self._evaluator = None
-        return Estimate(solution, mismatch, solved, good_at)
+        st = replace(st, evaluator=Evaluator(objective, exploit=(TRACK_SCHEDULE,)),
+                     best_fitness=float(objective(np.atleast_2d(solution.pose))[0]))
+        mismatch = self._mismatch(st, solution.pose)
+        st = _remember_motion(st, solution if solution.converged else None)
+        if solution.converged:
+            st = replace(st, last=solution)
+        else:
+            st = replace(st, last=None, evaluator=None)
+        return st, Estimate(solution, mismatch, solved, good_at)
 
-    def _remember_motion(self, solution: Solution | None) -> None:
-        """The velocity per frame between the last two good estimates (for :meth:`_predicted`)."""
-        frame, previous = self._frame, self._good
-        self._good = None if solution is None else (frame, np.array(solution.pose))
-        if solution is None or previous is None or frame <= previous[0]:
-            self._motion = None
-            return
-        delta = np.array(solution.pose) - previous[1]
-        delta[3:] = wrap_angle(delta[3:])
-        self._motion = (frame, delta / (frame - previous[0]))
-
-    def _mismatch(self, pose: np.ndarray) -> float:
+    @staticmethod
+    def _mismatch(st: EstimatorState, pose: np.ndarray) -> float:
         """:attr:`Estimate.mismatch` of ``pose`` under the last frame's objective (1 when it cannot be judged)."""
-        objective = self._evaluator.objective if self._evaluator is not None else None
+        objective = st.evaluator.objective if st.evaluator is not None else None
         mismatch = None if objective is None else objective.mismatch(objective(np.atleast_2d(pose))[0])
         return 1.0 if mismatch is None else float(np.clip(mismatch, 0.0, 1.0))
 
 
-__all__ = ["CooperativeEstimator", "Estimate", "Knowledge", "constrained_bounds"]
+class CooperativeEstimator:
+    """A :class:`Cooperation` with its one :class:`EstimatorState`, for callers that want an object (tests, the
+    warm-up, benchmarks): each call replaces :attr:`state` whole. The vehicle keeps the state itself
+    (:func:`agents.vehicle.step.step`)."""
+
+    def __init__(self, model: Model, bounds: Bounds, options: SearchOptions | None = None, *, seed: int = 0,
+                 lost_mismatch: float = 0.5) -> None:
+        self.rules = Cooperation(model, bounds, options or SearchOptions(), seed, lost_mismatch)
+        self.state = EstimatorState()
+
+    @property
+    def options(self) -> SearchOptions:
+        return self.rules.options
+
+    @property
+    def searching(self) -> bool:
+        return self.state.searching
+
+    @property
+    def current_best(self) -> np.ndarray | None:
+        return self.state.current_best
+
+    def problem(self, views: Sequence[View], knowledge: Sequence[Knowledge] = (),
+                hints: np.ndarray | None = None) -> PoseProblem:
+        return self.rules.problem(views, knowledge, hints)
+
+    def reset(self) -> None:
+        """Forget the last pose and any search in progress: the next frame is searched from scratch."""
+        self.state = EstimatorState()
+
+    def estimate(self, views: Sequence[View], **kwargs) -> Estimate:
+        """:meth:`Cooperation.estimate` on the held state."""
+        self.state, estimate = self.rules.estimate(self.state, views, **kwargs)
+        return estimate
+
+    def generation(self, hints: np.ndarray | None = None, budget_s: float | None = None) -> Estimate | None:
+        """:meth:`Cooperation.generation` on the held state."""
+        self.state, estimate = self.rules.generation(self.state, hints, budget_s)
+        return estimate
+
+    def _start(self, problem: PoseProblem, candidates: np.ndarray | None, margin: float = 0.0) -> np.ndarray | None:
+        return self.rules.start(self.state, problem, candidates, margin)
+
+
+__all__ = ["Cooperation", "CooperativeEstimator", "Estimate", "EstimatorState", "Knowledge", "Verdict",
+           "constrained_bounds", "verdict"]

@@ -7,6 +7,8 @@ No header, no version: who sent it is in the key (``evopose/<fleet>/<vehicle>/hi
 from __future__ import annotations
 
 import struct
+from dataclasses import dataclass
+from typing import ClassVar
 
 import numpy as np
 
@@ -42,3 +44,15 @@ def decode_hint(payload: bytes) -> np.ndarray:
     if not np.all(np.isfinite(values)):
         raise InvalidMessage(f"hint values must be finite, got {values.tolist()}", topic=Topic.HINT)
     return values
+
+
+@dataclass(frozen=True)
+class Hint:
+    """A hint to send: ``world_from_target`` (6,) that goes out as the 24 bytes of :func:`encode_hint`."""
+
+    pose: tuple[float, float, float, float, float, float]
+    TOPIC: ClassVar[Topic] = Topic.HINT
+
+    def payload(self) -> bytes:
+        return encode_hint(self.pose)
+

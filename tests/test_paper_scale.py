@@ -14,22 +14,17 @@ import pytest
 
 from agents.experiments.results import frame_agreement
 from agents.vehicle.frames import SimulatedCamera
-from agents.vehicle.step import FrameInputs, share, step
+from agents.vehicle.step import FrameInputs, VehicleState, share, share_policy, step
 from agents.vehicle.team_views import build_views, mate_view, own_view
-from evopose.cooperative import CooperativeEstimator
+from evopose.cooperative import Cooperation, CooperativeEstimator
 from geometry import angle_difference
-from protocol import FeatureSet, decode, encode
+from protocol import decode, encode
 from scenarios.errors import ScenarioError
 from scenarios.fleet import load_fleet_scenario
 from scenarios.world import load_scenario
 from tests.fleet_procs import free_port
 
 ROOT = Path(__file__).resolve().parents[1]
-
-
-def _estimators(scenario):
-    return {v: CooperativeEstimator(scenario.model.evopose_model(), scenario.bounds(), seed=i)
-            for i, v in enumerate(("H1", "H2"))}
 
 
 def test_any_fleet_scenario_runs_on_another_world_with_the_same_vehicles():
@@ -56,25 +51,23 @@ def test_a_driving_pioneer_is_tracked_and_both_helicopters_agree(world):
     """Feature sets with their senders' best poses, in process: 20 frames of a Pioneer driving at 0.5 m/s."""
     scenario = load_scenario(world)
     cams = {v: SimulatedCamera(scenario, v) for v in ("H1", "H2")}
-    estimators = _estimators(scenario)
+    states = {v: VehicleState(Cooperation(scenario.model.evopose_model(), scenario.bounds(), seed=i),
+                              share_policy("features"), v, "pioneer") for i, v in enumerate(("H1", "H2"))}
     good = agreed = 0
     errors = []
     for n in range(20):
         frames = {v: cams[v].acquire(n, n * 100_000_000) for v in cams}
         own = {v: own_view(v, frames[v].stamp_ns, frames[v].camera, frames[v].points) for v in cams}
-        sent = {}
-        for v in cams:
-            out = share("features", "raw", frames[v], own[v], estimators[v].current_best)
-            sent[v] = decode("features", encode(FeatureSet(sender=v, seq=n, stamp_ns=own[v].stamp_ns, **out.fields)))
-        results = {}
+        sent = {v: decode("features", encode(share(states[v], frames[v], own[v]))) for v in cams}
+        published, events = {}, {}
         for v, mate in (("H1", "H2"), ("H2", "H1")):
-            results[v] = step(estimators[v], FrameInputs(n, own[v], (mate_view(mate, sent[mate], None),),
-                                                         truth=frames[v].truth),
-                              vehicle=v, target="pioneer", share_mode="features", budget_s=1.0)
-        good += results["H1"].estimate.good and results["H2"].estimate.good
-        agreed += results["H1"].outbox[0].fields["pose"] == results["H2"].outbox[0].fields["pose"]
-        if results["H1"].estimate.good:
-            errors.append(results["H1"].event["error"]["position"])
+            states[v], messages, events[v] = step(states[v], FrameInputs(
+                n, own[v], (mate_view(mate, sent[mate], None),), truth=frames[v].truth, budget_s=1.0))
+            published[v] = messages[0].pose
+        good += events["H1"].estimate.good and events["H2"].estimate.good
+        agreed += published["H1"] == published["H2"]
+        if events["H1"].estimate.good:
+            errors.append(events["H1"].error["position"])
     assert good >= 18 and agreed >= 19
     assert np.median(errors) < 0.02  # metres, while the robot drove 1 m
 

@@ -7,10 +7,12 @@ import numpy as np
 import pytest
 
 from agents.vehicle.frames import SimulatedCamera
-from agents.vehicle.step import FrameInputs, share, step
-from agents.vehicle.team_views import build_views, mate_view, own_view
-from evopose.cooperative import CooperativeEstimator
-from protocol import FeatureSet, decode, encode
+from agents.vehicle.hints import HintInbox
+from agents.vehicle.step import POLICIES, FrameInputs, VehicleState, idle, share, share_policy, step
+from agents.vehicle.team_views import Staleness, TeamViews, build_views, mate_view, own_view
+from evopose.cooperative import Cooperation, CooperativeEstimator
+from protocol import PoseEstimate, Topic, decode, encode
+from protocol.hint import Hint
 from scenarios.world import load_scenario
 
 
@@ -25,6 +27,11 @@ def _estimator(scenario, seed=0):
     return CooperativeEstimator(scenario.model.evopose_model(), scenario.bounds(), seed=seed)
 
 
+def _state(scenario, vehicle: str, mode: str, seed: int = 0) -> VehicleState:
+    return VehicleState(Cooperation(scenario.model.evopose_model(), scenario.bounds(), seed=seed),
+                        share_policy(mode), vehicle, "pioneer")
+
+
 def _own(frames, vehicle, n):
     f = frames[vehicle][n]
     return own_view(vehicle, f.stamp_ns, f.camera, f.points)
@@ -33,23 +40,84 @@ def _own(frames, vehicle, n):
 def test_step_publishes_the_pose_and_in_hint_mode_a_hint(paper_scale):
     scenario, frames = paper_scale
     inputs = FrameInputs(0, _own(frames, "H1", 0), truth=frames["H1"][0].truth)
-    result = step(_estimator(scenario), inputs, vehicle="H1", target="pioneer", share_mode="hint")
-    topics = [out.topic for out in result.outbox]
-    assert result.estimate is not None and result.estimate.good
-    assert topics == ["pose", "hint"]
-    pose = result.outbox[0].fields
-    assert pose["converged"] and pose["target"] == "pioneer" and pose["inputs"] == ()
-    assert result.event["error"]["position"] < 0.5
-    alone = step(_estimator(scenario), inputs, vehicle="H1", target="pioneer", share_mode="none")
-    assert [out.topic for out in alone.outbox] == ["pose"]
+    before = _state(scenario, "H1", "hint")
+    after, messages, event = step(before, inputs)
+    assert [m.TOPIC for m in messages] == [Topic.POSE, Topic.HINT]
+    pose = messages[0]
+    assert isinstance(pose, PoseEstimate) and pose.converged and pose.confident == event.verdict.good
+    assert pose.target == "pioneer" and pose.inputs == () and isinstance(messages[1], Hint)
+    assert messages[1].pose == pose.pose and event.verdict.good and event.error["position"] < 0.5
+    assert before.estimator.last is None and after.estimator.last is not None  # a new state; the old one intact
+    assert event.to_json()["event"] == "frame" and event.to_json()["good"]
+    _, alone, _ = step(_state(scenario, "H1", "none"), inputs)
+    assert [m.TOPIC for m in alone] == [Topic.POSE]
 
 
 def test_too_few_points_is_a_no_estimate_event_and_publishes_nothing(paper_scale):
     scenario, frames = paper_scale
     own = _own(frames, "H1", 0)
     empty = own.__class__(own.vehicle, own.stamp_ns, own.camera, own.points[:2])
-    result = step(_estimator(scenario), FrameInputs(0, empty), vehicle="H1", target="pioneer", share_mode="none")
-    assert result.estimate is None and result.outbox == () and result.event["event"] == "no-estimate"
+    state = _state(scenario, "H1", "none")
+    after, messages, event = step(state, FrameInputs(0, empty))
+    assert after is state and messages == [] and event.estimate is None
+    assert event.to_json()["event"] == "no-estimate" and event.to_json()["reason"] == "too few image points"
+    skipped = event.from_source(7, "stale image").to_json()
+    assert skipped["reason"] == "no usable frame: stale image" and skipped["scene_frame"] == 7
+
+
+def test_each_share_mode_is_one_policy():
+    assert [POLICIES[m].shares for m in ("none", "raw", "features", "hint")] == [None, Topic.IMAGE, Topic.FEATURES,
+                                                                                   None]
+    assert [m for m, p in POLICIES.items() if p.idle_generations] == ["none", "hint"]
+    assert [m for m, p in POLICIES.items() if p.sends_hints and p.takes_hints] == ["hint"]
+    assert share_policy("features").generations_per_frame == 1 and share_policy("hint").candidate_margin > 0
+    with pytest.raises(ValueError, match="share mode must be one of none, raw, features, hint, got 'x'"):
+        share_policy("x")
+
+
+def test_between_frames_a_good_best_goes_out_as_a_hint_only_in_hint_mode(paper_scale):
+    scenario, frames = paper_scale
+    inputs = FrameInputs(0, _own(frames, "H1", 0))
+    for mode, expected in (("hint", [Topic.HINT]), ("none", [])):
+        state, _, event = step(_state(scenario, "H1", mode), inputs)
+        assert event.verdict.good
+        state, messages, estimate = idle(state, None, None)
+        assert [m.TOPIC for m in messages] == expected and estimate is not None
+    empty_state, messages, estimate = idle(_state(scenario, "H1", "hint"), None, None)
+    assert messages == [] and estimate is None  # nothing to improve before the first estimate
+
+
+def test_hints_kept_are_the_newest_and_the_latest_survives_a_batch_taken():
+    inbox = HintInbox(kept=3)
+    assert inbox.take_all() is None and inbox.take_latest() is None
+    for k in range(5):
+        inbox.put(np.full(6, float(k)))
+    batch = inbox.take_all()
+    assert batch.shape == (3, 6) and list(batch[:, 0]) == [2.0, 3.0, 4.0] and inbox.dropped == 2
+    assert inbox.take_all() is None
+    assert inbox.take_latest()[0] == 4.0 and inbox.take_latest() is None  # the newest, kept for the next frame
+
+
+def test_pairing_is_by_stamp_and_a_stale_teammate_is_reported_once_and_fresh_again(paper_scale):
+    _, frames = paper_scale
+    team = TeamViews()
+    for n in range(3):
+        team.add(_own(frames, "H2", n))
+    stamp = frames["H2"][1].stamp_ns
+    assert team.at(stamp, {"H2"})["H2"].stamp_ns == stamp and team.at(stamp + 50_000_000, {"H2"}) == {}
+    assert team.sharing({"H2"}, frames["H2"][2].stamp_ns, 0.5) == {"H2"}
+    assert team.sharing({"H2"}, frames["H2"][2].stamp_ns + 2_000_000_000, 0.5) == set()  # its newest is 2 s old
+    staleness = Staleness()
+    staleness, stale, back = staleness.update({"H2"}, {"H2"})
+    assert (stale, back) == ([], [])
+    staleness, stale, back = staleness.update({"H2"}, set())  # alive, sharing before, nothing fresh now
+    assert (stale, back) == (["H2"], [])
+    staleness, stale, back = staleness.update({"H2"}, set())  # said once
+    assert (stale, back) == ([], [])
+    staleness, stale, back = staleness.update({"H2"}, {"H2"})
+    assert (stale, back) == ([], ["H2"])
+    _, stale, _ = Staleness().update({"H3"}, set())  # never shared: not stale, simply silent
+    assert stale == []
 
 
 def test_a_search_in_slices_ends_where_the_whole_search_ends(paper_scale):
@@ -73,25 +141,22 @@ def test_feature_sets_carry_the_best_and_team_mates_agree(paper_scale):
     """Exp. 2(a) with our extension: each feature set carries the sender's best pose; both vehicles weigh the
     same candidates on the same eq. (4) views and publish the same pose, although their searches differ."""
     scenario, frames = paper_scale
-    h1, h2 = _estimator(scenario, seed=1), _estimator(scenario, seed=2)
+    states = {"H1": _state(scenario, "H1", "features", seed=1), "H2": _state(scenario, "H2", "features", seed=2)}
     agreed = 0
     for n in range(4):
-        own1, own2 = _own(frames, "H1", n), _own(frames, "H2", n)
-        sent = {}
-        for name, est, own in (("H1", h1, own1), ("H2", h2, own2)):
-            out = share("features", "raw", frames[name][n], own, est.current_best)
-            message = FeatureSet(sender=name, seq=n, stamp_ns=own.stamp_ns, **out.fields)
-            sent[name] = decode("features", encode(message))  # through the wire format
-        mate_of = {"H1": mate_view("H2", sent["H2"], None), "H2": mate_view("H1", sent["H1"], None)}
-        r1 = step(h1, FrameInputs(n, own1, (mate_of["H1"],)), vehicle="H1", target="pioneer", share_mode="features")
-        r2 = step(h2, FrameInputs(n, own2, (mate_of["H2"],)), vehicle="H2", target="pioneer", share_mode="features")
-        assert r1.inputs == r2.inputs == ("H1", "H2")
+        own = {"H1": _own(frames, "H1", n), "H2": _own(frames, "H2", n)}
+        sent = {v: decode("features", encode(share(states[v], frames[v][n], own[v]))) for v in own}  # the wire
+        assert sent["H1"].best is None if n == 0 else sent["H1"].best is not None
+        events = {}
+        for v, mate in (("H1", "H2"), ("H2", "H1")):
+            states[v], _, events[v] = step(states[v], FrameInputs(n, own[v], (mate_view(mate, sent[mate], None),)))
+        assert events["H1"].views == events["H2"].views == ("H1", "H2")
         if n >= 1:  # from the second frame on, each has the other's best
-            agreed += bool(np.array_equal(r1.estimate.pose, r2.estimate.pose))
+            agreed += bool(np.array_equal(events["H1"].estimate.pose, events["H2"].estimate.pose))
     assert agreed == 3
 
 
-# -- the improver's slots (agents.vehicle.roles.SlotSchedule) ----------------------------------------------
+# -- the between-frame slots (agents.vehicle.roles.SlotSchedule) ----------------------------------------------
 
 def test_slot_schedule_keeps_the_rate_and_makes_up_at_most_a_burst():
     from agents.vehicle.roles import SlotSchedule

@@ -47,6 +47,7 @@ import zenoh
 
 from protocol import (QOS, Message, Payload, ProtocolError, Stats, Topic, alive_key, alive_selector, check_name,
                       check_topic, decode_sample, encode, encode_hint, parse_alive_key, topic_key)
+from protocol.hint import Hint
 
 from agents.transport.inbox import BoundedSenders, Inbox, SenderBudget
 from agents.transport.receiver import TopicReceiver
@@ -223,6 +224,13 @@ class FleetBus:
         if isinstance(message, Message) and message.sender != self.vehicle:
             raise ValueError(f"message sender {message.sender!r} is not this vehicle {self.vehicle!r}")
         return self.put_raw(message.TOPIC, encode(message))
+
+    def send(self, message: Message | Hint) -> int:
+        """Publish a message built before its number was known (``seq`` 0): it goes out as this vehicle's next of
+        its topic; a :class:`protocol.hint.Hint` as its 24 bytes. The payload size in bytes."""
+        if isinstance(message, Hint):
+            return self.put_raw(Topic.HINT, message.payload())
+        return self.publish(message.model_copy(update=self.header(message.TOPIC, message.stamp_ns)))
 
     def publish_hint(self, pose_world_from_target: np.ndarray) -> int:
         """Publish the 24-byte hint of ``pose_world_from_target`` ``(x, y, z, roll, pitch, yaw)``."""

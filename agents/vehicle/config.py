@@ -19,9 +19,6 @@ VIEW_WEIGHTS = ("equal", "step", "adaptive")
 CAMERA_ROLES = ("uav", "ground-station")
 #: Feature points a camera vehicle extracts (``--features``; agents.problem.extract.FEATURE_KINDS).
 FEATURES = ("marks", "contrast", "corners")
-#: Share modes in which a vehicle keeps improving its own estimate between frames (generations on the last
-#: views). Not with raw images or features: there every vehicle must compute the same pose from the same data.
-IDLE_GENERATIONS = ("none", "hint")
 #: Largest ROS_DOMAIN_ID (ROS 2's documented range, as ``evopose ros2 --domain``).
 MAX_ROS_DOMAIN = 232
 #: IMU random stream of the scenario's target (as in scenarios.render's ground truth).

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import statistics
+import time
 from collections import deque
 from dataclasses import asdict, dataclass, field
 
@@ -68,6 +69,31 @@ class RunRecord:
     mate_latency_s: deque = field(default_factory=lambda: deque(maxlen=RECENT))  # team-mates' data: arrival - stamp
     #: the last :data:`RECENT` published poses (team agreement, errors over time)
     poses: deque[PoseRow] = field(default_factory=lambda: deque(maxlen=RECENT))
+
+    def add_frame(self, event, image_ready_s: float) -> None:
+        """Count one frame's :class:`agents.vehicle.events.FrameEvent`; ``image_ready_s`` is the
+        ``perf_counter`` instant the run's first image existed (the paper's time to a good pose starts there)."""
+        estimate = event.estimate
+        if estimate is None:
+            return
+        self.frame_seconds.append(event.seconds)
+        self.multi_view_frames += len(event.views) > 1
+        self.estimates += 1
+        self.solves += int(estimate.solved)
+        if estimate.solved and self.first_solve_s is None:
+            self.first_history = [float(f) for f in estimate.solution.history]
+            self.first_solve_s = event.seconds
+        good = event.verdict.good
+        if good and self.first_good_s is None:  # the paper's time to a good pose: when the best first was good
+            self.first_good_s = (estimate.good_at or time.perf_counter()) - image_ready_s
+        if good:
+            self.good += 1
+            if event.error is not None:
+                self.errors.add(event.error)
+            if self.first_confirmed_s is None:
+                self.first_confirmed_s = time.perf_counter() - image_ready_s
+        self.last_pose, self.last_error = list(event.pose), event.error
+        self.poses.append(PoseRow(event.frame, tuple(event.pose), good))
 
     def summary(self) -> dict:
         out = {k: v for k, v in asdict(self).items()

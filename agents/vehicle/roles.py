@@ -1,8 +1,10 @@
 """The vehicle roles as classes, each running its frame loop on an open :class:`FleetBus` (paper §IV).
 
-- :class:`CameraVehicle` (``uav``): per frame, acquire the image -> extract the marks -> share them ->
-  :func:`agents.vehicle.step.step` -> publish its outbox. With hints (and alone), an improver thread runs
-  generations between frames (the compiled kernels release the GIL) and its bests leave as hints.
+- :class:`CameraVehicle` (``uav``): per frame, acquire the image (marks extracted) -> publish
+  :func:`agents.vehicle.step.share`'s message -> pair team-mates' views -> :func:`agents.vehicle.step.step` ->
+  publish its messages. With hints (and alone), the frame loop runs generations in the time left until the next
+  tick (:func:`agents.vehicle.step.idle`) and good bests leave as hints. One thread owns the vehicle's state: the
+  frame loop; the bus's workers only queue what arrives.
 - :class:`GroundStation`: a camera vehicle that also holds the attitude within the airship's IMU reading
   (eq. 3).
 - :class:`~agents.vehicle.target_roles.Airship` and :class:`~agents.vehicle.target_roles.Target`: the roles of
@@ -12,37 +14,35 @@
 from __future__ import annotations
 
 import threading
-from abc import ABC, abstractmethod
 import time
+from abc import ABC, abstractmethod
 from collections.abc import Callable
 
 import cv2
 import numpy as np
 
 from evopose import SearchOptions
-from evopose.cooperative import CooperativeEstimator, Knowledge
-from protocol import MESSAGE_TYPES, Attitude, Topic
+from evopose.cooperative import Cooperation, EstimatorState, Knowledge
+from protocol import Attitude, Message, Topic
+from protocol.hint import Hint
 from scenarios.world import Scenario
 
 from agents.errors import TeamNotMetError
-from agents.runs import PoseRow
 from agents.transport.bus import FleetBus, Received
-from agents.vehicle.config import IDLE_GENERATIONS, AgentConfig
+from agents.vehicle.config import AgentConfig
 from agents.vehicle.frames import NS, FrameClock
+from agents.vehicle.hints import HintInbox
 from agents.vehicle.memory import release_free_memory
 from agents.vehicle.plausibility import Plausibility
 from agents.vehicle.records import RunRecord
 from agents.vehicle.sources import SourceEnded, SourceError, open_camera
-from agents.vehicle.step import FrameInputs, Outgoing, share, step
-from agents.vehicle.team_views import TeamViews, attitude_knowledge, build_views, mate_view, own_view, wait_until
+from agents.vehicle.step import FrameInputs, VehicleState, idle, share, share_policy, step
+from agents.vehicle.team_views import (Staleness, TeamViews, attitude_knowledge, build_views, mate_view, own_view,
+                                       wait_until)
 
 Emit = Callable[[dict], None]
-#: Share of a frame's period a search from scratch may take in the frame loop (the rest: render, extract, share).
-SEARCH_SHARE_OF_FRAME = 0.5
 #: Frames estimated before joining (a search, then tracking), so that no frame compiles a kernel.
 WARM_UP_FRAMES = 3
-#: Hints kept while waiting for the next frame or generation (the newest).
-HINTS_KEPT = 64
 
 
 class SlotSchedule:
@@ -108,7 +108,7 @@ class Vehicle(ABC):
                    "fps": self.clock.fps})
         n = None
         while not stop.is_set() and (self.config.frames is None or self.record.frames < self.config.frames):
-            nxt = self.clock.wait_next(n, stop)
+            nxt = self.next_frame(n, stop)
             if nxt is None:
                 break
             if n is not None and nxt > n + 1:
@@ -125,13 +125,9 @@ class Vehicle(ABC):
             self.record.frames += 1
         return self.summary()
 
-    def publish(self, out: Outgoing) -> None:
-        """Publish one outbox message (the bus adds sender and sequence number)."""
-        if out.topic == Topic.HINT.value:
-            self.bus.publish_hint(out.fields["pose"])
-            return
-        cls = MESSAGE_TYPES[Topic(out.topic)]
-        self.bus.publish(cls(**self.bus.header(out.topic, out.stamp_ns), **out.fields))
+    def next_frame(self, n: int | None, stop: threading.Event) -> int | None:
+        """Wait for the clock's frame after ``n`` (None: stopped); roles that work between frames do it here."""
+        return self.clock.wait_next(n, stop)
 
     def summary(self) -> dict:
         return {"event": "summary", "vehicle": self.config.vehicle, "role": self.role, "share": self.config.share,
@@ -152,43 +148,32 @@ class CameraVehicle(Vehicle):
 
     def __init__(self, config: AgentConfig, bus: FleetBus, scenario: Scenario, emit: Emit) -> None:
         super().__init__(config, bus, scenario, emit)
+        self.policy = share_policy(config.share)
         self.sync_wait_s = self.period_s / 2 if config.sync_wait_s is None else config.sync_wait_s
         self.team = TeamViews()
+        self.staleness = Staleness()
         self.camera = open_camera(config, scenario, bus)  # the renderer, or a real source (--source; ROS topics on
         # the bus's session)
         self.plausible = Plausibility(scenario.bounds(), config.operating_radius_m, config.max_clock_offset_s)
-        self.estimator = CooperativeEstimator(scenario.model.evopose_model(), scenario.bounds(),
-                                              SearchOptions(time_budget=config.time_budget_s,
-                                                            view_weights=config.view_weights), seed=config.seed)
-        self._hints: list[np.ndarray] = []
-        self._latest_hint: np.ndarray | None = None
-        self._sharing_mates: set[str] = set()  # team-mates that ever sent views
-        self._stale: set[str] = set()  # of those, the live ones whose data are stale now
-        self._hints_lock = threading.Lock()
+        self.state = VehicleState(
+            Cooperation(scenario.model.evopose_model(), scenario.bounds(),
+                        SearchOptions(time_budget=config.time_budget_s, view_weights=config.view_weights),
+                        config.seed),
+            self.policy, config.vehicle, scenario.spec.target.name, config.image_encoding)
+        self.hints = HintInbox()
         # slots missed during a frame are made up after it (at most a frame period's worth)
         burst = max(int(config.hint_rate_hz * self.period_s), 1)
         self._hint_schedule = SlotSchedule(config.hint_rate_hz, burst)
         self._generation_schedule = SlotSchedule(config.hint_rate_hz, burst)
-        self._hint_send_lock = threading.Lock()
-        #: held while the estimator is used: by the frame loop and by the improver thread (one writer at a time)
-        self._estimator_lock = threading.Lock()
-        #: set while no frame is in progress: the improver runs only then, so the frame loop keeps the camera rate
-        #: (both share one interpreter; a generation between frames never delays a frame by more than itself)
-        self._between_frames = threading.Event()
-        self._between_frames.set()
         self._image_ready: float | None = None  # perf_counter when the first frame's image existed
-        self._done = threading.Event()
 
     # -- set-up ---------------------------------------------------------------------------------
 
     def subscribe(self) -> None:
-        share_mode, bus = self.config.share, self.bus
-        if share_mode == "raw":
-            bus.subscribe(Topic.IMAGE)
-        elif share_mode == "features":
-            bus.subscribe(Topic.FEATURES)
-        elif share_mode == "hint":
-            bus.subscribe(Topic.HINT, self._on_hint)
+        if self.policy.shares is not None:
+            self.bus.subscribe(self.policy.shares)
+        if self.policy.takes_hints:
+            self.bus.subscribe(Topic.HINT, self._on_hint)
 
     @classmethod
     def warm_up(cls, config: AgentConfig, scenario: Scenario) -> None:
@@ -203,21 +188,17 @@ class CameraVehicle(Vehicle):
             camera.close()
         views, _ = build_views([own_view(config.vehicle, 0, frame.camera, frame.points, frame.labels)])
         if views:  # every path a frame may take compiles here: a search, tracking (eq. 2), a team-mate's best
-            estimator = CooperativeEstimator(scenario.model.evopose_model(), scenario.bounds(),
-                                             SearchOptions(max_generations=1, min_starts=1))
+            rules = Cooperation(scenario.model.evopose_model(), scenario.bounds(),
+                                SearchOptions(max_generations=1, min_starts=1))
+            state = EstimatorState()
             for k in range(WARM_UP_FRAMES):
-                best = estimator.current_best
-                estimator.estimate(views, frame=k, candidates=None if best is None else np.array([best]))
-            estimator.generation(budget_s=0.0)
+                best = state.current_best
+                state, _ = rules.estimate(state, views, frame=k, candidates=None if best is None else best[None])
+            rules.generation(state, budget_s=0.0)
         release_free_memory()  # what the one-off work (ground texture, compilation) freed
 
     def run(self, stop: threading.Event) -> dict:
-        improver = None
-        if self.config.share in IDLE_GENERATIONS:
-            improver = threading.Thread(target=self.improve, args=(stop,), name="improver", daemon=True)
         try:
-            if improver is not None:
-                improver.start()
             summary = super().run(stop)
             source = getattr(self.camera, "summary_fields", None)  # a dataset: which, and whether the target is in it
             if source is not None:
@@ -226,9 +207,6 @@ class CameraVehicle(Vehicle):
                     summary["false_positives"] = summary["good"]
             return summary
         finally:
-            self._done.set()
-            if improver is not None and improver.is_alive():
-                improver.join(2.0)
             self.camera.close()
 
     # -- inputs ---------------------------------------------------------------------------------
@@ -242,25 +220,15 @@ class CameraVehicle(Vehicle):
         self.bus.counters.count_rejected(topic.value, reason)
         return True
 
-    def _on_hint(self, rx: Received) -> None:  # bus worker thread: check and append only
-        if self.refused(Topic.HINT, rx, self.plausible.pose_in_box(rx.message.pose)):
-            return
-        with self._hints_lock:
-            self._latest_hint = np.asarray(rx.message.pose, float)
-            self._hints.append(self._latest_hint)
-            del self._hints[:-HINTS_KEPT]
-
-    def latest_hint(self) -> np.ndarray | None:
-        """The newest team-mate's hint (kept after the improver took it), then forgotten."""
-        with self._hints_lock:
-            hint, self._latest_hint = self._latest_hint, None
-        return hint
+    def _on_hint(self, rx: Received) -> None:  # bus worker thread: check and queue only
+        if not self.refused(Topic.HINT, rx, self.plausible.pose_in_box(rx.message.pose)):
+            self.hints.put(rx.message.pose)
 
     def take_hints(self) -> np.ndarray | None:
-        with self._hints_lock:
-            hints, self._hints = self._hints, []
-            self.record.hints_used += len(hints)
-        return np.array(hints) if hints else None
+        """Every hint waiting (H, 6), counted as used."""
+        hints = self.hints.take_all()
+        self.record.hints_used += 0 if hints is None else len(hints)
+        return hints
 
     def knowledge(self) -> list[Knowledge]:
         """Eq. (3) knowledge of this frame (none for a UAV)."""
@@ -268,10 +236,9 @@ class CameraVehicle(Vehicle):
 
     def paired_views(self, stamp_ns: int) -> list:
         """Team-mates' views of this instant: wait up to ``sync_wait_s`` for each live, sharing team-mate."""
-        share_mode = self.config.share
-        if share_mode not in ("raw", "features"):
+        topic = self.policy.shares
+        if topic is None:
             return []
-        topic = Topic.IMAGE if share_mode == "raw" else Topic.FEATURES
         max_age = self.config.max_age_s
 
         def poll(timeout: float) -> None:
@@ -304,30 +271,20 @@ class CameraVehicle(Vehicle):
         return list(found.values())
 
     def _report_staleness(self, alive: frozenset[str], fresh: set[str], stamp_ns: int) -> None:
-        """A live team-mate whose data went stale (frozen, or a cut link: nothing newer than ``--max-age`` and the
-        frame in progress) is no longer waited for; say so once, with the age of its newest data at this frame,
-        and again when its data are fresh again."""
-        stale = set(alive) & self._sharing_mates - fresh
-        for mate in sorted(stale - self._stale):
+        """Say once when a live team-mate's data went stale (with the age of its newest data at this frame), and
+        again when they are fresh (:class:`Staleness`)."""
+        self.staleness, stale, back = self.staleness.update(alive, fresh)
+        for mate in stale:
             self.record.stale_events += 1
             newest = self.team.newest_stamp_ns(mate)
             self.emit({"event": "stale", "vehicle": mate, "by": self.config.vehicle,
                        "age_s": None if newest is None else (stamp_ns - newest) / 1e9})
-        for mate in sorted(self._stale & fresh):
+        for mate in back:
             self.emit({"event": "fresh", "vehicle": mate, "by": self.config.vehicle})
-        self._stale = stale
-        self._sharing_mates |= fresh
 
     # -- the frame ------------------------------------------------------------------------------
 
     def frame(self, n: int) -> None:
-        self._between_frames.clear()
-        try:
-            self._frame(n)
-        finally:
-            self._between_frames.set()
-
-    def _frame(self, n: int) -> None:
         stamp = self.clock.stamp_ns(n)
         t_acquire = time.perf_counter()
         frame = self.camera.acquire(n, stamp)
@@ -335,90 +292,49 @@ class CameraVehicle(Vehicle):
         if self._image_ready is None:
             self._image_ready = t_acquire + frame.render_s
         mine = own_view(self.config.vehicle, stamp, frame.camera, frame.points, frame.labels)
-        with self._estimator_lock:
-            best = self.estimator.current_best
-        shared = share(self.config.share, self.config.image_encoding, frame, mine, best)
+        shared = share(self.state, frame, mine)
         if shared is not None:
-            self.publish(shared)
-        hint_mode = self.config.share == "hint"
-        inputs = FrameInputs(n, mine, self.paired_views(stamp), self.knowledge(),
-                             self.take_hints() if hint_mode else None, frame.truth,
-                             self.latest_hint() if hint_mode else None)
-        # slices of a fixed number of generations (same views on every vehicle) are capped at a whole frame
-        same_views = self.config.share in ("features", "raw")
-        budget = (1.0 if same_views else SEARCH_SHARE_OF_FRAME) * self.period_s
-        with self._estimator_lock:
-            result = step(self.estimator, inputs, vehicle=self.config.vehicle,
-                          target=self.scenario.spec.target.name, share_mode=self.config.share, budget_s=budget)
-        for out in result.outbox:
-            if out.topic == Topic.HINT.value:
-                self.send_hint(out.fields["pose"])
-            else:
-                self.publish(out)
-        result.event["scene_frame"] = frame.scene_frame  # the scenario's frame, or the source's frame number
-        if frame.skipped is not None:  # the own view was not taken (a stale live input): say why, not "too few"
-            result.event["skipped"] = frame.skipped
-            if result.event.get("event") == "no-estimate":
-                result.event["reason"] = f"no usable frame: {frame.skipped}"
-        self.account(result)
-        self.emit(result.event)
+            self.bus.send(shared)
+        takes = self.policy.takes_hints
+        inputs = FrameInputs(n, mine, self.paired_views(stamp), self.knowledge(), self.take_hints() if takes else None,
+                             frame.truth, self.hints.take_latest() if takes else None,
+                             self.policy.search_share_of_frame * self.period_s)
+        self.state, messages, event = step(self.state, inputs)
+        for message in messages:
+            self.send(message)
+        event = event.from_source(frame.scene_frame, frame.skipped)
+        self.record.add_frame(event, self._image_ready)
+        self.emit(event.to_json())
 
-    def account(self, result) -> None:
-        """The run record of one frame's result."""
-        estimate, rec = result.estimate, self.record
-        if estimate is None:
-            return
-        rec.frame_seconds.append(result.seconds)
-        rec.multi_view_frames += len(result.inputs) > 1
-        rec.estimates += 1
-        rec.solves += int(estimate.solved)
-        sol = estimate.solution
-        if estimate.solved and rec.first_solve_s is None:
-            rec.first_history = [float(f) for f in sol.history]
-            rec.first_solve_s = result.seconds
-        error, good = result.event.get("error"), result.event["good"]  # good: converged and confident
-        if good and rec.first_good_s is None:  # the paper's time to a good pose: when the best first was good
-            rec.first_good_s = (estimate.good_at or time.perf_counter()) - self._image_ready
-        if good:
-            rec.good += 1
-            if error is not None:
-                rec.errors.add(error)
-            if rec.first_confirmed_s is None:
-                rec.first_confirmed_s = time.perf_counter() - self._image_ready
-        rec.last_pose, rec.last_error = list(result.outbox[0].fields["pose"]), error
-        rec.poses.append(PoseRow(result.event["frame"], tuple(rec.last_pose), bool(good)))
+    def send(self, message: Message | Hint) -> None:
+        """Publish a message of :func:`step` or :func:`idle`; hints no faster than ``hint_rate_hz``."""
+        if message.TOPIC is Topic.HINT:
+            if not self._hint_schedule.due(time.monotonic()):
+                return
+            self.record.hints_published += 1
+        self.bus.send(message)
 
     # -- between frames ---------------------------------------------------------------------------
 
-    def send_hint(self, pose: np.ndarray) -> None:
-        """Send ``pose`` as a hint unless that would exceed ``hint_rate_hz``."""
-        with self._hint_send_lock:
-            if not self._hint_schedule.due(time.monotonic()):
-                return
-            self.bus.publish_hint(pose)
-            self.record.hints_published += 1
-
-    def improve(self, stop: threading.Event) -> None:
-        """The improver thread: between frames, generations on the latest views (and the search in progress) with
-        the hints that arrived; in hint mode each good best goes out as a hint. One generation per slot of
-        ``hint_rate_hz``; the slots that fell during a frame are made up after it."""
-        period = 1.0 / self.config.hint_rate_hz
-        hint_mode = self.config.share == "hint"
-        schedule = self._generation_schedule
-        while not stop.is_set() and not self._done.is_set():
-            if not self._between_frames.wait(0.1):
-                continue
-            now = time.monotonic()
-            if not schedule.due(now):
-                self._done.wait(schedule.wait_s(now))
-                continue
-            with self._estimator_lock:
-                estimate = self.estimator.generation(self.take_hints() if hint_mode else None, budget_s=period)
-            if estimate is None:  # nothing to improve before the first estimate
-                self._done.wait(0.01)
-            # a search's best so far, or an unsure pose, is no hint
-            elif estimate.good and estimate.solution.confident and hint_mode:
-                self.send_hint(estimate.pose)
+    def next_frame(self, n: int | None, stop: threading.Event) -> int | None:
+        """Until the next tick, when the policy says so: generations on the latest views with the hints that
+        arrived (:func:`agents.vehicle.step.idle`), one per slot of ``hint_rate_hz``; the slots that fell during
+        a frame are made up after it. The frame has priority: no generation starts once the tick is due."""
+        if self.policy.idle_generations and n is not None:
+            due_ns = self.clock.stamp_ns(n + 1)
+            schedule, budget = self._generation_schedule, 1.0 / self.config.hint_rate_hz
+            while not stop.is_set() and time.time_ns() < due_ns:
+                now = time.monotonic()
+                if not schedule.due(now):
+                    stop.wait(min(schedule.wait_s(now), max(due_ns - time.time_ns(), 0) / NS))
+                    continue
+                self.state, messages, estimate = idle(self.state, self.take_hints() if self.policy.takes_hints
+                                                      else None, budget)
+                for message in messages:
+                    self.send(message)
+                if estimate is None:  # nothing to improve before the first estimate
+                    stop.wait(min(0.01, max(due_ns - time.time_ns(), 0) / NS))
+        return super().next_frame(n, stop)
 
 
 class GroundStation(CameraVehicle):

@@ -1,71 +1,109 @@
-"""A camera vehicle's per-frame decision, pure: what it shares, what it estimates, what it publishes.
+"""A camera vehicle's frame as one transition, pure: ``step(state, inputs) -> (state', messages, FrameEvent)``.
 
-No Zenoh, no clock, no threads: :func:`share` turns the own frame into the message team-mates get, and
-:func:`step` turns one frame's inputs (own view, team-mates' paired views, eq. 3 knowledge, hints) into
-an estimate and an *outbox* of messages to publish. The runtime (:mod:`agents.vehicle.roles`) gathers the
-inputs from the bus and publishes the outbox; tests call :func:`step` directly.
+No Zenoh, no clock, no threads, as the search is ask/tell (docs/architecture.md, "A frame's path"). The state is
+frozen (:class:`VehicleState`: the vehicle's constant rules and its :class:`evopose.cooperative.EstimatorState`);
+every rule that depends on ``--share`` is one :class:`SharePolicy` value; the verdict (good = converged and
+confident) is :class:`evopose.cooperative.Verdict`'s. The runtime (:mod:`agents.vehicle.roles`) acquires the
+frame, publishes :func:`share`'s message, pairs team-mates' views, calls :func:`step` and publishes what it returns;
+between frames it calls :func:`idle`. Tests call all three directly.
 """
 
 from __future__ import annotations
 
 import time
-from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from collections.abc import Sequence
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from evopose.cooperative import CooperativeEstimator, Estimate, Knowledge
-from geometry import matrix_from_pose, pose_from_matrix
+from evopose.cooperative import Cooperation, Estimate, EstimatorState, Knowledge, verdict
+from geometry import canonical_pose, pose_error
+from protocol import FeatureSet, ImageFrame, Message, PoseEstimate, Topic
+from protocol.hint import Hint
 
+from agents.vehicle.events import FrameEvent
 from agents.vehicle.frames import Frame
-from agents.vehicle.records import pose_dict
-from geometry import pose_error
 from agents.vehicle.team_views import MateView, build_views, encode_image
-
 
 #: Generations a search from scratch runs per frame when team-mates share the same views (25-100 ms each).
 GENERATIONS_PER_FRAME = 1
 #: Hint mode: a team-mate's pose whose mismatch on the own views is at most this much higher than the own
 #: best's is taken (the own views cannot tell the two apart; the team-mate sees from elsewhere).
 HINT_MARGIN = 0.1
+#: Share of a frame's period a search from scratch may take in the frame loop (the rest: render, extract, share).
+SEARCH_SHARE_OF_FRAME = 0.5
 
 
 @dataclass(frozen=True)
-class Outgoing:
-    """A message to publish: its topic (a ``protocol.Topic`` value), its acquisition stamp and its fields.
+class SharePolicy:
+    """Every rule that depends on the share mode (``--share``), decided once (:func:`share_policy`).
 
-    The transport adds the header (sender, sequence number); a ``hint`` carries ``{"pose": (6,)}``.
+    Attributes
+    ----------
+    mode : str
+        ``none``, ``raw``, ``features`` or ``hint``.
+    shares : Topic or None
+        What the own frame becomes for team-mates (``image``, ``features``), and what theirs are paired with it.
+    takes_hints, sends_hints : bool
+        Team-mates' hints join the search; a good estimate goes out as a hint (the paper's Experiment 2(b)).
+    idle_generations : bool
+        Generations run between frames on the last views (not when team-mates must compute the same pose).
+    same_views : bool
+        Every vehicle has the same views (raw images, feature sets): a search from scratch runs a fixed number
+        of generations per frame (so team-mates' bests agree) within the whole frame, not half of it.
     """
 
-    topic: str
-    stamp_ns: int
-    fields: Mapping = field(default_factory=dict)
+    mode: str
+    shares: Topic | None
+    takes_hints: bool
+    sends_hints: bool
+    idle_generations: bool
+    same_views: bool
+
+    @property
+    def generations_per_frame(self) -> int | None:
+        return GENERATIONS_PER_FRAME if self.same_views else None
+
+    @property
+    def search_share_of_frame(self) -> float:
+        return 1.0 if self.same_views else SEARCH_SHARE_OF_FRAME
+
+    @property
+    def candidate_margin(self) -> float:
+        """Weighing a team-mate's pose against the own best: the fittest wins (0), or the hint margin."""
+        return HINT_MARGIN if self.takes_hints else 0.0
 
 
-def share(mode: str, encoding: str, frame: Frame, own: MateView, best: np.ndarray | None = None) -> Outgoing | None:
-    """What the own frame gives team-mates: its points with the camera and the own ``best`` pose so far
-    (``features``), or the image (``raw``)."""
-    if mode == "features":
-        fields = {"camera": own.camera, "points": own.points.astype("<f4").tobytes()}
-        if own.labels is not None:
-            fields["labels"] = own.labels.astype(np.uint8).tobytes()
-        if best is not None:
-            fields["best"] = tuple(float(v) for v in best)
-        return Outgoing("features", own.stamp_ns, fields)
-    if mode == "raw":
-        h, w = frame.image.shape[:2]
-        channels = 1 if frame.image.ndim == 2 else 3
-        data = (np.ascontiguousarray(frame.image).tobytes() if encoding == "raw"
-                else encode_image(frame.image, encoding))
-        return Outgoing("image", own.stamp_ns, {"camera": own.camera, "encoding": encoding, "width": w, "height": h,
-                                                "channels": channels, "data": data})
-    return None
+POLICIES = {
+    "none": SharePolicy("none", None, False, False, True, False),
+    "raw": SharePolicy("raw", Topic.IMAGE, False, False, False, True),
+    "features": SharePolicy("features", Topic.FEATURES, False, False, False, True),
+    "hint": SharePolicy("hint", None, True, True, True, False),
+}
 
 
-def _covariance(solution) -> tuple[float, ...] | None:
-    """The solution's 6x6 covariance as 36 floats (row-major, ROS order), or None when it is not finite."""
-    cov = np.asarray(getattr(solution, "covariance", np.full((6, 6), np.inf)), float)
-    return tuple(float(v) for v in cov.ravel()) if cov.shape == (6, 6) and np.all(np.isfinite(cov)) else None
+def share_policy(mode: str) -> SharePolicy:
+    """The policy of a share mode; ValueError naming the modes otherwise."""
+    if mode not in POLICIES:
+        raise ValueError(f"share mode must be one of {', '.join(POLICIES)}, got {mode!r}")
+    return POLICIES[mode]
+
+
+@dataclass(frozen=True)
+class VehicleState:
+    """What a camera vehicle carries from frame to frame: its constant rules and its estimator's state."""
+
+    cooperation: Cooperation
+    policy: SharePolicy
+    vehicle: str
+    target: str
+    image_encoding: str = "raw"
+    estimator: EstimatorState = field(default_factory=EstimatorState)
+
+    @property
+    def best(self) -> np.ndarray | None:
+        """The own best pose now (6,), or None."""
+        return self.estimator.current_best
 
 
 @dataclass(frozen=True)
@@ -88,6 +126,8 @@ class FrameInputs:
         The simulator's true target pose: for the frame event's error only, never for the estimate.
     latest_hint : array (6,) or None
         The newest hint of a team-mate (hint mode), weighed against the own best with :data:`HINT_MARGIN`.
+    budget_s : float or None
+        Seconds a search from scratch may take in this frame (None: until it stops).
     """
 
     index: int
@@ -97,70 +137,92 @@ class FrameInputs:
     hints: np.ndarray | None = None
     truth: np.ndarray | None = None
     latest_hint: np.ndarray | None = None
+    budget_s: float | None = None
 
 
-@dataclass(frozen=True)
-class StepResult:
-    """What :func:`step` decided: the estimate (None without enough points), the outbox, the frame event."""
-
-    estimate: Estimate | None
-    inputs: tuple[str, ...]
-    seconds: float
-    outbox: tuple[Outgoing, ...]
-    event: dict
+def _header(state: VehicleState, stamp_ns: int) -> dict:
+    """A message's header before the bus numbers it (``seq`` 0; :meth:`FleetBus.send` sets the sender's next)."""
+    return {"sender": state.vehicle, "seq": 0, "stamp_ns": stamp_ns}
 
 
-def step(estimator: CooperativeEstimator, inputs: FrameInputs, *, vehicle: str, target: str, share_mode: str,
-         budget_s: float | None = None) -> StepResult:
+def share(state: VehicleState, frame: Frame, own: MateView) -> Message | None:
+    """What the own frame gives team-mates: its points with the camera and the own best pose so far
+    (``features``), or the image (``raw``); None in the other modes."""
+    if state.policy.shares is Topic.FEATURES:
+        best = state.best
+        return FeatureSet(**_header(state, own.stamp_ns), camera=own.camera,
+                          points=own.points.astype("<f4").tobytes(),
+                          labels=None if own.labels is None else own.labels.astype(np.uint8).tobytes(),
+                          best=None if best is None else tuple(float(v) for v in best))
+    if state.policy.shares is Topic.IMAGE:
+        h, w = frame.image.shape[:2]
+        data = (np.ascontiguousarray(frame.image).tobytes() if state.image_encoding == "raw"
+                else encode_image(frame.image, state.image_encoding))
+        return ImageFrame(**_header(state, own.stamp_ns), camera=own.camera, encoding=state.image_encoding,
+                          width=w, height=h, channels=1 if frame.image.ndim == 2 else 3, data=data)
+    return None
+
+
+def _covariance(solution) -> tuple[float, ...] | None:
+    """The solution's 6x6 covariance as 36 floats (row-major, ROS order), or None when it is not finite."""
+    cov = np.asarray(getattr(solution, "covariance", np.full((6, 6), np.inf)), float)
+    return tuple(float(v) for v in cov.ravel()) if cov.shape == (6, 6) and np.all(np.isfinite(cov)) else None
+
+
+def step(state: VehicleState, inputs: FrameInputs) -> tuple[VehicleState, list[Message | Hint], FrameEvent]:
     """One frame of a camera vehicle: eq. (1)-(4) on the own and team-mates' views, with knowledge and hints.
 
-    The estimate is published as a ``pose`` (``converged`` only when the estimator judges it good); in hint
-    mode a good estimate also goes out as a ``hint``. Team-mates' ``best`` poses (sent with their feature sets)
-    are weighed against the own best on this frame's eq. (4): the fitter one is tracked, so that vehicles with
-    the same views publish the same pose. ``budget_s`` bounds the time a search from scratch may
-    take in this frame: an unfinished search is resumed later and its best so far is published, not good.
+    The estimate is published as a ``pose`` (``confident`` = the verdict good); with ``sends_hints`` a good
+    estimate also goes out as a hint. Team-mates' ``best`` poses (sent with their feature sets) are weighed
+    against the own best on this frame's eq. (4): the fitter one is tracked, so that vehicles with the same views
+    publish the same pose. ``inputs.budget_s`` bounds a search from scratch in this frame: an unfinished search is
+    resumed later and its best so far is published, not good.
     """
-    own = inputs.own
+    own, policy = inputs.own, state.policy
     views, used = build_views([own, *inputs.mates])
     if not views:
-        event = {"event": "no-estimate", "vehicle": vehicle, "frame": inputs.index, "points": len(own.points),
-                 "reason": "too few image points"}
-        return StepResult(None, (), 0.0, (), event)
+        return state, [], FrameEvent.none(state.vehicle, inputs.index, len(own.points), "too few image points")
     t0 = time.perf_counter()
     candidates = [m.best for m in inputs.mates if m.best is not None]
     margin = 0.0
     if inputs.latest_hint is not None:  # hints: a team-mate's pose that fits the own views about as well wins
-        candidates, margin = [*candidates, inputs.latest_hint], HINT_MARGIN
-    # the same views on every vehicle (raw images, feature sets): slices of a fixed number of generations, so that
-    # team-mates' searches advance alike and their best so far agree; otherwise slices of time
-    generations = GENERATIONS_PER_FRAME if share_mode in ("features", "raw") else None
-    estimate = estimator.estimate(views, knowledge=inputs.knowledge, hints=inputs.hints, frame=inputs.index,
-                                  budget_s=budget_s, candidates=np.array(candidates) if candidates else None,
-                                  candidate_margin=margin, generations=generations)
+        candidates, margin = [*candidates, inputs.latest_hint], policy.candidate_margin
+    estimator, estimate = state.cooperation.estimate(
+        state.estimator, views, knowledge=inputs.knowledge, hints=inputs.hints, frame=inputs.index,
+        budget_s=inputs.budget_s, candidates=np.array(candidates) if candidates else None, candidate_margin=margin,
+        generations=policy.generations_per_frame)
     seconds = time.perf_counter() - t0
-    sol = estimate.solution
-    # good = the search judged it good and it is confident (no distinct pose fits nearly as well)
-    good = bool(estimate.good and getattr(sol, "confident", False))
-    pose = pose_from_matrix(matrix_from_pose(np.asarray(sol.pose, float)))  # canonical: pitch within +-90 deg
-    mates = tuple(v for v in used if v != vehicle)
-    outbox = [Outgoing("pose", own.stamp_ns, {
-        "target": target, "pose": tuple(float(v) for v in pose), "fitness": float(sol.fitness),
-        "mismatch": estimate.mismatch, "converged": estimate.good, "generations": int(sol.generations),
-        "seconds": seconds, "from_hint": bool(sol.from_hint), "inputs": mates, "confident": good,
-        "covariance": _covariance(sol)})]
-    if share_mode == "hint" and good:
-        outbox.append(Outgoing("hint", own.stamp_ns, {"pose": pose}))
-    event = {"event": "frame", "vehicle": vehicle, "frame": inputs.index, "stamp_ns": own.stamp_ns,
-             "points": len(own.points), "views": list(used),
-             # a team-mate's view of an earlier instant (it was late) differs from the one its owner used
-             "views_of_this_instant": all(m.stamp_ns == own.stamp_ns for m in inputs.mates if m.vehicle in used),
-             "knowledge": [k.name for k in inputs.knowledge],
-             "pose": pose_dict(pose), "fitness": float(sol.fitness), "mismatch": estimate.mismatch,
-             "good": good, "converged": estimate.good, "solved": estimate.solved, "searching": estimator.searching,
-             "from_hint": bool(sol.from_hint), "seconds": seconds}
-    if inputs.truth is not None:
-        event["error"] = pose_error(pose, inputs.truth)
-    return StepResult(estimate, tuple(used), seconds, tuple(outbox), event)
+    state = replace(state, estimator=estimator)
+    sol, judged = estimate.solution, verdict(estimate)
+    pose = canonical_pose(np.asarray(sol.pose, float))  # pitch within +-90 deg
+    mates = tuple(v for v in used if v != state.vehicle)
+    messages: list[Message | Hint] = [PoseEstimate(
+        **_header(state, own.stamp_ns), target=state.target, pose=tuple(float(v) for v in pose),
+        fitness=float(sol.fitness), mismatch=estimate.mismatch, converged=judged.converged,
+        generations=int(sol.generations), seconds=seconds, from_hint=bool(sol.from_hint), inputs=mates,
+        confident=judged.good, covariance=_covariance(sol))]
+    if policy.sends_hints and judged.good:
+        messages.append(Hint(tuple(float(v) for v in pose)))
+    event = FrameEvent(
+        vehicle=state.vehicle, frame=inputs.index, points=len(own.points), stamp_ns=own.stamp_ns, views=tuple(used),
+        # a team-mate's view of an earlier instant (it was late) differs from the one its owner used
+        views_of_this_instant=all(m.stamp_ns == own.stamp_ns for m in inputs.mates if m.vehicle in used),
+        knowledge=tuple(k.name for k in inputs.knowledge), pose=tuple(float(v) for v in pose),
+        fitness=float(sol.fitness), mismatch=estimate.mismatch, verdict=judged, solved=estimate.solved,
+        searching=estimator.searching, from_hint=bool(sol.from_hint), seconds=seconds,
+        error=None if inputs.truth is None else pose_error(pose, inputs.truth), estimate=estimate)
+    return state, messages, event
 
 
-__all__ = ["FrameInputs", "Outgoing", "StepResult", "share", "step"]
+def idle(state: VehicleState, hints: np.ndarray | None, budget_s: float | None
+         ) -> tuple[VehicleState, list[Hint], Estimate | None]:
+    """One generation between frames (:meth:`Cooperation.generation`) with the hints that arrived; a good best
+    goes out as a hint when the policy sends hints (a search's best so far, or an unsure pose, is no hint)."""
+    estimator, estimate = state.cooperation.generation(state.estimator, hints, budget_s)
+    state = replace(state, estimator=estimator)
+    if estimate is not None and state.policy.sends_hints and verdict(estimate).good:
+        return state, [Hint(tuple(float(v) for v in estimate.pose))], estimate
+    return state, [], estimate
+
+
+__all__ = ["FrameInputs", "POLICIES", "SharePolicy", "VehicleState", "idle", "share", "share_policy", "step"]

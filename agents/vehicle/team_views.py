@@ -178,6 +178,21 @@ class TeamViews:
         return out
 
 
+@dataclass(frozen=True)
+class Staleness:
+    """Which live team-mates' data went stale (frozen, or a cut link: nothing newer than ``--max-age`` and the frame
+    in progress): such a team-mate is no longer waited for, and that is said once, and again when it is fresh."""
+
+    sharing: frozenset[str] = frozenset()  #: team-mates that ever sent views
+    stale: frozenset[str] = frozenset()  #: of those, the live ones whose data are stale now
+
+    def update(self, alive: Iterable[str], fresh: Iterable[str]) -> tuple["Staleness", list[str], list[str]]:
+        """The next value, the team-mates that went stale now and those fresh again now."""
+        fresh = frozenset(fresh)
+        stale = frozenset(alive) & (self.sharing - fresh)
+        return Staleness(self.sharing | fresh, stale), sorted(stale - self.stale), sorted(self.stale & fresh)
+
+
 def attitude_knowledge(attitude: Attitude, sigmas: float) -> list[Knowledge]:
     """Eq. (3) from an IMU attitude: roll, pitch and yaw each within ``sigmas`` times its 1-sigma."""
     return [Knowledge(name, float(getattr(attitude, name)), sigmas * float(s))

@@ -1,0 +1,86 @@
+"""What one frame of a camera vehicle did, typed: the :class:`FrameEvent` that :func:`agents.vehicle.step.step`
+returns, the run record counts (:meth:`agents.vehicle.records.RunRecord.add_frame`) and the agent prints as a JSON
+line (``{"event": "frame", ...}`` or ``{"event": "no-estimate", ...}``)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+from evopose.cooperative import Estimate, Verdict
+
+from agents.vehicle.records import pose_dict
+
+
+@dataclass(frozen=True)
+class FrameEvent:
+    """One frame's outcome. ``estimate`` is None when the frame had too few image points (``reason`` says so).
+
+    Attributes
+    ----------
+    pose : tuple of 6 floats
+        The published pose (canonical roll-pitch-yaw), ``world_from_target``.
+    verdict : Verdict
+        ``converged``, ``confident`` and ``good`` (both), the one verdict (docs/design.md §2).
+    error : dict or None
+        Against the simulator's truth (:func:`geometry.pose_error`), when there is one.
+    scene_frame, skipped : set by the runtime: the source's frame shown; why the own view was not taken.
+    """
+
+    vehicle: str
+    frame: int
+    points: int
+    reason: str | None = None
+    stamp_ns: int = 0
+    views: tuple[str, ...] = ()
+    views_of_this_instant: bool = True
+    knowledge: tuple[str, ...] = ()
+    pose: tuple[float, ...] | None = None
+    fitness: float = float("nan")
+    mismatch: float = 1.0
+    verdict: Verdict = Verdict(False, False)
+    solved: bool = False
+    searching: bool = False
+    from_hint: bool = False
+    seconds: float = 0.0
+    error: dict | None = None
+    estimate: Estimate | None = None
+    scene_frame: int | None = None
+    skipped: str | None = None
+
+    @classmethod
+    def none(cls, vehicle: str, frame: int, points: int, reason: str) -> "FrameEvent":
+        """A frame without an estimate."""
+        return cls(vehicle, frame, points, reason=reason)
+
+    @property
+    def good(self) -> bool:
+        return self.verdict.good
+
+    def from_source(self, scene_frame: int | None, skipped: str | None) -> "FrameEvent":
+        """The event with the source's frame and, when the own view was not taken, why (not "too few")."""
+        reason = self.reason
+        if skipped is not None and self.estimate is None:
+            reason = f"no usable frame: {skipped}"
+        return replace(self, scene_frame=scene_frame, skipped=skipped, reason=reason)
+
+    def to_json(self) -> dict:
+        """The agent's JSON line."""
+        if self.estimate is None:
+            out = {"event": "no-estimate", "vehicle": self.vehicle, "frame": self.frame, "points": self.points,
+                   "reason": self.reason}
+        else:
+            out = {"event": "frame", "vehicle": self.vehicle, "frame": self.frame, "stamp_ns": self.stamp_ns,
+                   "points": self.points, "views": list(self.views),
+                   "views_of_this_instant": self.views_of_this_instant, "knowledge": list(self.knowledge),
+                   "pose": pose_dict(self.pose), "fitness": self.fitness, "mismatch": self.mismatch,
+                   "good": self.verdict.good, "converged": self.verdict.converged, "solved": self.solved,
+                   "searching": self.searching, "from_hint": self.from_hint, "seconds": self.seconds}
+            if self.error is not None:
+                out["error"] = self.error
+        out["scene_frame"] = self.scene_frame
+        if self.skipped is not None:
+            out["skipped"] = self.skipped
+        return out
+
+
+__all__ = ["FrameEvent"]
