@@ -12,7 +12,7 @@ REALTIME_MODULES = frozenset({
     "test_agents", "test_bus", "test_dataset_agents", "test_dataset_scenario", "test_faults", "test_fleet",
     "test_flood", "test_meter_ros2", "test_netns", "test_paper_scale", "test_plausibility", "test_record", "test_ros2",
     "test_ros_hints", "test_ros_sources", "test_scenarios", "test_security", "test_sources", "test_time_budget",
-    "test_view",
+    "test_vehicle_realtime", "test_view",
 })
 
 
