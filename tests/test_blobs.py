@@ -131,7 +131,7 @@ def test_paint_pixels_take_the_body_in_sun_in_shadow_and_under_gloss_but_not_gre
     assert paint_pixels(pixels, red).tolist() == [[True, True, True, False, False, False]]
 
 
-@pytest.mark.parametrize("name, recall, precision", [("paper", 0.6, 0.35), ("telephoto", 0.9, 0.65)])
+@pytest.mark.parametrize("name, recall, precision", [("paper", 0.65, 0.45), ("telephoto", 0.9, 0.7)])
 def test_on_the_committed_photoreal_frames_the_contrast_front_end_with_the_body_finds_the_marks(name, recall,
                                                                                              precision):
     # Blender Cycles frames (tests/data/photoreal, docs/datasets.md): the issue's bars (paper scale 0.8 / 0.8,
@@ -155,3 +155,17 @@ def test_on_the_committed_photoreal_frames_the_contrast_front_end_with_the_body_
             correct += len(match_to_truth(det.points, uv, match_px)[0])
             marks, detections = marks + int(whole.sum()), detections + len(det)
     assert found / marks >= recall and correct / detections >= precision
+
+
+def test_on_the_committed_frames_without_the_target_no_body_paint_means_no_marks():
+    from scenarios.dataset import open_dataset
+
+    data = open_dataset(Path(__file__).parent / "data" / "photoreal" / "absent")
+    world, area = data.world(), data.world().bounds()
+    for cam in data.cameras:
+        for k in range(data.frames):
+            image = cv2.imread(str(data.image_path(cam, k)), cv2.IMREAD_COLOR)
+            prior = mark_prior(data.camera(cam, k), world.model.mark_radius, world.model.size, area.lo[:3],
+                               area.hi[:3])
+            assert len(detect_contrast_marks(image, world.model.palette, prior)) > 0   # clutter in the marks' hues
+            assert len(detect_contrast_marks(image, world.model.palette, prior, body=world.model.body_colour)) == 0
