@@ -125,24 +125,30 @@ def euler_from_quaternion(q: np.ndarray) -> np.ndarray:
 def quaternion_from_rotation(R: np.ndarray) -> np.ndarray:
     """Unit quaternions ``(x, y, z, w)``, ``w >= 0``, of rotation matrices: (..., 3, 3) -> (..., 4).
 
-    Shepperd's method: the largest of ``w, x, y, z`` is taken from the diagonal, the rest from it.
+    Shepperd's method: from the trace when it is positive, else from the largest diagonal entry. The operations
+    keep the order of the ROS bridges' scalar version, so the CDR golden files stay byte for byte.
     """
     m = np.asarray(R, dtype=float)
     if m.shape[-2:] != (3, 3):
         raise ValueError(f"expected (..., 3, 3) rotation matrices, got shape {m.shape}")
     m00, m11, m22 = m[..., 0, 0], m[..., 1, 1], m[..., 2, 2]
-    # 4 * component^2 for w, x, y, z
-    four = np.stack([1 + m00 + m11 + m22, 1 + m00 - m11 - m22, 1 - m00 + m11 - m22, 1 - m00 - m11 + m22], -1)
-    best = np.argmax(four, axis=-1)
-    s = 2.0 * np.sqrt(np.maximum(np.take_along_axis(four, best[..., None], -1)[..., 0], 1e-300))
     d21, d02, d10 = m[..., 2, 1] - m[..., 1, 2], m[..., 0, 2] - m[..., 2, 0], m[..., 1, 0] - m[..., 0, 1]
     s01, s02, s12 = m[..., 0, 1] + m[..., 1, 0], m[..., 0, 2] + m[..., 2, 0], m[..., 1, 2] + m[..., 2, 1]
-    candidates = np.stack([np.stack([d21, d02, d10, s * s / 4], -1),
-                           np.stack([s * s / 4, s01, s02, d21], -1),
-                           np.stack([s01, s * s / 4, s12, d02], -1),
-                           np.stack([s02, s12, s * s / 4, d10], -1)], -2)
-    q = np.take_along_axis(candidates, best[..., None, None], -2)[..., 0, :] / s[..., None]
-    q /= np.linalg.norm(q, axis=-1, keepdims=True)
+    trace = m00 + m11 + m22
+    with np.errstate(invalid="ignore", divide="ignore"):  # the branches not taken may divide by zero
+        s0 = 2.0 * np.sqrt(1.0 + trace)
+        s1 = 2.0 * np.sqrt(1.0 + m00 - m11 - m22)
+        s2 = 2.0 * np.sqrt(1.0 + m11 - m00 - m22)
+        s3 = 2.0 * np.sqrt(1.0 + m22 - m00 - m11)
+        q0 = np.stack([d21 / s0, d02 / s0, d10 / s0, 0.25 * s0], -1)
+        q1 = np.stack([0.25 * s1, s01 / s1, s02 / s1, d21 / s1], -1)
+        q2 = np.stack([s01 / s2, 0.25 * s2, s12 / s2, d02 / s2], -1)
+        q3 = np.stack([s02 / s3, s12 / s3, 0.25 * s3, d10 / s3], -1)
+    x_largest, y_largest = (m00 > m11) & (m00 > m22), m11 > m22
+    q = np.where((trace > 0)[..., None], q0,
+                 np.where(x_largest[..., None], q1, np.where(y_largest[..., None], q2, q3)))
+    norm = np.sqrt(q[..., 0] * q[..., 0] + q[..., 1] * q[..., 1] + q[..., 2] * q[..., 2] + q[..., 3] * q[..., 3])
+    q = q / norm[..., None]
     return np.where(q[..., 3:4] < 0, -q, q)
 
 

@@ -300,9 +300,9 @@ class TicksReader:
 
 def test_a_skipped_tick_gives_a_frame_without_points_and_no_estimate():
     from agents.problem.extract import feature_extractor
-    from agents.vehicle.step import FrameInputs, step
+    from agents.vehicle.step import FrameInputs, VehicleState, share_policy, step
     from agents.vehicle.team_views import own_view
-    from evopose.cooperative import CooperativeEstimator
+    from evopose.cooperative import Cooperation
 
     scenario = load_scenario("exp2")
     image = render_frame(scenario, 0, "H1").image
@@ -322,10 +322,12 @@ def test_a_skipped_tick_gives_a_frame_without_points_and_no_estimate():
     for skipped in frames[1:3]:
         assert not skipped.image.any() and skipped.image.shape == image.shape
         assert np.array_equal(skipped.camera.world_from_camera, np.eye(4))  # the last frame's camera
-    estimator = CooperativeEstimator(scenario.model.evopose_model(), scenario.bounds())
+    state = VehicleState(Cooperation(scenario.model.evopose_model(), scenario.bounds()), share_policy("none"), "H1",
+                         "pioneer")
     own = own_view("H1", 1, frames[1].camera, frames[1].points, frames[1].labels)
-    result = step(estimator, FrameInputs(1, own), vehicle="H1", target="pioneer", share_mode="none")
-    assert result.estimate is None and result.event["event"] == "no-estimate" and result.event["points"] == 0
+    _, messages, event = step(state, FrameInputs(1, own))
+    assert messages == [] and event.estimate is None and event.to_json()["event"] == "no-estimate"
+    assert event.points == 0
 
 
 # -- /tf: map -> ... -> the camera's optical frame, composed from the newest transforms ---------------------------

@@ -13,7 +13,7 @@ from functools import cache
 
 import numpy as np
 
-from geometry import quaternion_from_euler, quaternion_from_rotation, rotation_from_euler
+from geometry import quaternion_from_rotation, rotation_from_euler
 
 POSE_WITH_COVARIANCE_STAMPED = "geometry_msgs/msg/PoseWithCovarianceStamped"
 POSE_STAMPED = "geometry_msgs/msg/PoseStamped"
@@ -71,7 +71,7 @@ def quaternion_from_matrix(r: np.ndarray) -> tuple[float, float, float, float]:
 
 
 def quaternion_from_rpy(roll: float, pitch: float, yaw: float) -> tuple[float, float, float, float]:
-    return tuple(float(c) for c in quaternion_from_euler((roll, pitch, yaw)))  # type: ignore[return-value]
+    return quaternion_from_matrix(matrix_from_rpy(roll, pitch, yaw))  # through the matrix, as the golden files
 
 
 def camera_rig(world_from_camera: tuple[float, ...]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

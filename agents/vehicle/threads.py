@@ -6,7 +6,7 @@ which computes every few milliseconds, it never went back to sleep: `python -m b
 (BENCHMARKS.md) repeats that call 200 times a second and measures 1.46-1.52 cores for the process with the
 default pool against 0.51-0.53 with one thread, the calls themselves taking 0.45-0.52 in both. The agents of a pair
 missed camera ticks and sent fewer hints. An agent's arrays are small and it has threads of its own (frame
-loop, improver, receivers): BLAS gains nothing from more than one thread there.
+loop, receivers): BLAS gains nothing from more than one thread there.
 """
 
 from __future__ import annotations
