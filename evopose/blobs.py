@@ -59,13 +59,16 @@ BLACK_SLACK = 0.02
 MIN_RELATIVE_BRIGHTNESS = 0.2
 #: Weight of the chroma axes against lightness in the response (CIE Lab units).
 CHROMA_WEIGHT = 1.0
+#: The body's paint is closed over gaps up to this share of the target's extent too (at the paper's scale marks
+#: 3-5 px apart break a face's paint into pieces).
+BODY_GAP = 0.12
 #: Least pixels beside the body for the response's spread to be taken there (else over the whole crop), and the
 #: least margin of ground kept around the body (the spread is the ground's texture, not the body's outline).
 MIN_BACKGROUND_PX, MIN_MARGIN_PX = 200, 48
 #: Body context (:func:`paint_pixels`): the largest residual of a paint pixel's fit, relative to the pixel, and the
 #: least share of its light the paint carries (a low sun's gloss on a red body's top face leaves it ~0.45; grey
 #: ground ~0.05).
-PAINT_RESIDUAL, PAINT_SHARE = 0.12, 0.3
+PAINT_RESIDUAL, PAINT_SHARE, PAINT_NOISE = 0.12, 0.3, 0.01
 #: With the body context, where the prior's largest mark radius is under :data:`SMALL_SPOT_PX`, a spot may misfit
 #: its label this much: the encoder's 4:2:0 chroma (2 x 2 px blocks) leaves such a mark's colour far off its
 #: paint's line, and the body, not the label, rejects the clutter.
@@ -185,10 +188,10 @@ def paint_pixels(lin: np.ndarray, body_linear: np.ndarray) -> np.ndarray:
     norm = np.linalg.norm(lin, axis=2)
     residual = np.linalg.norm(lin - fit, axis=2)
     share = a * float(c.sum()) / np.maximum(a * float(c.sum()) + 3 * b, 1e-9)
-    return (a > 0) & (residual <= PAINT_RESIDUAL * norm) & (share >= PAINT_SHARE) & (norm > 0.005)
+    return (a > 0) & (residual <= PAINT_RESIDUAL * norm + PAINT_NOISE) & (share >= PAINT_SHARE) & (norm > 0.005)
 
 
-def body_region(lin: np.ndarray, body_linear: np.ndarray, mark_px: float) -> np.ndarray:
+def body_region(lin: np.ndarray, body_linear: np.ndarray, mark_px: float, gap_px: float = 0.0) -> np.ndarray:
     """Where the target's marks can be (bool (H, W)): the pixels of the body's paint (:func:`paint_pixels`) less
     single specks; closed with a disc of the largest mark's radius ``mark_px`` and its holes filled (a mark inside
     a face is a hole in the paint, a mark on a face's outline a notch), then grown by half that radius, at least
@@ -196,7 +199,7 @@ def body_region(lin: np.ndarray, body_linear: np.ndarray, mark_px: float) -> np.
     lies beside the body). ``lin`` (H, W, 3) linear BGR, ``body_linear`` (3,)."""
     paint = cv2.morphologyEx(paint_pixels(lin, body_linear).astype(np.uint8), cv2.MORPH_OPEN,
                              np.ones((2, 2), np.uint8))
-    r = max(int(np.ceil(mark_px)), 1)
+    r = max(int(np.ceil(max(mark_px, gap_px))), 1)
     disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * r + 1, 2 * r + 1))
     closed = cv2.morphologyEx(paint, cv2.MORPH_CLOSE, disc)
     # fill the holes: everything the outside (flooded from a padded border) does not reach
@@ -229,7 +232,8 @@ def detect_contrast_marks(image_bgr: np.ndarray, palette: Mapping[str, tuple[int
     if body is None:
         return _detect(bgr, names, palette, prior, None, None, **settings)
     body_linear = _srgb_to_linear(np.array(body, np.float32) / 255.0)
-    region = body_region(_srgb_to_linear(bgr.astype(np.float32) / 255.0), body_linear, prior.radius_px[1])
+    gap = 0.0 if prior.extent_px is None else BODY_GAP * prior.extent_px
+    region = body_region(_srgb_to_linear(bgr.astype(np.float32) / 255.0), body_linear, prior.radius_px[1], gap)
     if not region.any():
         return _detect(bgr[:0, :0], names, palette, prior, region[:0, :0], body_linear, **settings)
     ys, xs = np.nonzero(region)
