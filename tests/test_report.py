@@ -35,3 +35,19 @@ def test_team_size_table_from_run_records():
                      "200 (50)", "1,375", "750"], cells
     assert [c.strip() for c in alone.strip("|").split("|")][:7] == ["none", "1", "100%", "9.0 (0.0)", "9.0 (9.0)",
                                                                     "0.50 (0.50)", "-"]
+
+
+def test_above_paper_names_each_cell_over_the_papers_table_ii_and_a_row_without_a_good_pose():
+    from agents.experiments.report import PAPER_TABLE_II, above_paper
+
+    def row(scenario: str, vehicle: str, **errors: float) -> dict:
+        base = {"roll": 0.01, "pitch": 0.01, "yaw": 0.01, "x": 0.001, "y": 0.001, "z": 0.001}
+        return {"scenario": scenario, "vehicle": vehicle, "world": "w", **base, **errors}
+
+    result_rows = [row("exp2-solo", "H1"), row("exp2-solo", "H2", pitch=4.05),
+                   row("exp2a-features", "H1", z=PAPER_TABLE_II["H1 + H2"][5][0] + 0.06),
+                   row("exp2b-hints", "H1", roll=float("nan")), row("exp2b-hints", "H2"),
+                   row("exp2-solo", "H2", pitch=99.0) | {"world": "other"}]
+    assert above_paper(result_rows, "w") == ["H2 pitch 4.05 > 1 deg", "H1 + H2 z 0.96 > 0.9 m",
+                                             "H1 + hint roll: no good pose"]
+    assert above_paper(result_rows[:1], "w") == []
