@@ -119,3 +119,15 @@ def test_no_module_is_over_450_lines():
     long = {str(p.relative_to(ROOT)): n for p in _modules()
             if (n := len(p.read_text(encoding="utf-8").splitlines())) > 450}
     assert not long
+
+
+def test_the_vehicle_runtime_holds_no_lock_and_dispatches_on_no_share_mode_string():
+    """roles.py keeps the clock, the camera, the bus and the frame loop (docs/architecture.md): the vehicle's state
+    has one owner, so no lock; the share mode's rules are one SharePolicy value (agents/vehicle/step.py), so no
+    comparison with a mode or topic name."""
+    source = (ROOT / "agents" / "vehicle" / "roles.py").read_text(encoding="utf-8")
+    assert "Lock(" not in source and "improver" not in source
+    names = ("none", "raw", "features", "hint", "image", "pose")
+    compared = [n for n in names if f'== "{n}"' in source or f'"{n}" in' in source or f'== "{n}"'.replace('"', "'")
+                in source]
+    assert not compared, compared
