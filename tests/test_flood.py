@@ -59,7 +59,11 @@ def test_a_flood_of_valid_feature_sets_is_rate_limited_and_leaves_every_frame_an
         with peer_session(f"tcp/127.0.0.1:{port}") as session:
             token = session.liveliness().declare_token(f"evopose/{fleet}/@alive/H2")
             publisher = session.declare_publisher(topic_key(fleet, "H2", "features"))
-            time.sleep(max(0.0, (epoch - time.time_ns()) / 1e9) + 2.0)  # 20 frames of normal running first
+            normal = 0
+            while normal < 20:  # 20 frames of normal running first: the victim's own frame events say when
+                line = victim.stdout.readline()
+                assert line, "the victim ended before its 20th frame"
+                normal += line.startswith("{") and json.loads(line).get("event") == "frame"
             rss.append(_rss_kb(victim.pid))
             flood_started = time.monotonic()
             end = time.monotonic() + 4.0
