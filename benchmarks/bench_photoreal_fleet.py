@@ -27,6 +27,7 @@ import numpy as np
 
 from agents.experiments.results import frame_agreement
 from agents.experiments.runner import dataset_scenario, run_scenario
+from agents.runs import pose_rows
 from geometry import pose_error
 from scenarios.dataset import open_dataset
 
@@ -61,8 +62,8 @@ def frame_rows(dataset: Path, scenario: str, features: str) -> list[dict]:
             good_errors, all_errors, right, wrong, first_good = [], [], 0, 0, None
             # a source plays its frames in order, one per frame processed (a late one is skipped, not consumed):
             # the i-th published pose is the dataset's frame i
-            for frame, published in enumerate(sorted(summary["poses"], key=lambda p: p[0])):
-                pose, good = np.array(published[1:7], float), bool(published[7])
+            for frame, published in enumerate(sorted(pose_rows(summary), key=lambda row: row.frame)):
+                pose, good = np.array(published.pose, float), published.good
                 if data.manifest.target_visible:
                     err = pose_error(pose, data.truth(frame).target_pose)
                     all_errors.append(err["position"])
