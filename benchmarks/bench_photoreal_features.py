@@ -68,7 +68,7 @@ def evaluate(directory: Path) -> list[dict]:
 
 
 def markdown(rows: list[dict], command: str) -> str:
-    lines = ["# Feature front-ends on rendered datasets", "",
+    lines = ["## Feature front-ends on rendered datasets", "",
              f"Produced by `{command}`; {provenance()}, OpenCV {cv2.__version__}, load average "
              f"{os.getloadavg()[0]:.1f}.", "",
              "Recall over fully visible marks, precision over all detections, labels over matched detections "

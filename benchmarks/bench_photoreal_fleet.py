@@ -98,13 +98,13 @@ def _cm(value: float | None) -> str:
 
 
 def markdown(rows: list[dict], command: str) -> str:
-    lines = ["# The fleet on rendered datasets", "", f"Produced by `{command}`; {provenance()}.", "",
+    lines = ["## The fleet on rendered datasets", "", f"Produced by `{command}`; {provenance()}.", "",
              "Per helicopter and run: good frames of all, frames before the first good one, median and largest "
              "position error over the good frames, confident-and-wrong frames (good, > 0.5 m or > 5 deg off; on a "
              "dataset without the target every good frame), and for shared feature sets the frames on which both "
              "published the same pose; \"right\" counts the published poses within 10 cm and 5 deg of the truth, "
              "good or not (what a stricter or looser verdict would have to work with) (benchmarks/bench_photoreal_fleet.py says how).", "",
-             "## Summary", "", "| scale | front-end | scenario | helicopter-runs | good frames | median error cm "
+             "### Summary", "", "| scale | front-end | scenario | helicopter-runs | good frames | median error cm "
              "| confident and wrong | right (<= 10 cm, 5 deg), good or not | median error cm, every frame |",
              "|---|---|---|---|---|---|---|---|---|"]
     groups: dict[tuple, list[dict]] = {}
@@ -120,7 +120,7 @@ def markdown(rows: list[dict], command: str) -> str:
                      f"({good / max(frames, 1):.0%}) | {_cm(statistics.median(medians) if medians else None)} "
                      f"| {sum(r['wrong'] for r in done)} | {sum(r['right'] for r in done)}/{frames} "
                      f"| {_cm(statistics.median(every) if every else None)} |")
-    lines += ["", "## Every run", "", "| dataset | front-end | scenario | vehicle | good | first good frame "
+    lines += ["", "### Every run", "", "| dataset | front-end | scenario | vehicle | good | first good frame "
               "| median cm | max cm | confident and wrong | right | median cm, every frame | same pose |",
               "|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
