@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from evopose import Camera
-from evopose.pose import matrix_from_pose
+from geometry import matrix_from_pose
 from scenarios.errors import ScenarioError
 from scenarios.photoreal.exr import read_exr
 from scenarios.photoreal.scene import (ENGINE_DEFAULTS, FORMAT, blender_camera, blender_matrix, describe_frame,

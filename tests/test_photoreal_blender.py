@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from evopose import Camera
-from evopose.pose import matrix_from_pose
+from geometry import matrix_from_pose
 from scenarios.mesh import ellipsoid_mesh
 from scenarios.photoreal.exr import read_exr
 from scenarios.photoreal.runner import PhotorealUnavailable, blender_version, run_job

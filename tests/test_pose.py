@@ -1,4 +1,4 @@
-"""Unit tests of evopose.pose: the (x, y, z, roll, pitch, yaw) world_from_target convention (docs/design.md §2)."""
+"""Unit tests of the geometry module: the (x, y, z, roll, pitch, yaw) world_from_target convention (docs/design.md §2)."""
 
 from __future__ import annotations
 

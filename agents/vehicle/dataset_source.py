@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from evopose import Camera
-from evopose.pose import matrix_from_pose, pose_from_matrix
+from geometry import matrix_from_pose, pose_from_matrix
 from scenarios.dataset import Dataset, locate_dataset, open_dataset
 from scenarios.world import Scenario
 

@@ -23,7 +23,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from evopose.pose import matrix_from_pose
+from geometry import matrix_from_pose
 
 from ..errors import ScenarioError
 from ..mesh import box_mesh

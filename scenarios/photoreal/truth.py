@@ -13,7 +13,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from evopose import Camera
-from evopose.pose import matrix_from_pose, pose_from_matrix
+from geometry import matrix_from_pose, pose_from_matrix
 
 from ..mesh import Mesh, box_mesh, hits
 from ..render import MARK_LIFT, mark_outlines, render_frame
