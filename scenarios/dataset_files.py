@@ -11,15 +11,13 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Annotated, Any, Literal, TypeVar
 
-import numpy as np
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 from evopose import Camera
-from geometry import PARAM_NAMES, pose_from_matrix
 
 from .camera_info_file import CameraInfoSpec
-from .documents import (MAX_DEPTH, Strict, _json_depth_ok, _json_object, _no_constant, describe, one_line,
+from .documents import (MAX_DEPTH, FullPoseSpec, Strict, _json_depth_ok, _json_object, _no_constant, describe, one_line,
                         read_bytes, read_mapping, validate)
 from .errors import WorldError
 
@@ -86,28 +84,6 @@ class ManifestSpec(Strict):
         return cameras
 
 
-class PoseLineSpec(Strict):
-    """A pose ``(x, y, z, roll, pitch, yaw)``, metres and radians, every value given."""
-
-    x: float
-    y: float
-    z: float
-    roll: float
-    pitch: float
-    yaw: float
-
-    def vector(self) -> np.ndarray:
-        return np.array([getattr(self, n) for n in PARAM_NAMES], float)
-
-    @classmethod
-    def of(cls, pose: np.ndarray) -> "PoseLineSpec":
-        """The spec of a pose (6,) or a transform (4, 4)."""
-        pose = np.asarray(pose, float)
-        if pose.shape == (4, 4):
-            pose = pose_from_matrix(pose)
-        return cls(**{n: float(v) for n, v in zip(PARAM_NAMES, pose.reshape(6))})
-
-
 class MarkSpec(Strict):
     """A mark whose centre is visible: model index, projected centre (pixels), colour name, whole disc visible."""
 
@@ -118,7 +94,7 @@ class MarkSpec(Strict):
 
 
 class ViewTruthSpec(Strict):
-    world_from_camera: PoseLineSpec
+    world_from_camera: FullPoseSpec
     marks: Annotated[list[MarkSpec], Field(max_length=MAX_MARKS)] = []
 
 
@@ -127,7 +103,7 @@ class TruthLineSpec(Strict):
 
     frame: Annotated[int, Field(ge=0)]
     time: Annotated[float, Field(ge=0)]
-    target_pose: PoseLineSpec
+    target_pose: FullPoseSpec
     target_visible: bool
     cameras: Annotated[dict[CameraName, ViewTruthSpec], Field(max_length=MAX_CAMERAS)]
 
@@ -136,7 +112,7 @@ class PosesLineSpec(Strict):
     """A line of a camera's ``poses.jsonl``."""
 
     frame: Annotated[int, Field(ge=0)]
-    world_from_camera: PoseLineSpec
+    world_from_camera: FullPoseSpec
 
 
 def read_camera_info_file(path: Path) -> Camera:

@@ -19,10 +19,10 @@ from evopose import Camera
 from .camera_info_file import calibration_document
 from .dataset_files import (CAMERA_INFO, FORMAT, FRAME_DIGITS, IMAGE_SUFFIXES, MANIFEST, MAX_POSES_BYTES,
                             MAX_POSES_LINE, MAX_TRUTH_BYTES, MAX_TRUTH_LINE, MODEL, POSES, TRUTH, WORLD, DatasetError,
-                            ManifestSpec, MarkSpec, PoseLineSpec, PosesLineSpec, TruthLineSpec, ViewTruthSpec,
+                            ManifestSpec, MarkSpec, PosesLineSpec, TruthLineSpec, ViewTruthSpec,
                             _check_camera, _check_frame_numbers, _dump_yaml, _json_line, _write_text,
                             image_name, read_json_lines)
-from .documents import StrictLoader, describe, read_mapping, validate
+from .documents import FullPoseSpec, StrictLoader, describe, read_mapping, validate
 from .target import resolve_model_path
 from .world import ScenarioSpec, build_scenario, load_scenario, read_world_document, resolve_scenario_path
 
@@ -189,7 +189,7 @@ class DatasetWriter:
         if k != self._poses_next[camera]:
             raise DatasetError(f"{self.root / camera / POSES}: frame {k} out of order: frame "
                                f"{self._poses_next[camera]} is next")
-        line = PosesLineSpec(frame=k, world_from_camera=PoseLineSpec.of(world_from_camera))
+        line = PosesLineSpec(frame=k, world_from_camera=FullPoseSpec.of(world_from_camera))
         with open(self.root / camera / POSES, "a", encoding="utf-8") as f:
             f.write(_json_line(line))
         self._poses_next[camera] = k + 1
@@ -215,9 +215,9 @@ class DatasetWriter:
             view = views[camera]
             marks = [MarkSpec(index=int(i), uv=[float(uv[0]), float(uv[1])], colour=str(c), fully_visible=bool(f))
                      for i, uv, c, f in zip(view.mark_index, view.mark_uv, view.mark_colour, view.fully_visible)]
-            cameras[camera] = ViewTruthSpec(world_from_camera=PoseLineSpec.of(view.camera_pose), marks=marks)
+            cameras[camera] = ViewTruthSpec(world_from_camera=FullPoseSpec.of(view.camera_pose), marks=marks)
         line = TruthLineSpec(frame=k, time=k / self.manifest.fps if time is None else float(time),
-                             target_pose=PoseLineSpec.of(target_pose),
+                             target_pose=FullPoseSpec.of(target_pose),
                              target_visible=self.manifest.target_visible if target_visible is None else target_visible,
                              cameras=cameras)
         with open(self.root / TRUTH, "a", encoding="utf-8") as f:

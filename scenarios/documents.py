@@ -23,8 +23,11 @@ import stat
 from pathlib import Path
 from typing import Any, TypeVar
 
+import numpy as np
 import yaml
 from pydantic import BaseModel, ConfigDict, ValidationError, model_validator
+
+from geometry import PARAM_NAMES, pose_from_matrix
 
 T = TypeVar("T", bound=BaseModel)
 
@@ -70,6 +73,30 @@ class Spec(BaseModel):
             if unknown:
                 raise UnknownKey(unknown[0], list(cls.model_fields))
         return data
+
+
+class FullPoseSpec(Spec):
+    """A pose ``(x, y, z, roll, pitch, yaw)``, metres and radians, every value given: the problem file's camera poses
+    and hints, a ``--camera-pose`` file, a rendered dataset's camera and target poses."""
+
+    x: float
+    y: float
+    z: float
+    roll: float
+    pitch: float
+    yaw: float
+
+    def vector(self) -> np.ndarray:
+        """The pose as an array, shape (6,)."""
+        return np.array([getattr(self, n) for n in PARAM_NAMES], float)
+
+    @classmethod
+    def of(cls, pose: np.ndarray) -> "FullPoseSpec":
+        """The spec of a pose (6,) or a transform (4, 4)."""
+        pose = np.asarray(pose, float)
+        if pose.shape == (4, 4):
+            pose = pose_from_matrix(pose)
+        return cls(**{n: float(v) for n, v in zip(PARAM_NAMES, pose.reshape(6))})
 
 
 class StrictLoader(yaml.SafeLoader):

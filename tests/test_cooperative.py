@@ -103,9 +103,12 @@ def test_a_generation_reports_the_eq4_fitness_of_its_pose_and_needs_an_estimate_
     views, _ = _views(frames, ("H1",))
     estimator.estimate(views)
     objective = PoseObjective(estimator.problem(views), estimator.options.fitness, estimator.options.tau)
-    for _ in range(5):
+    history = []
+    for _ in range(20):
         estimate = estimator.generation()
         assert objective(estimate.pose[None])[0] == pytest.approx(estimate.solution.fitness, rel=1e-9)
+        history.append(estimate.solution.fitness)
+    assert all(b <= a for a, b in zip(history, history[1:]))  # kept too: a regression of tell would show here
 
 
 def test_camera_round_trip_and_pairing_by_stamp(exp2):

@@ -27,9 +27,9 @@ import numpy as np
 
 from evopose import Camera
 from scenarios.camera_info_file import CameraInfoSpec, MatrixSpec
-from scenarios.documents import read_mapping, validate
+from scenarios.documents import FullPoseSpec, read_mapping, validate
 
-from agents.problem.problem_file import CameraSpec, PoseSpec, ProblemFileError
+from agents.problem.problem_file import CameraSpec, ProblemFileError
 
 def is_camera_info(document: dict[str, Any]) -> bool:
     """Whether a camera file's mapping is a ROS ``camera_info`` (it names ``camera_matrix``)."""
@@ -105,7 +105,7 @@ def read_camera_pose(path: str | Path) -> np.ndarray:
     ProblemFileError
         One line naming the file and the offending field.
     """
-    return validate(PoseSpec, read_mapping(path, ProblemFileError), path, ProblemFileError).vector()
+    return validate(FullPoseSpec, read_mapping(path, ProblemFileError), path, ProblemFileError).vector()
 
 
 __all__ = ["CameraInfoSpec", "MatrixSpec", "camera_from_camera_info_message", "camera_info_document", "is_camera_info",

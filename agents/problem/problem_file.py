@@ -23,7 +23,7 @@ from geometry import PARAM_NAMES, pose_from_matrix, quaternion_from_euler
 
 from scenarios.errors import WorldError
 from scenarios.target import TargetModel, load_model, resolve_model_path
-from scenarios.documents import Spec, describe, read_mapping, validation_message
+from scenarios.documents import FullPoseSpec, Spec, describe, read_mapping, validation_message
 
 from agents.problem.images import detect_marks, read_image
 
@@ -86,21 +86,6 @@ Range = Annotated[list[float], _fixed_length(2, "[lo, hi]"), AfterValidator(_mod
 Distortion = Annotated[list[float], _fixed_length(5, "[k1, k2, p1, p2, k3]")]
 
 
-class PoseSpec(Spec):
-    """A full pose ``(x, y, z, roll, pitch, yaw)``, metres and radians."""
-
-    x: float
-    y: float
-    z: float
-    roll: float
-    pitch: float
-    yaw: float
-
-    def vector(self) -> np.ndarray:
-        """The pose as an array, shape (6,)."""
-        return np.array([getattr(self, name) for name in PARAM_NAMES])
-
-
 class ModelSpec(Spec):
     """The target's feature points in the target frame, optionally with outward normals; or a model ``file``
     (``scenarios/models`` format: marks with colours, relative to the problem file, or a shipped model name)."""
@@ -141,7 +126,7 @@ class CameraSpec(Spec):
     width: Annotated[int, Field(gt=0)]
     height: Annotated[int, Field(gt=0)]
     distortion: Distortion | None = None
-    world_from_camera: PoseSpec | None = None
+    world_from_camera: FullPoseSpec | None = None
 
     def to_camera(self) -> Camera:
         extrinsic = None if self.world_from_camera is None else self.world_from_camera.vector()
@@ -223,7 +208,7 @@ class ProblemSpec(Spec):
     views: Annotated[list[ViewSpec], Field(min_length=1, max_length=MAX_VIEWS)]
     search: SearchSpec
     constraints: ConstraintsSpec = ConstraintsSpec()
-    hints: Annotated[list[PoseSpec], Field(max_length=MAX_HINTS)] = []
+    hints: Annotated[list[FullPoseSpec], Field(max_length=MAX_HINTS)] = []
     seed: Annotated[int, Field(ge=0)] | None = None
     options: OptionsSpec = OptionsSpec()
 
