@@ -22,7 +22,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from evopose.blobs import detect_contrast_marks, mark_prior
+from evopose.blobs import SMALL_SPOT_PX, detect_contrast_marks, mark_prior
 from evopose.features import colour_ranges, detect_colour_marks, match_to_truth
 from scenarios.dataset import open_dataset
 
@@ -49,7 +49,7 @@ def evaluate(directory: Path) -> list[dict]:
             whole = np.array([m.fully_visible for m in marks], bool)
             colours = [m.colour for m in marks]
             prior = mark_prior(camera, world.model.mark_radius, world.model.size, area.lo[:3], area.hi[:3])
-            match_px = 1.5 if prior.radius_px[1] < 3 else 3.0
+            match_px = 1.5 if prior.radius_px[1] < SMALL_SPOT_PX else 3.0
             for name in FRONT_ENDS:
                 det = (detect_contrast_marks(image, world.model.palette, prior, body=world.model.body_colour)
                        if name == "contrast"

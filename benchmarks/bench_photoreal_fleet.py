@@ -28,6 +28,7 @@ import numpy as np
 from agents.experiments.results import frame_agreement
 from agents.experiments.runner import dataset_scenario, run_scenario
 from agents.runs import pose_rows
+from evopose.blobs import SMALL_SPOT_PX, mark_prior
 from geometry import pose_error
 from scenarios.dataset import open_dataset
 
@@ -53,7 +54,7 @@ def frame_rows(dataset: Path, scenario: str, features: str) -> list[dict]:
         agreement = frame_agreement([record], "H1", "H2") if scenario == "exp2a-features" else None
         for vehicle in data.cameras:
             summary = record["agents"].get(vehicle)
-            row = {"dataset": dataset.name, "scale": _scale(dataset.name), "lighting": _lighting(dataset.name),
+            row = {"dataset": dataset.name, "scale": _scale(data, vehicle),
                    "visible": data.manifest.target_visible, "scenario": scenario, "features": features,
                    "vehicle": vehicle, "error": record.get("error")}
             if summary is None:
@@ -84,13 +85,13 @@ def frame_rows(dataset: Path, scenario: str, features: str) -> list[dict]:
     return rows
 
 
-def _scale(name: str) -> str:
-    return "telephoto" if "telephoto" in name else "paper"
-
-
-def _lighting(name: str) -> str:
-    return next((light for light in ("high", "low", "overcast") if name.endswith(light)), "absent" if
-                "absent" in name else "")
+def _scale(data, camera: str) -> str:
+    """"paper" when the camera's marks can be at most ``SMALL_SPOT_PX`` in radius (the paper's scale: the Pioneer
+    ~25 px), else "telephoto": from the camera and the operating area, as the front-end sizes them."""
+    world = data.world()
+    area = world.bounds()
+    prior = mark_prior(data.camera(camera, 0), world.model.mark_radius, world.model.size, area.lo[:3], area.hi[:3])
+    return "paper" if prior.radius_px[1] < SMALL_SPOT_PX else "telephoto"
 
 
 def _cm(value: float | None) -> str:

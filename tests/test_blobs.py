@@ -136,25 +136,19 @@ def test_on_the_committed_photoreal_frames_the_contrast_front_end_with_the_body_
                                                                                              precision):
     # Blender Cycles frames (tests/data/photoreal, docs/datasets.md): the bars (paper scale 0.8 / 0.8,
     # telephoto 0.95) are not met yet; these are the levels measured (BENCHMARKS.md), so a regression fails
-    from scenarios.dataset import open_dataset
+    # the benchmark's own evaluation (match radius, recall over whole marks, precision over every detection)
+    from benchmarks.bench_photoreal_features import evaluate
 
-    data = open_dataset(Path(__file__).parent / "data" / "photoreal" / name)
-    world, area = data.world(), data.world().bounds()
-    found = marks = correct = detections = 0
-    for cam in data.cameras:
-        for k in range(data.frames):
-            image = cv2.imread(str(data.image_path(cam, k)), cv2.IMREAD_COLOR)
-            truth = data.truth(k).cameras[cam].marks
-            uv = np.array([m.uv for m in truth]).reshape(-1, 2)
-            whole = np.array([m.fully_visible for m in truth], bool)
-            prior = mark_prior(data.camera(cam, k), world.model.mark_radius, world.model.size, area.lo[:3],
-                               area.hi[:3])
-            match_px = 1.5 if prior.radius_px[1] < 3 else 3.0
-            det = detect_contrast_marks(image, world.model.palette, prior, body=world.model.body_colour)
-            found += len(match_to_truth(det.points, uv[whole], match_px)[0])
-            correct += len(match_to_truth(det.points, uv, match_px)[0])
-            marks, detections = marks + int(whole.sum()), detections + len(det)
-    assert found / marks >= recall and correct / detections >= precision
+    every = evaluate(Path(__file__).parent / "data" / "photoreal" / name)
+    pooled = {}
+    for front_end in ("contrast", "marks"):
+        rows = [r for r in every if r["front_end"] == front_end]
+        marks, detections = sum(r["marks"] for r in rows), sum(r["detections"] for r in rows)
+        pooled[front_end] = (sum(r["recall"] * r["marks"] for r in rows) / marks,
+                             sum(r["precision"] * r["detections"] for r in rows) / max(detections, 1))
+    assert pooled["contrast"][0] >= recall and pooled["contrast"][1] >= precision, pooled
+    if name == "paper":  # where the hue bands are blind (0.13 recall here)
+        assert pooled["contrast"][0] > 3 * pooled["marks"][0], pooled
 
 
 def test_on_the_committed_frames_without_the_target_no_body_paint_means_no_marks():
