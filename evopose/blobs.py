@@ -223,32 +223,33 @@ def detect_contrast_marks(image_bgr: np.ndarray, palette: Mapping[str, tuple[int
     when every mark is under :data:`SMALL_SPOT_PX`. Returns the marks sorted by label then row.
 
     With a body the scale space is built only around it: the box of :func:`body_region` grown by three of the
-    largest blur sigmas (no paint in the image: no marks)."""
+    largest blur sigmas, at least :data:`MIN_MARGIN_PX` (no paint in the image: no marks)."""
     bgr = _to_bgr(image_bgr)
     names = tuple(palette)
     if not names:
         raise ValueError("the palette names no colour")
     settings = dict(k_sigma=k_sigma, max_edge_ratio=max_edge_ratio, max_misfit=max_misfit, max_marks=max_marks)
+    lin = _srgb_to_linear(bgr.astype(np.float32) / 255.0)
     if body is None:
-        return _detect(bgr, names, palette, prior, None, None, **settings)
+        return _detect(bgr, lin, names, palette, prior, None, **settings)
     body_linear = _srgb_to_linear(np.array(body, np.float32) / 255.0)
     gap = 0.0 if prior.extent_px is None else BODY_GAP * prior.extent_px
-    region = body_region(_srgb_to_linear(bgr.astype(np.float32) / 255.0), body_linear, prior.radius_px[1], gap)
+    region = body_region(lin, body_linear, prior.radius_px[1], gap)
     if not region.any():
-        return _detect(bgr[:0, :0], names, palette, prior, region[:0, :0], body_linear, **settings)
+        return _detect(bgr[:0, :0], lin[:0, :0], names, palette, prior, region[:0, :0], **settings)
     ys, xs = np.nonzero(region)
     margin = max(int(np.ceil(3 * scales(prior)[-1])) + 2, MIN_MARGIN_PX)
     y0, y1 = max(int(ys.min()) - margin, 0), min(int(ys.max()) + margin + 1, bgr.shape[0])
     x0, x1 = max(int(xs.min()) - margin, 0), min(int(xs.max()) + margin + 1, bgr.shape[1])
-    found = _detect(bgr[y0:y1, x0:x1], names, palette, prior, region[y0:y1, x0:x1], body_linear, **settings)
+    found = _detect(bgr[y0:y1, x0:x1], lin[y0:y1, x0:x1], names, palette, prior, region[y0:y1, x0:x1], **settings)
     return replace(found, points=found.points + (x0, y0))
 
 
-def _detect(bgr: np.ndarray, names: tuple[str, ...], palette: Mapping[str, tuple[int, int, int]], prior: MarkPrior,
-            region: np.ndarray | None, body_linear: np.ndarray | None, *, k_sigma: float, max_edge_ratio: float,
+def _detect(bgr: np.ndarray, lin: np.ndarray, names: tuple[str, ...], palette: Mapping[str, tuple[int, int, int]],
+            prior: MarkPrior, region: np.ndarray | None, *, k_sigma: float, max_edge_ratio: float,
             max_misfit: float | None, max_marks: int) -> ContrastMarks:
-    """:func:`detect_contrast_marks` in ``bgr`` (H, W, 3) uint8, the marks kept on ``region`` (H, W) bool when
-    given (the body's: ``body_linear`` (3,) its paint)."""
+    """:func:`detect_contrast_marks` in ``bgr`` (H, W, 3) uint8 (``lin`` the same in linear light, float32), the
+    marks kept on ``region`` (H, W) bool when given (the body's)."""
     h, w = bgr.shape[:2]
     if h < 5 or w < 5:
         empty = np.zeros(0)
@@ -305,7 +306,6 @@ def _detect(bgr: np.ndarray, names: tuple[str, ...], palette: Mapping[str, tuple
         off = -np.linalg.solve(np.array([[dxx, dxy], [dxy, dyy]]), np.array([gx, gy]))
         pts[i] = (x + np.clip(off[0], -0.5, 0.5), y + np.clip(off[1], -0.5, 0.5))
     lvl, ys, xs, radius, pts = lvl[ok], ys[ok], xs[ok], radius[ok], pts[ok]
-    lin = _srgb_to_linear(img)
     if region is not None:  # context: on or beside the body's paint
         on = region[ys, xs]
         lvl, ys, xs, radius, pts = lvl[on], ys[on], xs[on], radius[on], pts[on]
