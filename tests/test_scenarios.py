@@ -200,3 +200,11 @@ def test_features_override_sets_every_camera_vehicles_front_end_and_a_bad_kind_i
     assert main(["scenario", "run", "exp2a-features", "--features", "hues"]) == 2
     err = capsys.readouterr().err
     assert "--features" in err and "marks, contrast, corners" in err and err.count("\n") == 1
+
+
+def test_the_feature_kinds_are_one_list():
+    from agents.problem.extract import FEATURE_KINDS as extractors
+    from agents.vehicle.config import FEATURES
+    from scenarios.fleet import FEATURE_KINDS
+
+    assert FEATURES == FEATURE_KINDS == extractors == ("marks", "contrast", "corners")

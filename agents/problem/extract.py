@@ -22,12 +22,9 @@ import numpy as np
 from evopose import Bounds, Camera
 from evopose.blobs import MarkPrior, detect_contrast_marks, mark_prior
 from evopose.features import colour_ranges, detect_colour_marks, detect_corners, x_junctions
+from scenarios.fleet import FEATURE_KINDS
 from scenarios.target import TargetModel
 
-#: The kinds of feature points (``--features``): colour ``marks`` by preset hue bands (the default; the front-end
-#: for the project's flat-coloured drawings), marks by ``contrast`` (camera images: photoreal renders, JPEG 4:2:0),
-#: chessboard ``corners``.
-FEATURE_KINDS = ("marks", "contrast", "corners")
 #: Shi-Tomasi settings of ``corners``: at most this many corners, quality relative to the strongest, spacing in
 #: pixels (a 640 x 480 photo of a 9 x 6 board 0.3-0.4 m away: squares of 30-60 px).
 MAX_CORNERS, CORNER_QUALITY, CORNER_SPACING_PX = 150, 0.05, 8.0

@@ -17,7 +17,8 @@ ENCODINGS = ("raw", "jpeg", "png")
 #: Eq. (4)'s view weights (evopose.weights): fixed, the paper's step rule, or from each view's evidence.
 VIEW_WEIGHTS = ("equal", "step", "adaptive")
 CAMERA_ROLES = ("uav", "ground-station")
-#: Feature points a camera vehicle extracts (``--features``; agents.problem.extract.FEATURE_KINDS).
+#: Feature points a camera vehicle extracts (``--features``): scenarios.fleet.FEATURE_KINDS, here without pydantic
+#: for the CLI's help (tests/test_scenarios.py checks they are the same).
 FEATURES = ("marks", "contrast", "corners")
 #: Largest ROS_DOMAIN_ID (ROS 2's documented range, as ``evopose ros2 --domain``).
 MAX_ROS_DOMAIN = 232
