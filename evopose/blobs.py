@@ -19,7 +19,8 @@ scale a mark has at the target's distance. So (docs/design.md, "The feature fron
 4. **Label** (:func:`label_colours`): which of the model's colours, seen under an unknown brightness ``s``,
    lies on the line from the background through the observed spot (a blend ``p = a c + (1 - a) b``), in
    linear light; a confidence from the margin to the second colour. A spot that fits no paint colour (a
-   body corner, a shadow) is dropped.
+   body corner, a shadow) is dropped. Spots under :data:`SMALL_SPOT_PX` on a body take their label from
+   :mod:`evopose.spot_colour` instead, which models the encoder's 4:2:0 chroma.
 5. **Context**: the marks lie on the target's body. Given the body's paint colour (the model's), a candidate
    must lie on or inside a patch of that paint seen under any light (:func:`paint_pixels`: the dichromatic
    reflection model, paint plus the light's own colour; :func:`body_region`); clutter in the marks' own hues lies
@@ -40,6 +41,7 @@ import cv2
 import numpy as np
 
 from .features import MarkDetections, _coverage, _to_bgr
+from .spot_colour import label_small_spots
 
 #: Scale steps per octave of the scale space.
 STEPS_PER_OCTAVE = 3
@@ -239,17 +241,19 @@ def detect_contrast_marks(image_bgr: np.ndarray, palette: Mapping[str, tuple[int
         return _detect(bgr[:0, :0], lin[:0, :0], names, palette, prior, region[:0, :0], **settings)
     ys, xs = np.nonzero(region)
     margin = max(int(np.ceil(3 * scales(prior)[-1])) + 2, MIN_MARGIN_PX)
-    y0, y1 = max(int(ys.min()) - margin, 0), min(int(ys.max()) + margin + 1, bgr.shape[0])
-    x0, x1 = max(int(xs.min()) - margin, 0), min(int(xs.max()) + margin + 1, bgr.shape[1])
-    found = _detect(bgr[y0:y1, x0:x1], lin[y0:y1, x0:x1], names, palette, prior, region[y0:y1, x0:x1], **settings)
+    # the crop starts on even coordinates: the encoder's 2 x 2 chroma blocks stay aligned (evopose.spot_colour)
+    y0, y1 = max(int(ys.min()) - margin, 0) // 2 * 2, min(int(ys.max()) + margin + 1, bgr.shape[0])
+    x0, x1 = max(int(xs.min()) - margin, 0) // 2 * 2, min(int(xs.max()) + margin + 1, bgr.shape[1])
+    found = _detect(bgr[y0:y1, x0:x1], lin[y0:y1, x0:x1], names, palette, prior, region[y0:y1, x0:x1], **settings,
+                    body=body)
     return replace(found, points=found.points + (x0, y0))
 
 
 def _detect(bgr: np.ndarray, lin: np.ndarray, names: tuple[str, ...], palette: Mapping[str, tuple[int, int, int]],
             prior: MarkPrior, region: np.ndarray | None, *, k_sigma: float, max_edge_ratio: float,
-            max_misfit: float | None, max_marks: int) -> ContrastMarks:
+            max_misfit: float | None, max_marks: int, body: tuple[int, int, int] | None = None) -> ContrastMarks:
     """:func:`detect_contrast_marks` in ``bgr`` (H, W, 3) uint8 (``lin`` the same in linear light, float32), the
-    marks kept on ``region`` (H, W) bool when given (the body's)."""
+    marks kept on ``region`` (H, W) bool when given (the body's paint ``body``, BGR)."""
     h, w = bgr.shape[:2]
     if h < 5 or w < 5:
         empty = np.zeros(0)
@@ -347,6 +351,11 @@ def _detect(bgr: np.ndarray, lin: np.ndarray, names: tuple[str, ...], palette: M
     if prior.extent_px is not None and len(pts) > 1:
         keep = _densest_cluster(pts, contrast, 0.75 * prior.extent_px)
         pts, labels, conf, radius, contrast = pts[keep], labels[keep], conf[keep], radius[keep], contrast[keep]
+    if body is not None and prior.radius_px[1] < SMALL_SPOT_PX and len(pts):
+        # 2-4 px spots: the label through the encoder's 4:2:0 chroma (evopose.spot_colour); the crop is even-aligned
+        labels, conf = label_small_spots(bgr, pts, radius, np.array([palette[n] for n in names], np.uint8), body)
+        kept = labels >= 0
+        pts, labels, conf, radius, contrast = pts[kept], labels[kept], conf[kept], radius[kept], contrast[kept]
     order = np.lexsort((pts[:, 0], pts[:, 1], labels)) if len(pts) else np.zeros(0, int)
     areas = np.round(np.pi * radius ** 2).astype(int)
     return ContrastMarks(pts[order].reshape(-1, 2), labels[order].astype(int), areas[order], names,

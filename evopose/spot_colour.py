@@ -1,0 +1,129 @@
+"""Which paint colour a 2-4 px spot is, seen through the encoder: analysis by synthesis in JPEG's own colour space.
+
+A camera streams JPEG with 4:2:0 chroma: luminance at every pixel, the two chroma channels as means over 2 x 2
+blocks. A 5 cm mark 30 m away covers 2-4 px, so its luminance keeps about half its contrast against the body while
+its chroma keeps about a tenth (measured on the project's Cycles frames: a cyan mark on the red body moves Y by
++34 and Cr by only -10 of the -120 a full cyan would). A label fitted in RGB, where luminance and chroma are mixed,
+then reads the diluted chroma as the body's own: cyan and green came out yellow or magenta (55 % of the paper-scale
+labels right, cyan 10 %, green 7 %).
+
+So the label is fitted where the encoder works (docs/design.md, "The feature front-end"): in gamma-encoded Y Cr Cb
+(ITU-R BT.601 full range, JPEG's), a spot of paint colour ``c`` at brightness ``k`` over its surroundings ``r`` is
+
+    dY(x) = a g(x) (k Y_c - Y_r)            (luminance: full resolution)
+    dC(x) = a S[g](x) (k C_c - C_r)         (chroma, centred on 128: through the 4:2:0 operator S)
+
+with ``g`` the spot's profile (a Gaussian of the detector's scale at the sub-pixel position), ``a`` its coverage
+and ``S`` the encoder's block means aligned to even image coordinates, upsampled bilinearly (:func:`chroma_420`).
+Scaling linear light by ``s`` scales gamma values by ``s^(1/2.4)``, so ``k`` is exactly a brightness. For each
+colour and each ``k`` on a grid the model is linear in ``a``: the best ``a`` in closed form, the misfit the residual
+over the spot's window. ``k`` is held near the light on the body: the ring's luminance over the body paint's
+(:data:`BRIGHTNESS_SPAN` either way), as marks and body share a face and its light.
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+#: Half size of the window the 4:2:0 operator is applied on, and of the window the misfit is taken over (pixels).
+PATCH_HALF, FIT_HALF = 5, 3
+#: The mark's brightness relative to the body's light lies within this factor either way.
+BRIGHTNESS_SPAN = 1.6
+#: Without the body's colour: the mark's brightness relative to its palette colour lies in this range.
+FREE_BRIGHTNESS = (0.15, 1.6)
+#: Brightness steps of the grid, and the largest coverage (a spot may show a little more than its mark: blur).
+BRIGHTNESS_STEPS, MAX_COVERAGE = 16, 1.2
+
+
+def to_ycrcb(bgr: np.ndarray) -> np.ndarray:
+    """uint8 BGR (..., 3) -> float Y, Cr, Cb (..., 3), JPEG's full-range BT.601 (OpenCV's ``COLOR_BGR2YCrCb``)."""
+    a = np.asarray(bgr, np.uint8)
+    flat = a.reshape(-1, 1, 3)
+    return cv2.cvtColor(flat, cv2.COLOR_BGR2YCrCb).reshape(a.shape).astype(np.float64)
+
+
+def chroma_420(field: np.ndarray, x0: int, y0: int) -> np.ndarray:
+    """The encoder's 4:2:0 chroma operator on ``field`` (H, W) whose top-left pixel is image pixel ``(x0, y0)``:
+    means over the 2 x 2 blocks of the image's grid (aligned to even coordinates), upsampled bilinearly back to
+    (H, W)."""
+    ox, oy = x0 % 2, y0 % 2
+    h, w = field.shape
+    padded = np.pad(field, ((oy, (h + oy) % 2), (ox, (w + ox) % 2)), mode="edge")
+    blocks = padded.reshape(padded.shape[0] // 2, 2, padded.shape[1] // 2, 2).mean(axis=(1, 3))
+    up = cv2.resize(blocks, (padded.shape[1], padded.shape[0]), interpolation=cv2.INTER_LINEAR)
+    return up[oy:oy + h, ox:ox + w]
+
+
+def ring_colours(ycc: np.ndarray, points: np.ndarray, radius: np.ndarray) -> np.ndarray:
+    """The median Y Cr Cb (K, 3) of each spot's ring, ``radius + 1.5`` to ``radius + 3`` px from ``points`` (K, 2)."""
+    h, w = ycc.shape[:2]
+    out = np.zeros((len(points), 3))
+    for i, ((u, v), r) in enumerate(zip(points, radius)):
+        reach = r + 3.0
+        x0, x1 = max(int(np.floor(u - reach)), 0), min(int(np.ceil(u + reach)) + 1, w)
+        y0, y1 = max(int(np.floor(v - reach)), 0), min(int(np.ceil(v + reach)) + 1, h)
+        yy, xx = np.mgrid[y0:y1, x0:x1]
+        dist = np.hypot(xx - u, yy - v)
+        sel = (dist >= r + 1.5) & (dist <= reach)
+        out[i] = np.median(ycc[y0:y1, x0:x1][sel], axis=0) if sel.any() else ycc[int(round(v)), int(round(u))]
+    return out
+
+
+def spot_misfits(image_bgr: np.ndarray, points: np.ndarray, radius: np.ndarray, palette_bgr: np.ndarray,
+                 body_bgr: tuple[int, int, int] | None = None) -> np.ndarray:
+    """Misfit (K, C) of each spot (``points`` (K, 2) pixels, ``radius`` (K,) pixels from the detector's scale) as
+    each paint colour of ``palette_bgr`` (C, 3) uint8 sRGB, through 4:2:0 chroma (the module's model): the
+    root-sum-square residual over the spot's window, in 8-bit Y Cr Cb units. inf for a spot too near the border."""
+    ycc = to_ycrcb(image_bgr)
+    h, w = ycc.shape[:2]
+    palette = to_ycrcb(np.asarray(palette_bgr, np.uint8).reshape(-1, 3))            # (C, 3)
+    pal_y, pal_c = palette[:, 0], palette[:, 1:] - 128.0
+    ring = ring_colours(ycc, points, radius)
+    body_y = None if body_bgr is None else float(to_ycrcb(np.array([body_bgr], np.uint8))[0, 0])
+    out = np.full((len(points), len(palette)), np.inf)
+    span = 2 * PATCH_HALF + 1
+    for i, ((u, v), r) in enumerate(zip(points, radius)):
+        x0, y0 = int(round(u)) - PATCH_HALF, int(round(v)) - PATCH_HALF
+        if x0 < 0 or y0 < 0 or x0 + span > w or y0 + span > h:
+            continue
+        yy, xx = np.mgrid[y0:y0 + span, x0:x0 + span]
+        sigma = max(r / np.sqrt(2), 0.6)
+        g = np.exp(-((xx - u) ** 2 + (yy - v) ** 2) / (2 * sigma * sigma))
+        sg = chroma_420(g, x0, y0)
+        inner = (np.abs(xx - int(round(u))) <= FIT_HALF) & (np.abs(yy - int(round(v))) <= FIT_HALF)
+        d = ycc[y0:y0 + span, x0:x0 + span][inner] - ring[i]                          # (N, 3)
+        gi, si = g[inner], sg[inner]
+        ring_y, ring_c = ring[i, 0], ring[i, 1:] - 128.0
+        lo, hi = FREE_BRIGHTNESS if not body_y else (ring_y / body_y / BRIGHTNESS_SPAN,
+                                                     ring_y / body_y * BRIGHTNESS_SPAN)
+        ks = np.geomspace(max(lo, 1e-3), max(hi, 2e-3), BRIGHTNESS_STEPS)             # (G,)
+        obs = np.concatenate([d[:, 0], d[:, 1], d[:, 2]])                              # (3N,)
+        for j in range(len(palette)):
+            # the unit-coverage model at each brightness, (G, 3N): [g (k Y_c - Y_r), S[g] (k C_c - C_r)]
+            model = np.concatenate([gi[None, :] * (ks[:, None] * pal_y[j] - ring_y),
+                                    si[None, :] * (ks[:, None] * pal_c[j, 0] - ring_c[0]),
+                                    si[None, :] * (ks[:, None] * pal_c[j, 1] - ring_c[1])], axis=1)
+            norm = np.einsum("gn,gn->g", model, model)
+            a = np.clip(model @ obs / np.maximum(norm, 1e-12), 0.0, MAX_COVERAGE)
+            resid = obs[None, :] - a[:, None] * model
+            out[i, j] = float(np.sqrt(np.min(np.einsum("gn,gn->g", resid, resid))))
+    return out
+
+
+def label_small_spots(image_bgr: np.ndarray, points: np.ndarray, radius: np.ndarray, palette_bgr: np.ndarray,
+                      body_bgr: tuple[int, int, int] | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Each spot's colour (index into ``palette_bgr``, (K,)) and a confidence (K,) in [0, 1], 1 - best misfit over
+    the second's (:func:`spot_misfits`); a spot no colour can be fitted to (at the border) gets label -1."""
+    misfit = spot_misfits(image_bgr, points, radius, palette_bgr, body_bgr)
+    if misfit.shape[1] == 0 or len(misfit) == 0:
+        return np.full(len(points), -1, int), np.zeros(len(points))
+    order = np.argsort(misfit, axis=1)
+    best = misfit[np.arange(len(misfit)), order[:, 0]]
+    second = misfit[np.arange(len(misfit)), order[:, 1]] if misfit.shape[1] > 1 else np.full(len(misfit), np.inf)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        confidence = np.where(np.isfinite(best), np.clip(1.0 - best / np.maximum(second, 1e-9), 0.0, 1.0), 0.0)
+    return np.where(np.isfinite(best), order[:, 0], -1), confidence
+
+
+__all__ = ["chroma_420", "label_small_spots", "ring_colours", "spot_misfits", "to_ycrcb"]
