@@ -56,21 +56,29 @@ class Estimate:
 @dataclass(frozen=True)
 class Verdict:
     """The one verdict on a pose (docs/design.md §2): ``converged`` (the search judged its best good), ``confident``
-    (no distinct pose fits nearly as well), ``good`` = both, what a vehicle publishes and counts."""
+    (no distinct pose fits nearly as well: the right basin), ``precise`` (its covariance places it within the
+    target's own size, :attr:`evopose.solver.Solution.precise`); ``good`` = all three, what a vehicle publishes and
+    counts. ``in_right_basin`` = converged and confident, what a vehicle may offer its team-mates as a hint."""
 
     converged: bool
     confident: bool
+    precise: bool = False
+
+    @property
+    def in_right_basin(self) -> bool:
+        return self.converged and self.confident
 
     @property
     def good(self) -> bool:
-        return self.converged and self.confident
+        return self.converged and self.confident and self.precise
 
 
 def verdict(estimate: "Estimate | None") -> Verdict:
     """The verdict on an estimate (none: neither)."""
     if estimate is None:
         return Verdict(False, False)
-    return Verdict(bool(estimate.solution.converged), bool(getattr(estimate.solution, "confident", False)))
+    sol = estimate.solution
+    return Verdict(bool(sol.converged), bool(getattr(sol, "confident", False)), bool(getattr(sol, "precise", False)))
 
 
 @dataclass(frozen=True, eq=False)

@@ -23,7 +23,7 @@ from .options import SearchOptions
 from .problem import PoseProblem, View
 from .refine import TRACK_HARD_SCHEDULE, TRACK_SCHEDULE, annealing, refine
 from .search import EvoPose
-from .uncertainty import Confidence, assess, track_confidence
+from .uncertainty import Confidence, assess, imprecise, track_confidence
 from .weights import rule_weights
 
 #: Final polish of the best pose: hard nearest-neighbour steps (accepted only when the fitness drops).
@@ -104,6 +104,15 @@ class Solution:
 
     def with_(self, **changes) -> "Solution":
         return replace(self, **changes)
+
+    @property
+    def precise(self) -> bool:
+        """The covariance places the pose within the target's own size (:func:`evopose.uncertainty.imprecise`
+        under the options' rules): what, beside ``converged`` and ``confident``, makes a pose good to act on."""
+        if self.problem is None:
+            return False
+        rules = (self.options or SearchOptions()).confidence
+        return not imprecise(self.problem.model.points, self.covariance, rules)
 
 
 def _rng(seed: int | np.random.Generator | None) -> np.random.Generator:

@@ -32,7 +32,7 @@ from .covariance import (CovarianceEstimate, Matches, covariance, deviation, in_
 from .fitness import POINT_NOISE_PX, PoseObjective
 
 __all__ = ["Confidence", "ConfidenceRules", "CovarianceEstimate", "Matches", "assess", "covariance", "deviation",
-           "in_box_second_moment", "mahalanobis", "mutual_matches", "projection_jacobian",
+           "imprecise", "in_box_second_moment", "mahalanobis", "mutual_matches", "projection_jacobian",
            "same_image", "shared_pairs", "sum_of_squares", "track_confidence", "untruncated_variance"]
 
 
@@ -67,6 +67,15 @@ class ConfidenceRules:
     converged_margin : float
         :attr:`evopose.solver.Solution.converged` also needs the runner-up worse by this margin (a search that
         stopped with a distinct pose about as good has not settled anything).
+    max_position_sigma : float
+        (:func:`imprecise`, not part of ``confident``) Largest 1-sigma position uncertainty (the covariance's worst
+        direction) as a share of the target's extent (the diagonal of its marks' bounding box): a good pose is
+        right to within the target's own size at three sigmas. One camera 30 m from a 44 cm robot finds the right
+        basin but knows its range only to 0.4-1 m (the paper's Table II: H1 alone 2.3 m off in Z); two cameras
+        know it to 1-3 cm.
+    max_rotation_sigma : float
+        Largest 1-sigma rotation uncertainty (radians, the worst axis): 5 deg. (At the paper's scale two cameras
+        leave 2-3 deg: marks 3-5 px apart.)
     """
 
     min_pairs: int = 7
@@ -78,6 +87,8 @@ class ConfidenceRules:
     track_sigmas: float = 4.0
     track_motion: tuple[float, float, float, float, float, float] = (0.1, 0.1, 0.1, 0.1, 0.1, 0.1)
     converged_margin: float = 4.0
+    max_position_sigma: float = 1.0 / 3.0
+    max_rotation_sigma: float = float(np.deg2rad(5.0))
 
 
 def sum_of_squares(objective: PoseObjective, pose: np.ndarray, matches: Matches | None = None) -> float:
@@ -186,6 +197,21 @@ def assess(objective: PoseObjective, pose: np.ndarray, alternatives: np.ndarray 
               else "loose fit" if cov.residual_variance > rules.max_residual_px ** 2
               else "ambiguous" if margin < rules.margin else "")
     return Confidence(reason == "", cov, n_pairs, unmatched, float(margin), runner_up, reason, s_best, s_alt)
+
+
+def imprecise(marks: np.ndarray, cov: np.ndarray, rules: ConfidenceRules = ConfidenceRules()) -> bool:
+    """Whether a pose with covariance ``cov`` (6, 6) is too uncertain to act on, though perhaps in the right basin:
+    the worst direction's position sigma over ``rules.max_position_sigma`` of the target's extent (the diagonal of
+    its ``marks`` (M, 3) bounding box), or the worst rotation sigma over ``rules.max_rotation_sigma``. One camera
+    far from a small target (the paper's H1 or H2 alone) finds the right basin but not its range. True when the
+    covariance is not finite."""
+    cov = np.asarray(cov, float)
+    if not np.all(np.isfinite(cov)):
+        return True
+    extent = float(np.linalg.norm(np.ptp(marks, axis=0))) if len(marks) else 0.0
+    position = float(np.sqrt(max(np.linalg.eigvalsh(cov[:3, :3]).max(), 0.0)))
+    rotation = float(np.sqrt(max(np.linalg.eigvalsh(cov[3:, 3:]).max(), 0.0)))
+    return position > rules.max_position_sigma * extent or rotation > rules.max_rotation_sigma
 
 
 def shared_pairs(a: Matches, b: Matches) -> float:

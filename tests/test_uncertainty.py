@@ -227,3 +227,20 @@ def test_rules_are_options():
     assert solve(sp.problem, seed=0).confident
     never = solve(sp.problem, SearchOptions(confidence=ConfidenceRules(margin=1e9)), seed=0)
     assert not never.confident and never.confidence.reason == "ambiguous"
+
+
+def test_one_camera_at_paper_scale_finds_the_basin_but_not_the_range_two_cameras_find_both():
+    """The paper's Table II: H1 alone is metres off in range, H1 + H2 centimetres. Confident (the right basin) is
+    not enough to act on: ``precise`` needs the covariance within the target's own size (3 sigma), and the
+    errors it rules out are real ones."""
+    from evopose.uncertainty import imprecise
+
+    alone, both = _paper(1), _paper(1, cameras=("H1", "H2"))
+    one, two = solve(alone.problem, seed=0), solve(both.problem, seed=0)
+    assert one.confident and in_right_basin(alone, one.pose) and not one.precise
+    assert two.confident and two.precise
+    extent = np.linalg.norm(np.ptp(alone.problem.model.points, axis=0))
+    range_sigma = np.sqrt(np.linalg.eigvalsh(one.covariance[:3, :3]).max())
+    assert range_sigma > extent / 3 > 5 * np.sqrt(np.linalg.eigvalsh(two.covariance[:3, :3]).max())
+    assert imprecise(alone.problem.model.points, np.full((6, 6), np.inf))
+    assert not imprecise(alone.problem.model.points, one.covariance, ConfidenceRules(max_position_sigma=10.0))

@@ -397,7 +397,9 @@ def problem_to_dict(problem: PoseProblem, constraints: dict[str, tuple[float, fl
 def solution_to_dict(solution: Solution) -> dict:
     """The solver's output object (docs/design.md §3), plus ``stop_reason``, ``view_terms`` and ``view_weights``.
 
-    ``confident`` is the calibrated verdict (:attr:`evopose.Solution.confident`); ``covariance`` the 6x6
+    ``confident`` is the calibrated verdict (:attr:`evopose.Solution.confident`: the right basin), ``precise``
+    whether the covariance places the pose within the target's own size (:attr:`evopose.Solution.precise`;
+    a pose to act on is converged, confident and precise); ``covariance`` the 6x6
     covariance in the ROS ``PoseWithCovariance`` convention (docs/protocol.md, "Covariance"), row by row;
     an entry that is not finite (no covariance could be computed) is null, never NaN or Infinity.
     """
@@ -411,6 +413,7 @@ def solution_to_dict(solution: Solution) -> dict:
         "seconds": float(solution.seconds),
         "converged": bool(solution.converged),
         "confident": bool(solution.confident),
+        "precise": bool(solution.precise),
         "covariance": [[float(c) if math.isfinite(c) else None for c in row] for row in covariance.tolist()],
         "stop_reason": solution.stop_reason,
         "view_terms": np.asarray(solution.view_terms, float).tolist(),

@@ -201,7 +201,7 @@ def step(state: VehicleState, inputs: FrameInputs) -> tuple[VehicleState, list[M
         fitness=float(sol.fitness), mismatch=estimate.mismatch, converged=judged.converged,
         generations=int(sol.generations), seconds=seconds, from_hint=bool(sol.from_hint), inputs=mates,
         confident=judged.good, covariance=_covariance(sol))]
-    if policy.sends_hints and judged.good:
+    if policy.sends_hints and judged.in_right_basin:  # a hint need not be precise: the mate's selection judges it
         messages.append(Hint(tuple(float(v) for v in pose)))
     event = FrameEvent(
         vehicle=state.vehicle, frame=inputs.index, points=len(own.points), stamp_ns=own.stamp_ns, views=tuple(used),
@@ -216,11 +216,12 @@ def step(state: VehicleState, inputs: FrameInputs) -> tuple[VehicleState, list[M
 
 def idle(state: VehicleState, hints: np.ndarray | None, budget_s: float | None
          ) -> tuple[VehicleState, list[Hint], Estimate | None]:
-    """One generation between frames (:meth:`Cooperation.generation`) with the hints that arrived; a good best
-    goes out as a hint when the policy sends hints (a search's best so far, or an unsure pose, is no hint)."""
+    """One generation between frames (:meth:`Cooperation.generation`) with the hints that arrived; a best in the
+    right basin (converged and confident, precise or not) goes out as a hint when the policy sends hints (a
+    search's best so far, or an unsure pose, is no hint)."""
     estimator, estimate = state.cooperation.generation(state.estimator, hints, budget_s)
     state = replace(state, estimator=estimator)
-    if estimate is not None and state.policy.sends_hints and verdict(estimate).good:
+    if estimate is not None and state.policy.sends_hints and verdict(estimate).in_right_basin:
         return state, [Hint(tuple(float(v) for v in estimate.pose))], estimate
     return state, [], estimate
 
