@@ -97,7 +97,7 @@ def one(task: tuple[str, int, int]) -> dict:
     rec = {"group": group, "index": index, "kind": sp.kind, "absent": absent, "noise": float(sp.noise),
            "clutter": float(sp.clutter), "views": len(sp.problem.views), "seconds": seconds,
            "evaluations": sol.evaluations, "converged": bool(sol.converged), "stop_reason": sol.stop_reason,
-           "confident": bool(sol.confident), "reason": conf.reason, "pairs": int(conf.n_pairs), "unmatched": float(conf.unmatched),
+           "confident": bool(sol.confident), "precise": bool(sol.precise), "reason": conf.reason, "pairs": int(conf.n_pairs), "unmatched": float(conf.unmatched),
            "margin": float(conf.margin) if np.isfinite(conf.margin) else None,
            "sigmas": [float(x) for x in conf.covariance.sigmas] if conf.covariance.ok else None,
            "s2": float(conf.covariance.residual_variance), "s_best": float(conf.sum_of_squares),
@@ -109,7 +109,9 @@ def one(task: tuple[str, int, int]) -> dict:
     rot, pos = pose_errors(sol.pose, sp.true_pose, sp.symmetries, sp.problem.model.points.mean(axis=0))
     rec.update(right=bool(in_right_basin(sp, sol.pose)), identified=float(marks_identified(sp, sol.pose)),
                accurate=bool(is_success(rot, pos, sp.distance)), rot_deg=float(np.rad2deg(rot)), pos_m=float(pos),
-               errors=[float(x) for x in parameter_errors(sp, sol.pose)])
+               errors=[float(x) for x in parameter_errors(sp, sol.pose)],
+               within_size=bool(np.rad2deg(rot) <= 5.0
+                                and pos <= np.linalg.norm(np.ptp(sp.problem.model.points, axis=0))))
     rec["truth_fits_best"] = rec["right"] or truth_fits_best(sp, sol.pose)
     oracle = pnp_oracle_views(sp)
     o_rot, o_pos = pose_errors(oracle.pose, sp.true_pose, sp.symmetries, sp.problem.model.points.mean(axis=0))
@@ -183,6 +185,7 @@ def scale_rows(records: list[dict], scale: str) -> list[list]:
         if not recs:
             continue
         conf = [r for r in recs if r["confident"]]
+        good = [r for r in recs if r["converged"] and r["confident"] and r["precise"]]
         solvable = [r for r in recs if r["oracle_right"]]
         decidable = [r for r in recs if r["truth_fits_best"]]
         cal, _ = calibration(recs)
@@ -192,6 +195,7 @@ def scale_rows(records: list[dict], scale: str) -> list[list]:
                      _pct(sum(r["oracle_accurate"] for r in recs), len(recs)),
                      _pct(sum(r["right"] for r in conf), len(conf)),
                      _pct(sum(r["confident"] for r in solvable), len(solvable)),
+                     _pct(len(good), len(recs)), _pct(sum(r["within_size"] for r in good), len(good)),
                      _pct(len(decidable), len(recs)), _pct(sum(r["right"] for r in decidable), len(decidable)),
                      _pct(sum(r["confident"] for r in decidable), len(decidable)),
                      " / ".join(f"{100 * c:.0f}" for c in cal),
@@ -201,7 +205,8 @@ def scale_rows(records: list[dict], scale: str) -> list[list]:
 
 
 HEADER = ["group", "problems", "right basin", "oracle right basin", "accurate", "oracle accurate",
-          "precision of confident", "confident where the oracle is right",
+          "precision of confident", "confident where the oracle is right", "good (converged, confident, precise)",
+          "good within the target's size and 5 deg",
           "eq. (1) prefers the truth", "right basin where it does", "confident where it does",
           "1-sigma coverage x / y / z / roll / pitch / yaw (%)", "converged in a wrong basin", "median CPU ms"]
 
@@ -214,7 +219,10 @@ def markdown(records: list[dict], args: argparse.Namespace, seconds: float) -> s
              "solves; 1-sigma coverage of each parameter 55-80 % (68 % for a Gaussian); absent target confident "
              "<= 1 %. Right basin = at least half of the true marks identified one to one (scale-free); accurate "
              "= rotation < 5 deg and position < 5 % of the distance. The oracle is `cv2.solvePnP` given the true "
-             "correspondences (with two views, then least squares over both). Coverage is over the confident estimates.",
+             "correspondences (with two views, then least squares over both). Coverage is over the confident estimates. "
+             "Good = converged, confident and precise (`Solution.precise`: the covariance within the target's size at "
+             "3 sigma, rotation sigma <= 5 deg), what an agent publishes as good; its precision is against the "
+             "target's own size (marks' bounding-box diagonal) and 5 deg.",
              "", "\"eq. (1) prefers the truth\": the true pose, polished on the problem's own fitness, stays in the right "
              "basin and fits at least as well as EvoPose's answer (`truth_fits_best`). Where it does not, a wrong pose "
              "fits the unlabelled points better than the truth: no minimiser of eq. (1) can find the truth there, "
@@ -231,10 +239,11 @@ def markdown(records: list[dict], args: argparse.Namespace, seconds: float) -> s
             if recs:
                 rows.append([scale, mode, len(recs), _pct(sum(r["confident"] for r in recs), len(recs)),
                              _pct(sum(r["converged"] for r in recs), len(recs)),
+                             _pct(sum(r["converged"] and r["confident"] and r["precise"] for r in recs), len(recs)),
                              f"{1000 * np.median([r['seconds'] for r in recs]):.0f}"])
     lines += ["### Absent target", "", "Only false points: `clutter` where the target would be (as many points as "
               "the target problem had), `noise` 10-40 points over the whole image.", ""]
-    lines += md_table(["scale", "points", "problems", "confident", "converged", "median CPU ms"], rows) + [""]
+    lines += md_table(["scale", "points", "problems", "confident", "converged", "good", "median CPU ms"], rows) + [""]
     rows = []
     for lo, hi in ((0.5, 1.0), (1.0, 1.5), (1.5, 2.0)):
         for scale in ABSENT_BASE:
