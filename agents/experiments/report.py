@@ -289,7 +289,8 @@ def write_report(out: Path, *, runs: int, frames: int | None, seed: int, endpoin
              f"{platform.machine()} with {os.cpu_count()} cores (shared, noisy), in "
              f"{(time.time() - started) / 60:.1f} min. Every vehicle ran as its own process over Zenoh on loopback; "
              "each run used other search seeds and another world seed (image noise, IMU bias). Errors are per run the "
-             "mean absolute error over the frames with a good (converged) estimate, then mean and σ over the runs. "
+             "mean absolute error over the frames whose estimate is in the right basin (converged and confident; a good "
+             "frame is also precise), then mean and σ over the runs. "
              "Time to a good pose: from the acquisition of the first frame to the first good estimate. Experiment 2 "
              "runs on two worlds of the same geometry: at the paper's image scale (the headline) and with telephoto "
              "lenses.",
@@ -331,7 +332,7 @@ def write_report(out: Path, *, runs: int, frames: int | None, seed: int, endpoin
               *_tracking_lines(result_rows), "",
               f"## Team size: 1, 2, 4 and 8 UAVs (`{TEAM_SIZE}`, world `exp2-eight`, 2 frames/s)", "",
               *_team_size_lines(records, result_rows), "",
-              f"Up to {TEAM_SIZE_RUNS} runs per size. Errors over each UAV's good frames. CPU: the whole agent process "
+              f"Up to {TEAM_SIZE_RUNS} runs per size. Errors over each UAV's frames in the right basin. CPU: the whole agent process "
               "(every thread) per frame, of which rendering its simulated camera, which a real vehicle does not "
               "pay. Bytes: every topic, per second of the run, per UAV (the router's and the meter's traffic "
               "aside).", "", "## Fig. 6: fitness of the best individual", ""]

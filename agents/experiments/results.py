@@ -1,7 +1,7 @@
 """From the agents' run summaries to the paper's tables: errors over runs, time to a good pose, bandwidth.
 
-Per run and estimating vehicle the error is the mean absolute error over the frames with a good
-(converged) estimate; the table gives its mean over the runs and, like the paper's Tables I and II, the
+Per run and estimating vehicle the error is the mean absolute error over the frames whose estimate is in the
+right basin (converged and confident; a good frame is also precise); the table gives its mean over the runs and, like the paper's Tables I and II, the
 standard deviation over the runs (σ). Angles in degrees, positions in metres (Table I: centimetres).
 """
 

@@ -73,7 +73,8 @@ class FrameEvent:
                    "points": self.points, "views": list(self.views),
                    "views_of_this_instant": self.views_of_this_instant, "knowledge": list(self.knowledge),
                    "pose": pose_dict(self.pose), "fitness": self.fitness, "mismatch": self.mismatch,
-                   "good": self.verdict.good, "converged": self.verdict.converged, "solved": self.solved,
+                   "good": self.verdict.good, "converged": self.verdict.converged,
+                   "confident": self.verdict.confident, "precise": self.verdict.precise, "solved": self.solved,
                    "searching": self.searching, "from_hint": self.from_hint, "seconds": self.seconds}
             if self.error is not None:
                 out["error"] = self.error
