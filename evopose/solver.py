@@ -82,6 +82,9 @@ class Solution:
         (precision >= 97 % at both image scales, absent targets confident <= 1 %).
     confidence : Confidence or None
         What the verdict rests on (matches, margin over the runner-up basin, the reason when not confident).
+    precise : bool (property)
+        The covariance places the pose within the target's own size: a pose to act on is converged, confident and
+        precise (one camera at the paper's scale is confident, not precise).
     """
 
     pose: np.ndarray
