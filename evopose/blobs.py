@@ -41,7 +41,7 @@ import cv2
 import numpy as np
 
 from .features import MarkDetections, _coverage, _to_bgr
-from .spot_colour import label_small_spots
+from .spot_colour import label_small_spots, ring_colours
 
 #: Scale steps per octave of the scale space.
 STEPS_PER_OCTAVE = 3
@@ -317,15 +317,7 @@ def _detect(bgr: np.ndarray, lin: np.ndarray, names: tuple[str, ...], palette: M
     spot = np.array([lin[y, x] if r < 1.5 else cv2.GaussianBlur(lin[max(y - 2, 0):y + 3, max(x - 2, 0):x + 3],
                                                                 (0, 0), 0.5 * r)[min(y, 2), min(x, 2)]
                      for y, x, r in zip(ys.tolist(), xs.tolist(), radius.tolist())]).reshape(-1, 3)
-    ring = np.zeros((len(ys), 3), np.float32)
-    for i, (y, x, r) in enumerate(zip(ys.tolist(), xs.tolist(), radius.tolist())):
-        r_in, r_out = r + 1.5, r + 3.0
-        y0, y1, x0, x1 = max(int(y - r_out), 0), min(int(y + r_out) + 1, h), max(int(x - r_out), 0), min(
-            int(x + r_out) + 1, w)
-        yy, xx = np.mgrid[y0:y1, x0:x1]
-        dist = np.hypot(yy - y, xx - x)
-        sel = (dist >= r_in) & (dist <= r_out)
-        ring[i] = np.median(lin[y0:y1, x0:x1][sel], axis=0)
+    ring = ring_colours(lin, np.stack([xs, ys], axis=1).astype(float), radius)
     pal = _srgb_to_linear(np.array([palette[n] for n in names], np.float32) / 255.0)
     scene = float(np.median(lin[::4, ::4].sum(axis=2)))
     labels, misfit, conf = label_colours(spot.astype(float), ring.astype(float), pal.astype(float),

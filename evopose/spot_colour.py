@@ -55,10 +55,12 @@ def chroma_420(field: np.ndarray, x0: int, y0: int) -> np.ndarray:
     return up[oy:oy + h, ox:ox + w]
 
 
-def ring_colours(ycc: np.ndarray, points: np.ndarray, radius: np.ndarray) -> np.ndarray:
-    """The median Y Cr Cb (K, 3) of each spot's ring, ``radius + 1.5`` to ``radius + 3`` px from ``points`` (K, 2)."""
-    h, w = ycc.shape[:2]
-    out = np.zeros((len(points), 3))
+def ring_colours(image: np.ndarray, points: np.ndarray, radius: np.ndarray) -> np.ndarray:
+    """The median colour (K, C) of each spot's ring in ``image`` (H, W, C), ``radius + 1.5`` to ``radius + 3`` px
+    from ``points`` (K, 2): the surroundings a spot is blended with (here in Y Cr Cb; :mod:`evopose.blobs` in
+    linear light)."""
+    h, w = image.shape[:2]
+    out = np.zeros((len(points), image.shape[2]))
     for i, ((u, v), r) in enumerate(zip(points, radius)):
         reach = r + 3.0
         x0, x1 = max(int(np.floor(u - reach)), 0), min(int(np.ceil(u + reach)) + 1, w)
@@ -66,7 +68,7 @@ def ring_colours(ycc: np.ndarray, points: np.ndarray, radius: np.ndarray) -> np.
         yy, xx = np.mgrid[y0:y1, x0:x1]
         dist = np.hypot(xx - u, yy - v)
         sel = (dist >= r + 1.5) & (dist <= reach)
-        out[i] = np.median(ycc[y0:y1, x0:x1][sel], axis=0) if sel.any() else ycc[int(round(v)), int(round(u))]
+        out[i] = np.median(image[y0:y1, x0:x1][sel], axis=0) if sel.any() else image[int(round(v)), int(round(u))]
     return out
 
 
