@@ -40,6 +40,7 @@ def evaluate(directory: Path) -> list[dict]:
     rows = []
     for cam in dataset.cameras:
         acc = {name: np.zeros(5) for name in FRONT_ENDS}
+        by_colour = {name: {c: np.zeros(2) for c in world.model.palette} for name in FRONT_ENDS}  # matched, right
         match_px = 3.0
         for k in range(dataset.frames):
             image = cv2.imread(str(dataset.image_path(cam, k)), cv2.IMREAD_COLOR)
@@ -57,28 +58,49 @@ def evaluate(directory: Path) -> list[dict]:
                 found, _ = match_to_truth(det.points, uv[whole], match_px)
                 correct, _ = match_to_truth(det.points, uv, match_px)
                 labelled = sum(det.names[det.labels[i]] == colours[j] for i, j in correct)
+                for i, j in correct:
+                    by_colour[name][colours[j]] += [1, det.names[det.labels[i]] == colours[j]]
                 acc[name] += [whole.sum(), len(found), len(det), len(correct), labelled]
         for name, a in acc.items():
             rows.append({"dataset": directory.name, "world": dataset.manifest.world, "camera": cam,
                          "engine": dataset.manifest.engine.name, "front_end": name, "frames": dataset.frames,
                          "marks": int(a[0]), "detections": int(a[2]), "match_px": match_px,
                          "recall": a[1] / max(a[0], 1), "precision": a[3] / max(a[2], 1),
-                         "labels": a[4] / max(a[3], 1)})
+                         "labels": a[4] / max(a[3], 1),
+                         "labels_by_colour": {c: (int(n[0]), int(n[1])) for c, n in by_colour[name].items()}})
     return rows
+
+
+def _by_colour(counts: dict) -> str:
+    """``{colour: (matched, labelled right)}`` as "yellow 0.99, cyan 0.68, ..." ("-": none matched)."""
+    return ", ".join(f"{c} {f'{right / matched:.2f}' if matched else '-'}" for c, (matched, right) in counts.items())
+
+
+def pooled_by_colour(rows: list[dict], front_end: str) -> dict:
+    """``{colour: (matched, labelled right)}`` summed over the ``rows`` of ``front_end``."""
+    out: dict = {}
+    for r in rows:
+        if r["front_end"] == front_end:
+            for c, (matched, right) in r["labels_by_colour"].items():
+                m, k = out.get(c, (0, 0))
+                out[c] = (m + matched, k + right)
+    return out
 
 
 def markdown(rows: list[dict], command: str) -> str:
     lines = ["## Feature front-ends on rendered datasets", "",
              f"Produced by `{command}`; {provenance()}, OpenCV {cv2.__version__}, load average "
              f"{os.getloadavg()[0]:.1f}.", "",
-             "Recall over fully visible marks, precision over all detections, labels over matched detections "
-             "(benchmarks/bench_photoreal_features.py says how).", "",
+             "Recall over fully visible marks, precision over all detections, labels over matched detections, "
+             "and per true colour (benchmarks/bench_photoreal_features.py says how).", "",
              "| dataset | world | engine | camera | front-end | frames | marks | detections | match px | recall "
-             "| precision | labels |", "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+             "| precision | labels | labels by colour |", "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         lines.append(f"| {r['dataset']} | {r['world']} | {r['engine']} | {r['camera']} | {r['front_end']} "
                      f"| {r['frames']} | {r['marks']} | {r['detections']} | {r['match_px']:g} | {r['recall']:.2f} "
-                     f"| {r['precision']:.2f} | {r['labels']:.2f} |")
+                     f"| {r['precision']:.2f} | {r['labels']:.2f} | {_by_colour(r['labels_by_colour'])} |")
+    lines += ["", "Labels by true colour, pooled: " + "; ".join(
+        f"{name}: {_by_colour(pooled_by_colour(rows, name))}" for name in FRONT_ENDS) + "."]
     return "\n".join(lines) + "\n"
 
 
