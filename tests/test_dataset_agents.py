@@ -147,6 +147,36 @@ def test_the_camera_of_each_frame_is_the_datasets_or_the_files_given(datasets, t
         camera.close()
 
 
+def test_a_datasets_frame_is_stamped_with_the_tick_it_was_taken_at_however_late_it_is_played(datasets):
+    # two team-mates playing one recording stamp each of its frames alike, so their views of it pair (eq. 4), even
+    # when one of them processes it ticks later than the other
+    from agents.vehicle.config import AgentConfig
+    from agents.vehicle.frames import FrameClock
+    from agents.vehicle.sources import open_camera
+    from scenarios.world import load_scenario
+
+    exp2, _ = datasets
+    scenario = load_scenario(exp2 / "world.yaml")
+    epoch = 1_800_000_000 * 10**9
+    clock = FrameClock(10.0, epoch)
+    on_time, late = (open_camera(AgentConfig(fleet="f", vehicle=v, scenario=None, source=str(exp2), fps=10.0,
+                                             epoch_ns=epoch), scenario) for v in ("H1", "H2"))
+    try:
+        for k, tick in enumerate((0, 3, 4, 9)):  # the late one skips nothing: frame k, at a later tick
+            a, b = on_time.acquire(k, clock.stamp_ns(k)), late.acquire(tick, clock.stamp_ns(tick))
+            assert a.scene_frame == b.scene_frame == k and a.stamp_ns == b.stamp_ns == clock.stamp_ns(k)
+    finally:
+        on_time.close(), late.close()
+    # without a common clock (no --epoch-ns) a vehicle's first tick is the recording's frame 0
+    alone = open_camera(AgentConfig(fleet="f", vehicle="H1", scenario=None, source=str(exp2), fps=10.0), scenario)
+    try:
+        own = FrameClock(10.0)  # its ticks count from the Unix epoch
+        stamps = [alone.acquire(tick, own.stamp_ns(tick)).stamp_ns for tick in (7, 8, 10)]
+        assert stamps == [own.stamp_ns(t) for t in (7, 8, 9)]
+    finally:
+        alone.close()
+
+
 # -- one line and exit 2 ----------------------------------------------------------------------------------------
 
 

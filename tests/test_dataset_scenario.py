@@ -97,14 +97,21 @@ def test_two_helicopters_on_the_committed_cycles_frames_agree_and_no_good_pose_i
     assert done.returncode == 0 and "Traceback" not in done.stderr, done.stderr
     (run,) = json.loads(done.stdout.splitlines()[-1])["runs"]
     data = open_dataset(folder)
-    rows = {v: {r.frame: r for r in pose_rows(run["agents"][v])} for v in ("H1", "H2")}
-    paired = rows["H1"].keys() & rows["H2"].keys()
-    assert len(paired) >= data.frames - 1
-    # each searches both images in its own time slices: once both settle they publish the same pose
-    assert sum(rows["H1"][k].pose == rows["H2"][k].pose for k in paired) >= len(paired) // 2
-    # a source plays its frames in order, one per frame processed: the i-th published pose is the dataset's frame i
+    # a source plays its frames in order, one per frame processed: each vehicle publishes a pose of every frame of
+    # the dataset, at the tick it got to it (a late vehicle at a later tick than its team-mate): pair by that frame
+    rows = {v: {r.scene_frame: r for r in pose_rows(run["agents"][v])} for v in ("H1", "H2")}
+    assert all(sorted(rows[v]) == list(range(data.frames)) for v in rows), rows
+    # each searches both images (eq. 4), each frame paired with the team-mate's view of the same instant even when
+    # one ran late: on every frame they publish the same pose up to where each one's search stopped in its own
+    # time slices, i.e. within the accuracy a right pose has at that scale (measured on two loaded cores: telephoto
+    # up to 0.5 mm and 0.2 deg apart, each 0.2 deg from the truth; paper scale up to 1.5 cm and 1.9 deg apart, each
+    # up to 3.6 deg from the truth, which is the bar below for the last pose: 10 cm, 5 deg)
+    same_m, same_deg = (0.01, 0.5) if scale == "telephoto" else (0.1, 5.0)
+    for k in range(data.frames):
+        apart = pose_error(np.array(rows["H1"][k].pose), np.array(rows["H2"][k].pose))
+        assert apart["position"] <= same_m and max(apart[a] for a in ("roll", "pitch", "yaw")) <= same_deg, (k, apart)
     for vehicle in ("H1", "H2"):
-        published = sorted(rows[vehicle].values(), key=lambda r: r.frame)
+        published = [rows[vehicle][k] for k in range(data.frames)]
         good = [(i, r) for i, r in enumerate(published) if r.good]
         for i, r in good:
             error = pose_error(np.array(r.pose), data.truth(i).target_pose)

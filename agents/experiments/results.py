@@ -11,7 +11,7 @@ import statistics
 
 import numpy as np
 
-from agents.runs import pose_rows
+from agents.runs import instant_key, pose_rows
 from geometry import angle_difference, pose_difference
 
 PARAMS = ("roll", "pitch", "yaw", "x", "y", "z")
@@ -92,16 +92,18 @@ AGREE_POSITION_M, AGREE_ANGLE_DEG = 0.01, 0.1
 
 
 def frame_agreement(records: list[dict], a: str, b: str) -> dict:
-    """Frame by frame, whether ``a`` and ``b`` published the same pose (within 1 cm and 0.1°): over the frames
-    both published a pose for, ``frames``, ``agreed`` and their ratio ``fraction``; and how often both were good."""
+    """Frame by frame, whether ``a`` and ``b`` published the same pose (within 1 cm and 0.1°): over the instants
+    of the world both published a pose for (:func:`agents.runs.instant_key`: a dataset's frame, else the fleet
+    clock's), ``frames``, ``agreed`` and their ratio ``fraction``; and how often both were good."""
     frames = agreed = both_good = 0
     for record in records:
         sa, sb = record["agents"].get(a), record["agents"].get(b)
         if not (sa and sb):
             continue
-        pb = {q.frame: q for q in pose_rows(sb)}
+        key_a, key_b = instant_key(sa), instant_key(sb)
+        pb = {key_b(q): q for q in pose_rows(sb)}
         for p in pose_rows(sa):
-            q = pb.get(p.frame)
+            q = pb.get(key_a(p))
             if q is None:
                 continue
             frames += 1

@@ -8,6 +8,13 @@ carry errors exactly as on the renderer; on a dataset rendered without the targe
 truth is None (nothing to be right about), and every frame the agent marks good is a false positive (the summary's
 ``false_positives``). The world (the target model, the search box) is the dataset's world.yaml unless
 ``--scenario`` names one (:func:`dataset_world`).
+
+A dataset is a recording: its frame ``k`` was taken at its own instant, whichever fleet tick a vehicle gets to it
+at. A vehicle plays one frame per frame processed (a slow one falls behind, it skips nothing), and stamps frame
+``k`` with the fleet clock's stamp of the tick it was taken at: tick ``k`` when the fleet has a common clock
+(``--epoch-ns``, which a scenario run sets: frame 0 of the run is frame 0 of the dataset), else the vehicle's first
+tick plus ``k``. So team-mates playing the same dataset stamp the same instant alike, and their views of it pair
+(eq. 4) even when one is late: a view is never paired with a team-mate's view of another instant of the recording.
 """
 
 from __future__ import annotations
@@ -23,7 +30,7 @@ from scenarios.dataset import Dataset, locate_dataset, open_dataset
 from scenarios.world import Scenario
 
 from agents.problem.extract import FeatureExtractor
-from agents.vehicle.frames import Frame
+from agents.vehicle.frames import Frame, FrameClock
 from agents.vehicle.sources import FileListReader, SourceCamera, SourceError
 
 
@@ -45,13 +52,16 @@ class DatasetCamera(SourceCamera):
 
     def __init__(self, dataset: Dataset, camera_name: str, scenario: Scenario, vehicle: str,
                  extract: FeatureExtractor, *, intrinsics: Camera | None = None,
-                 world_from_camera: np.ndarray | None = None, intrinsics_from: str | None = None) -> None:
+                 world_from_camera: np.ndarray | None = None, intrinsics_from: str | None = None,
+                 clock: FrameClock | None = None, first_tick: int | None = None) -> None:
         reader = FileListReader(dataset.image_paths(camera_name), str(dataset.root / camera_name))
         super().__init__(reader, scenario, vehicle, extract,
                          intrinsics=None if intrinsics is None else (lambda: intrinsics),
                          world_from_camera=None if world_from_camera is None else (lambda: world_from_camera),
                          intrinsics_from=intrinsics_from or f"dataset {dataset.root} camera {camera_name}")
         self.dataset, self.camera_name = dataset, camera_name
+        # the fleet tick frame 0 was taken at (None: the first tick a frame is asked at), on ``clock``
+        self.clock, self.first_tick = clock, first_tick
 
     def camera(self, k: int) -> Camera:
         """The dataset's camera of frame ``k`` (intrinsics and pose), each replaced by the file given instead."""
@@ -74,10 +84,21 @@ class DatasetCamera(SourceCamera):
         return matrix_from_pose(pose)
 
     def acquire(self, index: int, stamp_ns: int) -> Frame:
+        """The dataset's next frame, processed at fleet tick ``index``, stamped with the tick it was taken at
+        (:meth:`taken_at`)."""
+        if self.first_tick is None:
+            self.first_tick = index
         frame = super().acquire(index, stamp_ns)
         if frame.skipped is not None:
             return frame
-        return replace(frame, truth=self.truth(frame.scene_frame))
+        taken = self.taken_at(frame.scene_frame, index)
+        stamp = stamp_ns if self.clock is None else self.clock.stamp_ns(taken)
+        return replace(frame, stamp_ns=stamp, truth=self.truth(frame.scene_frame))
+
+    def taken_at(self, k: int, index: int) -> int:
+        """The fleet tick of the dataset's frame ``k`` shown at tick ``index``: ``first_tick + k``, never after
+        ``index`` (a frame is not taken after it is processed)."""
+        return min(int(self.first_tick if self.first_tick is not None else index) + k, index)
 
     def truth(self, k: int) -> np.ndarray | None:
         """The target's true pose at frame ``k``; None without truth.jsonl or when the target is not in the images."""
@@ -92,9 +113,10 @@ class DatasetCamera(SourceCamera):
 
 def open_dataset_camera(source: str, located: tuple[Path, str | None], scenario: Scenario, vehicle: str,
                         extract: FeatureExtractor, *, intrinsics: Camera | None = None,
-                        world_from_camera: np.ndarray | None = None, intrinsics_from: str | None = None
-                        ) -> DatasetCamera:
-    """The camera of ``--source`` (a dataset root: ``vehicle``'s folder; a camera's folder: that camera)."""
+                        world_from_camera: np.ndarray | None = None, intrinsics_from: str | None = None,
+                        clock: FrameClock | None = None, first_tick: int | None = None) -> DatasetCamera:
+    """The camera of ``--source`` (a dataset root: ``vehicle``'s folder; a camera's folder: that camera), its frames
+    stamped on ``clock`` from ``first_tick`` (:class:`DatasetCamera`)."""
     root, folder = located
     dataset = open_dataset(root)
     name = folder or vehicle
@@ -102,7 +124,8 @@ def open_dataset_camera(source: str, located: tuple[Path, str | None], scenario:
         raise SourceError(f"--source {source}: the dataset has no camera {name!r} (cameras: "
                           f"{', '.join(dataset.cameras)})")
     return DatasetCamera(dataset, name, scenario, vehicle, extract, intrinsics=intrinsics,
-                         world_from_camera=world_from_camera, intrinsics_from=intrinsics_from)
+                         world_from_camera=world_from_camera, intrinsics_from=intrinsics_from, clock=clock,
+                         first_tick=first_tick)
 
 
 __all__ = ["DatasetCamera", "dataset_location", "dataset_world", "open_dataset_camera"]

@@ -95,7 +95,7 @@ class RunRecord:
             if self.first_confirmed_s is None:
                 self.first_confirmed_s = time.perf_counter() - image_ready_s
         self.last_pose, self.last_error = list(event.pose), event.error
-        self.poses.append(PoseRow(event.frame, tuple(event.pose), good))
+        self.poses.append(PoseRow(event.frame, tuple(event.pose), good, event.scene_frame))
 
     def summary(self) -> dict:
         out = {k: v for k, v in asdict(self).items()

@@ -285,9 +285,9 @@ class CameraVehicle(Vehicle):
     # -- the frame ------------------------------------------------------------------------------
 
     def frame(self, n: int) -> None:
-        stamp = self.clock.stamp_ns(n)
         t_acquire = time.perf_counter()
-        frame = self.camera.acquire(n, stamp)
+        frame = self.camera.acquire(n, self.clock.stamp_ns(n))
+        stamp = frame.stamp_ns  # when the image was taken: tick n's, or a recording's own instant (dataset_source)
         self.record.render_cpu_s += frame.render_cpu_s
         if self._image_ready is None:
             self._image_ready = t_acquire + frame.render_s
