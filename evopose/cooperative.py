@@ -76,7 +76,8 @@ class Cooperation:
         Seeds every search; a search started at frame ``n`` uses ``(seed, n)``, so two vehicles given the same
         inputs compute the same pose.
     lost_mismatch : float
-        Tracking is lost (and the pose searched again) when the mismatch exceeds this.
+        Tracking is lost (and the pose searched again) when the share of the visible marks without a one-to-one
+        match exceeds this (:class:`evopose.local.LocalSearch`).
     """
 
     model: Model

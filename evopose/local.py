@@ -79,18 +79,24 @@ class LocalSearch:
     generations : int
         Generations before ``tell`` says stop.
     lost_mismatch : float or None
-        With a value, the stop reason says whether the fit held: "tracked" when the best's mismatch and
-        unmatched share are both within it (robust fitness), else "lost". None: "max_generations".
+        With a value, the stop reason says whether the fit held: "tracked" when the best's share of visible
+        marks without a one-to-one match is within it and its mismatch within ``lost_fitness_share`` (a bounded
+        fitness), else "lost". None: "max_generations".
+    lost_fitness_share : float or None
+        The largest mismatch of a fit that held (None: ``lost_mismatch``). The mismatch counts false image
+        points too, so a caller that knows how much of the image the last pose left unexplained raises it
+        (:func:`evopose.solver.track`).
     """
 
     def __init__(self, bounds: Bounds, rng: np.random.Generator | None = None, *, children: int = 0,
                  child_step: tuple[float, float] = (0.0, 0.0), generations: int = 1,
-                 lost_mismatch: float | None = None) -> None:
+                 lost_mismatch: float | None = None, lost_fitness_share: float | None = None) -> None:
         if children and rng is None:
             raise ValueError("mutated children need a random generator")
         self.bounds, self.rng = bounds, rng
         self.children, self.child_step = int(children), child_step
         self.generations, self.lost_mismatch = int(generations), lost_mismatch
+        self.lost_fitness_share = lost_mismatch if lost_fitness_share is None else lost_fitness_share
 
     def start(self, pose: np.ndarray, fitness: float = np.inf) -> LocalState:
         """The incumbent ``pose`` (6,) with its eq. (4) ``fitness`` (inf when unknown under the current views)."""
@@ -143,5 +149,6 @@ class LocalSearch:
         if self.lost_mismatch is None:
             return "max_generations"
         m = state.best_match
-        held = m.mismatch is not None and m.mismatch <= self.lost_mismatch and m.unmatched <= self.lost_mismatch
+        held = (m.mismatch is not None and m.mismatch <= self.lost_fitness_share
+                and m.unmatched <= self.lost_mismatch)
         return "tracked" if held else "lost"
