@@ -89,6 +89,20 @@ def test_each_finding_holds_or_does_not_with_its_numbers():
     assert missing[0][2] == "H1 9.00 cm, H2 0.30 cm, H1 + H2 not run" and missing[2][2] == "no frame"
 
 
+def test_a_gain_in_the_last_digits_is_no_improvement():
+    # hints that leave H2 where it was (the same pose tracked, 80.50 cm either way) do not "improve" it
+    records = [dict(r) for r in RECORDS]
+    records[0] = record("exp2-solo", "alone", {"H1": summary("H1", "none", 0.09, 0.5, poses()),
+                                               "H2": summary("H2", "none", 0.805, 0.1, poses(0.1))})
+    records[2] = record("exp2b-hints", "hints", {"H1": summary("H1", "hint", 0.05, 0.1, poses()),
+                                                 "H2": summary("H2", "hint", 0.805 - 1e-7, 0.3, poses(0.05))})
+    found = {text: verdict for text, verdict, _ in photoreal_findings(rows(records), records, WORLD)}
+    assert found["Hints improve H2 (position error)"] == "does not hold"
+    records[2]["agents"]["H2"] = summary("H2", "hint", 0.70, 0.3, poses(0.05))  # 13 % better: an improvement
+    found = {text: verdict for text, verdict, _ in photoreal_findings(rows(records), records, WORLD)}
+    assert found["Hints improve H2 (position error)"] == "holds"
+
+
 def test_without_a_dataset_the_section_is_skipped_and_says_why(monkeypatch, tmp_path):
     monkeypatch.setattr(photoreal, "DEFAULT_DATASETS", (tmp_path / "none-a", tmp_path / "none-b"))
     dataset, why = resolve_dataset(None)

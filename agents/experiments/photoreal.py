@@ -15,7 +15,7 @@ import threading
 from pathlib import Path
 
 from agents.experiments.report import _table_ii
-from agents.experiments.results import frame_agreement, rows
+from agents.experiments.results import frame_agreement, improves, rows
 from agents.experiments.runner import dataset_scenario, run_scenario
 
 #: The project's root: the default datasets are relative to it.
@@ -97,7 +97,8 @@ def photoreal_findings(result_rows: list[dict], records: list[dict], world: str)
     """The paper's findings on the dataset: ``(finding, "holds" | "does not hold" | "not measured", numbers)``.
 
     "Not measured" when a run the finding compares is missing; a helicopter that never had a good pose counts as
-    worse than any error or time (and a finding whose better side never had one does not hold)."""
+    worse than any error or time (and a finding whose better side never had one does not hold); "better" is by at
+    least :data:`agents.experiments.results.MIN_GAIN`."""
     def find(scenario: str, vehicle: str) -> dict | None:
         return next((r for r in result_rows if r["scenario"] == scenario and r["vehicle"] == vehicle
                      and r["world"] == world), None)
@@ -105,7 +106,7 @@ def photoreal_findings(result_rows: list[dict], records: list[dict], world: str)
     def verdict(rows_needed: tuple, better: float, than: float) -> str:
         if any(r is None for r in rows_needed):
             return "not measured"
-        return "holds" if better < than else "does not hold"
+        return "holds" if improves(better, than) else "does not hold"
 
     def cm(r: dict | None) -> str:
         return "not run" if r is None else ("no good pose" if math.isinf(_value(r, "position")) else

@@ -21,7 +21,7 @@ from pathlib import Path
 from scenarios.fleet import load_fleet_scenario
 
 from agents.experiments import DEFAULT_ENDPOINT, figures
-from agents.experiments.results import agreement, frame_agreement, rows
+from agents.experiments.results import agreement, frame_agreement, improves, rows
 from agents.experiments.runner import run_scenario
 
 SCENARIOS = ("exp1-airship", "exp2-solo", "exp2a-features", "exp2b-hints", "exp2-raw")
@@ -118,7 +118,8 @@ def findings(result_rows: list[dict], agree_a: dict, agree_b: dict, world: str,
                     f"{both['history'][-1]:.3f} px vs 0.5 x H1 + 0.5 x H2 = {alone:.3f} px"))
     if h1 and h2 and h1h and h2h:
         gain1, gain2 = h1["position"] - h1h["position"], h2["position"] - h2h["position"]
-        out.append(("Hints improve each helicopter", gain1 > 0 and gain2 > 0,
+        out.append(("Hints improve each helicopter",
+                    improves(h1h["position"], h1["position"]) and improves(h2h["position"], h2["position"]),
                     f"H1 {h1['position'] * 100:.2f} -> {h1h['position'] * 100:.2f} cm, "
                     f"H2 {h2['position'] * 100:.2f} -> {h2h['position'] * 100:.2f} cm"))
         out.append(("...and H2 most", gain2 > gain1, f"gain H1 {gain1 * 100:.2f} cm, H2 {gain2 * 100:.2f} cm"))
