@@ -242,6 +242,41 @@ def test_tracking_follows_small_motion_and_reinitialises_when_lost():
     assert lost.reinitialised
 
 
+def test_tracking_the_right_pose_holds_on_cycles_frames_whose_clutter_leaves_half_the_fit_unexplained():
+    # Blender Cycles frames at the paper's scale (tests/data/photoreal/paper, the contrast front-end): half the
+    # points are clutter, so the right pose leaves over half of eq. (4) unexplained (mismatch 0.56-0.61 on 3 of
+    # the 4 frames) while half or more of its marks are matched. A fixed 0.5 mismatch lost it on those 3 frames;
+    # the bound that follows the previous fit's own mismatch (tracked_mismatch_bound) keeps it on all 4
+    from pathlib import Path
+
+    import cv2
+
+    from agents.problem.extract import feature_extractor
+    from geometry import pose_error
+    from scenarios.dataset import open_dataset
+
+    data = open_dataset(Path(__file__).parent / "data" / "photoreal" / "paper")
+    world = data.world()
+    extract = feature_extractor("contrast", world.model, world.bounds())
+    previous, mismatches = None, []
+    for k in range(data.frames):
+        views = []
+        for name in data.cameras:
+            camera = data.camera(name, k)
+            points, labels = extract(cv2.imread(str(data.image_path(name, k))), camera)
+            views.append(View(camera, points, 0.5, labels))
+        problem = PoseProblem(world.model.evopose_model(), tuple(views), world.bounds())
+        truth = data.truth(k).target_pose
+        start = solve(problem, seed=0) if previous is None else previous
+        tracked = track(start.with_(pose=np.array(truth)), views, problem=problem, search_when_lost=False, seed=0)
+        objective = PoseObjective(problem, tracked.options.fitness, tracked.options.tau)
+        mismatches.append(objective.match(tracked.pose).mismatch)
+        assert tracked.stop_reason == "tracked", (k, mismatches[-1])
+        assert pose_error(tracked.pose, truth)["position"] <= 0.05
+        previous = tracked
+    assert sum(m > 0.5 for m in mismatches) >= 2, mismatches  # the case the fixed bound lost
+
+
 def test_bounds_are_respected_by_the_result():
     sp = make_problem("box", np.random.default_rng(71), noise=1.0, clutter=0.0, missing=0.0)
     lo, hi = sp.problem.bounds.lo.copy(), sp.problem.bounds.hi.copy()
