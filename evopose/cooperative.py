@@ -77,7 +77,8 @@ class Cooperation:
         inputs compute the same pose.
     lost_mismatch : float
         Tracking is lost (and the pose searched again) when the share of the visible marks without a one-to-one
-        match exceeds this (:class:`evopose.local.LocalSearch`).
+        match exceeds this, or the mismatch exceeds :func:`evopose.solver.tracked_mismatch_bound` (this, or the
+        previous fit's own plus a rise).
     """
 
     model: Model
