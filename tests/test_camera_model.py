@@ -278,3 +278,30 @@ def test_clutter_hides_marks_in_the_image_and_the_truth(shape, centre, size, eye
     assert len(open_view.truth.mark_index) >= 4 and len(hidden.truth.mark_index) == 0
     b, g, r = (hidden.image[int(v), int(u)].astype(int) for u, v in open_view.truth.mark_uv[:1]).__next__()
     assert b > r + 30  # where a mark was, the bin's paint
+
+
+def test_lens_distortion_moves_each_point_where_the_camera_projects_it():
+    # Blender renders a pinhole image; develop.distort resamples it through the lens. A spot drawn at a point's
+    # pinhole projection must land where the project's own plumb_bob projection (evopose.Camera) puts that point,
+    # not where the inverse mapping would (the spots are 5-20 px from their pinhole places near the corners)
+    from evopose import Camera
+    from scenarios.photoreal.develop import distort
+
+    camera = Camera(800.0, 800.0, 320.0, 240.0, 640, 480, np.array([-0.28, 0.09, 0.001, -0.0015, 0.0]))
+    pinhole = Camera(800.0, 800.0, 320.0, 240.0, 640, 480)
+    points = np.array([[x, y, 1.0] for x in (-0.33, -0.12, 0.2, 0.33) for y in (-0.24, 0.05, 0.24)])
+    expected, _ = camera.project_camera_points(points)
+    undistorted, _ = pinhole.project_camera_points(points)
+    yy, xx = np.mgrid[0:480, 0:640]
+    image = np.zeros((480, 640), np.float32)
+    for u, v in undistorted:
+        image += np.exp(-((xx - u) ** 2 + (yy - v) ** 2) / (2 * 1.5 ** 2)).astype(np.float32)
+    seen = distort(image, camera)
+    for (u, v), (u0, v0) in zip(expected, undistorted):
+        x0, y0 = int(round(u)) - 8, int(round(v)) - 8
+        patch = seen[y0:y0 + 17, x0:x0 + 17]
+        py, px = np.mgrid[y0:y0 + 17, x0:x0 + 17]
+        centroid = np.array([(patch * px).sum(), (patch * py).sum()]) / patch.sum()
+        assert np.linalg.norm(centroid - (u, v)) < 0.25, ((u, v), centroid)
+    moved = np.linalg.norm(expected - undistorted, axis=1)
+    assert moved.max() > 5.0  # the lens moves the corner spots: the test can tell the mapping's direction

@@ -1,8 +1,10 @@
 """Radiance -> the camera's image: the lens's distortion, then the camera model (:mod:`scenarios.camera_model`).
 
 Blender renders a pinhole image (its pixel filter is the anti-aliasing); a world camera with plumb_bob distortion
-gets it by resampling: each output (distorted) pixel takes the pinhole image at its undistorted position (the
-mapping OpenCV's ``initUndistortRectifyMap`` computes). The world's ``blur_sigma`` blurs the light as the lens does.
+gets it by resampling: each output (distorted) pixel takes the pinhole image at its undistorted position, which
+OpenCV's iterated ``undistortPoints`` computes (to 1e-6 px). ``initUndistortRectifyMap`` is the other way
+round (for each undistorted pixel its distorted source: what undistorting a photograph needs) and would move each
+point away from where the camera model projects it. The world's ``blur_sigma`` blurs the light as the lens does.
 The camera model then exposes, mosaics, adds sensor noise, demosaics, tones and encodes, seeded per world, camera
 and frame. The OpenCV renderer's ``noise_sigma`` and lighting gain are not used: the camera model's sensor noise
 and auto exposure stand for them.
@@ -19,18 +21,29 @@ from ..camera_model import CameraModelSpec, Captured, capture, linear_from_srgb
 from ..sensors import stream_rng
 from ..world import Scenario
 
+#: Iterations and tolerance (pixels) of inverting the lens for each output pixel (:func:`distort`).
+UNDISTORT_CRITERIA = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 50, 1e-6)
 #: Stream of the camera model's draws for a dataset's images (the OpenCV renderer's own is 404).
 STREAM_DATASET_CAMERA = 505
 
 
 def distort(radiance: np.ndarray, camera: Camera) -> np.ndarray:
-    """The pinhole image ``radiance`` (intrinsics of ``camera``) as the distorted lens sees it."""
+    """The pinhole image ``radiance`` (H, W[, C], intrinsics of ``camera``) as the distorted lens sees it: a point
+    projected by the pinhole to ``p`` shows where ``camera`` (plumb_bob) projects it."""
     if not np.any(camera.distortion):
         return radiance
-    size = (camera.width, camera.height)
-    map_x, map_y = cv2.initUndistortRectifyMap(camera.matrix, camera.distortion, None, camera.matrix, size,
-                                               cv2.CV_32FC1)
-    return cv2.remap(radiance, map_x, map_y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+    w, h = camera.width, camera.height
+    grid = np.stack(np.meshgrid(np.arange(w, dtype=np.float64), np.arange(h, dtype=np.float64)), axis=-1)
+    points = grid.reshape(-1, 1, 2)
+    if hasattr(cv2, "undistortPointsIter"):  # OpenCV 4.x; 5.x folded it into undistortPoints
+        undistorted = cv2.undistortPointsIter(points, camera.matrix, camera.distortion, None, camera.matrix,
+                                              UNDISTORT_CRITERIA)
+    else:
+        undistorted = cv2.undistortPoints(points, camera.matrix, camera.distortion, R=None, P=camera.matrix,
+                                          criteria=UNDISTORT_CRITERIA)
+    undistorted = undistorted.reshape(h, w, 2).astype(np.float32)
+    return cv2.remap(radiance, undistorted[..., 0], undistorted[..., 1], cv2.INTER_LINEAR,
+                     borderMode=cv2.BORDER_REPLICATE)
 
 
 def camera_model_of(scenario: Scenario) -> CameraModelSpec:
