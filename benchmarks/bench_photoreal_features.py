@@ -9,7 +9,8 @@ For every camera of every dataset both colour front-ends run on every image: ``m
 by :func:`evopose.blobs.mark_prior` from the frame's camera and the world's operating area). A detection within the
 match radius of a visible mark's projected centre is a true positive (one-to-one, nearest first): 1.5 px when the
 marks' largest expected radius is under 3 px (the paper's scale), else 3 px. Recall counts the fully visible marks;
-precision every detection; labels the matched detections whose colour is the mark's.
+precision every detection; labels the matched detections whose colour is the mark's; position the rms error per
+axis of the matched detections against the true projections.
 """
 
 from __future__ import annotations
@@ -41,6 +42,7 @@ def evaluate(directory: Path) -> list[dict]:
     for cam in dataset.cameras:
         acc = {name: np.zeros(5) for name in FRONT_ENDS}
         by_colour = {name: {c: np.zeros(2) for c in world.model.palette} for name in FRONT_ENDS}  # matched, right
+        squared = {name: np.zeros(2) for name in FRONT_ENDS}  # sum of squared position errors (px^2), pairs
         match_px = 3.0
         for k in range(dataset.frames):
             image = cv2.imread(str(dataset.image_path(cam, k)), cv2.IMREAD_COLOR)
@@ -60,6 +62,7 @@ def evaluate(directory: Path) -> list[dict]:
                 labelled = sum(det.names[det.labels[i]] == colours[j] for i, j in correct)
                 for i, j in correct:
                     by_colour[name][colours[j]] += [1, det.names[det.labels[i]] == colours[j]]
+                    squared[name] += [float(np.sum((det.points[i] - uv[j]) ** 2)), 1]
                 acc[name] += [whole.sum(), len(found), len(det), len(correct), labelled]
         for name, a in acc.items():
             rows.append({"dataset": directory.name, "world": dataset.manifest.world, "camera": cam,
@@ -67,6 +70,9 @@ def evaluate(directory: Path) -> list[dict]:
                          "marks": int(a[0]), "detections": int(a[2]), "match_px": match_px,
                          "recall": a[1] / max(a[0], 1), "precision": a[3] / max(a[2], 1),
                          "labels": a[4] / max(a[3], 1),
+                         # of a found mark's position, per axis: how well a true mark is located (the detections
+                         # within match px of one; a mislabelled or false point is a matching error, not this)
+                         "position_rms_px": float(np.sqrt(squared[name][0] / max(2 * squared[name][1], 1))),
                          "labels_by_colour": {c: (int(n[0]), int(n[1])) for c, n in by_colour[name].items()}})
     return rows
 
@@ -92,13 +98,16 @@ def markdown(rows: list[dict], command: str) -> str:
              f"Produced by `{command}`; {provenance()}, OpenCV {cv2.__version__}, load average "
              f"{os.getloadavg()[0]:.1f}.", "",
              "Recall over fully visible marks, precision over all detections, labels over matched detections, "
-             "and per true colour (benchmarks/bench_photoreal_features.py says how).", "",
+             "and per true colour; position: the rms error per axis of the matched detections against the marks' "
+             "true projections (benchmarks/bench_photoreal_features.py says how).", "",
              "| dataset | world | engine | camera | front-end | frames | marks | detections | match px | recall "
-             "| precision | labels | labels by colour |", "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+             "| precision | labels | position rms px | labels by colour |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         lines.append(f"| {r['dataset']} | {r['world']} | {r['engine']} | {r['camera']} | {r['front_end']} "
                      f"| {r['frames']} | {r['marks']} | {r['detections']} | {r['match_px']:g} | {r['recall']:.2f} "
-                     f"| {r['precision']:.2f} | {r['labels']:.2f} | {_by_colour(r['labels_by_colour'])} |")
+                     f"| {r['precision']:.2f} | {r['labels']:.2f} | {r['position_rms_px']:.2f} "
+                     f"| {_by_colour(r['labels_by_colour'])} |")
     lines += ["", "Labels by true colour, pooled: " + "; ".join(
         f"{name}: {_by_colour(pooled_by_colour(rows, name))}" for name in FRONT_ENDS) + "."]
     return "\n".join(lines) + "\n"

@@ -270,9 +270,8 @@ def tracked_mismatch_bound(previous: Solution, options: SearchOptions, lost_mism
     """
     if previous.problem is None or not previous.problem.views:
         return lost_mismatch
-    objective = PoseObjective(previous.problem, options.fitness, options.tau)
-    before = objective.match(np.asarray(previous.pose, float)).mismatch
-    if before is None or not np.isfinite(before):
+    before = pose_mismatch(previous.problem, previous.pose, options)
+    if not np.isfinite(before):
         return lost_mismatch
     return float(min(MAX_TRACKED_MISMATCH, max(lost_mismatch, before + MISMATCH_RISE)))
 

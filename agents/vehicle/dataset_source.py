@@ -51,9 +51,9 @@ class DatasetCamera(SourceCamera):
     """One camera of a dataset, played in frame order: its images, its per-frame camera, the truth."""
 
     def __init__(self, dataset: Dataset, camera_name: str, scenario: Scenario, vehicle: str,
-                 extract: FeatureExtractor, *, intrinsics: Camera | None = None,
-                 world_from_camera: np.ndarray | None = None, intrinsics_from: str | None = None,
-                 clock: FrameClock | None = None, first_tick: int | None = None) -> None:
+                 extract: FeatureExtractor, clock: FrameClock, *, first_tick: int | None = None,
+                 intrinsics: Camera | None = None, world_from_camera: np.ndarray | None = None,
+                 intrinsics_from: str | None = None) -> None:
         reader = FileListReader(dataset.image_paths(camera_name), str(dataset.root / camera_name))
         super().__init__(reader, scenario, vehicle, extract,
                          intrinsics=None if intrinsics is None else (lambda: intrinsics),
@@ -84,21 +84,15 @@ class DatasetCamera(SourceCamera):
         return matrix_from_pose(pose)
 
     def acquire(self, index: int, stamp_ns: int) -> Frame:
-        """The dataset's next frame, processed at fleet tick ``index``, stamped with the tick it was taken at
-        (:meth:`taken_at`)."""
+        """The dataset's next frame, processed at fleet tick ``index``, stamped with the tick it was taken at:
+        ``first_tick`` plus its number, never after ``index``."""
         if self.first_tick is None:
             self.first_tick = index
         frame = super().acquire(index, stamp_ns)
         if frame.skipped is not None:
             return frame
-        taken = self.taken_at(frame.scene_frame, index)
-        stamp = stamp_ns if self.clock is None else self.clock.stamp_ns(taken)
-        return replace(frame, stamp_ns=stamp, truth=self.truth(frame.scene_frame))
-
-    def taken_at(self, k: int, index: int) -> int:
-        """The fleet tick of the dataset's frame ``k`` shown at tick ``index``: ``first_tick + k``, never after
-        ``index`` (a frame is not taken after it is processed)."""
-        return min(int(self.first_tick if self.first_tick is not None else index) + k, index)
+        taken = min(self.first_tick + frame.scene_frame, index)  # never after it is processed
+        return replace(frame, stamp_ns=self.clock.stamp_ns(taken), truth=self.truth(frame.scene_frame))
 
     def truth(self, k: int) -> np.ndarray | None:
         """The target's true pose at frame ``k``; None without truth.jsonl or when the target is not in the images."""
@@ -112,9 +106,9 @@ class DatasetCamera(SourceCamera):
 
 
 def open_dataset_camera(source: str, located: tuple[Path, str | None], scenario: Scenario, vehicle: str,
-                        extract: FeatureExtractor, *, intrinsics: Camera | None = None,
-                        world_from_camera: np.ndarray | None = None, intrinsics_from: str | None = None,
-                        clock: FrameClock | None = None, first_tick: int | None = None) -> DatasetCamera:
+                        extract: FeatureExtractor, clock: FrameClock, *, first_tick: int | None = None,
+                        intrinsics: Camera | None = None, world_from_camera: np.ndarray | None = None,
+                        intrinsics_from: str | None = None) -> DatasetCamera:
     """The camera of ``--source`` (a dataset root: ``vehicle``'s folder; a camera's folder: that camera), its frames
     stamped on ``clock`` from ``first_tick`` (:class:`DatasetCamera`)."""
     root, folder = located
@@ -123,9 +117,8 @@ def open_dataset_camera(source: str, located: tuple[Path, str | None], scenario:
     if name not in dataset.cameras:
         raise SourceError(f"--source {source}: the dataset has no camera {name!r} (cameras: "
                           f"{', '.join(dataset.cameras)})")
-    return DatasetCamera(dataset, name, scenario, vehicle, extract, intrinsics=intrinsics,
-                         world_from_camera=world_from_camera, intrinsics_from=intrinsics_from, clock=clock,
-                         first_tick=first_tick)
+    return DatasetCamera(dataset, name, scenario, vehicle, extract, clock, first_tick=first_tick,
+                         intrinsics=intrinsics, world_from_camera=world_from_camera, intrinsics_from=intrinsics_from)
 
 
 __all__ = ["DatasetCamera", "dataset_location", "dataset_world", "open_dataset_camera"]

@@ -62,6 +62,12 @@ class FrameClock:
         return None if stop.is_set() else n
 
 
+def fleet_clock(fps: float | None, scenario: Scenario, epoch_ns: int) -> FrameClock:
+    """An agent's clock: ``--fps`` (default: the scenario's) from ``--epoch-ns`` (the vehicle's frame loop, and the
+    ticks a dataset's frames were taken at)."""
+    return FrameClock(fps or scenario.spec.fps, epoch_ns)
+
+
 @dataclass(frozen=True)
 class Frame:
     """One acquired frame.

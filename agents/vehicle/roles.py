@@ -30,7 +30,7 @@ from scenarios.world import Scenario
 from agents.errors import TeamNotMetError
 from agents.transport.bus import FleetBus, Received
 from agents.vehicle.config import AgentConfig
-from agents.vehicle.frames import NS, FrameClock
+from agents.vehicle.frames import NS, fleet_clock
 from agents.vehicle.hints import HintInbox
 from agents.vehicle.memory import release_free_memory
 from agents.vehicle.plausibility import Plausibility
@@ -74,7 +74,7 @@ class Vehicle(ABC):
 
     def __init__(self, config: AgentConfig, bus: FleetBus, scenario: Scenario, emit: Emit) -> None:
         self.config, self.bus, self.scenario, self.emit = config, bus, scenario, emit
-        self.clock = FrameClock(config.fps or scenario.spec.fps, config.epoch_ns)
+        self.clock = fleet_clock(config.fps, scenario, config.epoch_ns)
         self.period_s = 1.0 / self.clock.fps
         self.record = RunRecord()
         self._started_ns = 0

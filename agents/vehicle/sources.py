@@ -53,7 +53,7 @@ from agents.problem.extract import FeatureExtractor, feature_extractor
 from agents.problem.images import read_image
 from agents.transport.bus import FleetBus
 from agents.vehicle.config import AgentConfig
-from agents.vehicle.frames import Frame, FrameClock, SimulatedCamera
+from agents.vehicle.frames import Frame, SimulatedCamera, fleet_clock
 
 #: Files a directory source plays (by suffix, lower case).
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".ppm", ".pgm", ".webp")
@@ -329,11 +329,11 @@ def open_camera(config: AgentConfig, scenario: Scenario, bus: FleetBus | None = 
     located = None if ros_inputs else dataset_location(config.source)
     if located is not None:  # a rendered dataset (docs/datasets.md): its images, per-frame cameras and truth
         # a common clock (--epoch-ns): the dataset's frame k is the fleet's frame k; else from the first tick
-        clock = FrameClock(config.fps or scenario.spec.fps, config.epoch_ns)
-        return open_dataset_camera(str(config.source), located, scenario, config.vehicle, extract, intrinsics=k_file,
+        return open_dataset_camera(str(config.source), located, scenario, config.vehicle, extract,
+                                   fleet_clock(config.fps, scenario, config.epoch_ns),
+                                   first_tick=0 if config.epoch_ns else None, intrinsics=k_file,
                                    world_from_camera=pose_file, intrinsics_from=None if config.camera_info is None
-                                   else f"--camera-info {config.camera_info}", clock=clock,
-                                   first_tick=0 if config.epoch_ns else None)
+                                   else f"--camera-info {config.camera_info}")
     if ros_inputs and bus is None:
         if not is_ros(config.source):
             open_reader(str(config.source)).close()
