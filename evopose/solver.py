@@ -264,9 +264,10 @@ def tracked_mismatch_bound(previous: Solution, options: SearchOptions, lost_mism
 
     The mismatch counts every image point the pose leaves unexplained, the false ones too. A camera image has
     many (the contrast front-end's precision at the paper's scale is ~0.5): the right pose of such a frame
-    leaves 0.45-0.6 unexplained, from frame to frame within 0.15, while 50-70 % of its marks are matched, and a
-    fixed 0.5 lost it on 11 of 20 frames of a Cycles sequence (photoreal-paper-g1-high, each loss a search of
-    1-3 frames). A fit that jumped to a wrong pose leaves what the last one explained unexplained: the rise.
+    leaves 0.41-0.61 unexplained while half or more of its marks are matched, and a fixed 0.5 would lose it on 11
+    of 20 frames of photoreal-paper-g1-high (``benchmarks/bench_photoreal_tracking.py``; each loss a search of 1-3
+    frames, and the two helicopters were good on 11 of 20 frames, now 19, ``bench_photoreal_fleet``). A fit that
+    jumped to a wrong pose leaves what the last one explained unexplained: the rise.
     """
     if previous.problem is None or not previous.problem.views:
         return lost_mismatch
