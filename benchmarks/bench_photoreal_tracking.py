@@ -97,7 +97,8 @@ def main(argv: list[str] | None = None) -> int:
     command = "python -m benchmarks.bench_photoreal_tracking " + " ".join(argv if argv is not None else sys.argv[1:])
     lines = ["## Two cameras tracking on rendered datasets (in process)", "",
              f"Produced by `.venv/bin/{command}`; {provenance()}.", "",
-             (__doc__ or "").split("\n\n")[2].replace("\n", " "), "",
+             next(part for part in (__doc__ or "").split("\n\n") if part.startswith("Per dataset")).replace("\n", " "),
+             "",
              "| " + " | ".join(HEADER) + " |", "|" + "---|" * len(HEADER)]
     lines += ["| " + " | ".join(row) + " |" for row in table]
     args.out.parent.mkdir(parents=True, exist_ok=True)
