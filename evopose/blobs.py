@@ -71,6 +71,12 @@ MIN_BACKGROUND_PX, MIN_MARGIN_PX = 200, 48
 #: least share of its light the paint carries (a low sun's gloss on a red body's top face leaves it ~0.45; grey
 #: ground ~0.05).
 PAINT_RESIDUAL, PAINT_SHARE, PAINT_NOISE = 0.12, 0.3, 0.01
+#: A face whose paint carries less of its light (a low sun's sky gloss on a red top face seen at a grazing angle
+#: leaves ~0.2; grey ground up to ~0.16 in 1 of 1000 pixels) is paint where it touches the surely painted pixels
+#: (:func:`body_region`: hysteresis, as Canny's edges): this share and up, connected to a pixel of PAINT_SHARE.
+PAINT_SHARE_CONNECTED = 0.18
+#: Most re-centrings of a spot's coverage window (:func:`_coverage_centroids`).
+CENTROID_STEPS = 6
 #: With the body context, where the prior's largest mark radius is under :data:`SMALL_SPOT_PX`, a spot may misfit
 #: its label this much: the encoder's 4:2:0 chroma (2 x 2 px blocks) leaves such a mark's colour far off its
 #: paint's line, and the body, not the label, rejects the clutter.
@@ -173,12 +179,12 @@ class ContrastMarks(MarkDetections):
     contrast: np.ndarray = None  # type: ignore[assignment]
 
 
-def paint_pixels(lin: np.ndarray, body_linear: np.ndarray) -> np.ndarray:
+def paint_pixels(lin: np.ndarray, body_linear: np.ndarray, min_share: float = PAINT_SHARE) -> np.ndarray:
     """Which pixels (bool (H, W)) show the body's paint, under any light: the dichromatic reflection model, a
     pixel ``p = a c + b w`` of the paint's colour ``c`` (the body lit by the sun, or only by the sky in a shadow)
     and the light's own colour ``w`` (neutral in a white-balanced image: the gloss reflecting the sky), ``a, b >=
     0``. Paint when the fit leaves at most :data:`PAINT_RESIDUAL` of the pixel and the paint carries at least
-    :data:`PAINT_SHARE` of its light (grey ground fits ``w`` alone; the marks' hues fit neither)."""
+    ``min_share`` of its light (grey ground fits ``w`` alone; the marks' hues fit neither)."""
     c = body_linear.astype(np.float32)
     basis = np.stack([c, np.ones(3, np.float32)], axis=1)                       # (3, 2): [c, w]
     coef = lin @ np.linalg.pinv(basis).T.astype(np.float32)                       # (H, W, 2)
@@ -190,16 +196,35 @@ def paint_pixels(lin: np.ndarray, body_linear: np.ndarray) -> np.ndarray:
     norm = np.linalg.norm(lin, axis=2)
     residual = np.linalg.norm(lin - fit, axis=2)
     share = a * float(c.sum()) / np.maximum(a * float(c.sum()) + 3 * b, 1e-9)
-    return (a > 0) & (residual <= PAINT_RESIDUAL * norm + PAINT_NOISE) & (share >= PAINT_SHARE) & (norm > 0.005)
+    return (a > 0) & (residual <= PAINT_RESIDUAL * norm + PAINT_NOISE) & (share >= min_share) & (norm > 0.005)
+
+
+def connected_paint(lin: np.ndarray, body_linear: np.ndarray) -> np.ndarray:
+    """The body's paint with its glossy faces (bool (H, W)): :func:`paint_pixels` at :data:`PAINT_SHARE`, and the
+    8-connected patches of pixels at :data:`PAINT_SHARE_CONNECTED` that touch them (hysteresis). ``lin`` (H, W, 3)
+    linear BGR, ``body_linear`` (3,)."""
+    sure = paint_pixels(lin, body_linear)
+    weak = paint_pixels(lin, body_linear, PAINT_SHARE_CONNECTED) | sure
+    count, patches = cv2.connectedComponents(weak.astype(np.uint8), connectivity=8)
+    touching = np.zeros(count, bool)
+    touching[np.unique(patches[sure])] = True
+    touching[0] = False
+    return touching[patches]
 
 
 def body_region(lin: np.ndarray, body_linear: np.ndarray, mark_px: float, gap_px: float = 0.0) -> np.ndarray:
-    """Where the target's marks can be (bool (H, W)): the pixels of the body's paint (:func:`paint_pixels`) less
+    """Where the target's marks can be (bool (H, W)): the pixels of the body's paint (:func:`connected_paint` when
+    ``mark_px`` is at least :data:`SMALL_SPOT_PX`, else :func:`paint_pixels`) less
     single specks; closed with a disc of the largest mark's radius ``mark_px`` and its holes filled (a mark inside
     a face is a hole in the paint, a mark on a face's outline a notch), then grown by half that radius, at least
     2 px (a mark on the outline of a face lies half outside its paint; a 2-3 px mark's pixels are mixed with what
     lies beside the body). ``lin`` (H, W, 3) linear BGR, ``body_linear`` (3,)."""
-    paint = cv2.morphologyEx(paint_pixels(lin, body_linear).astype(np.uint8), cv2.MORPH_OPEN,
+    # glossy faces (hysteresis) where a mark is large enough to be told from the specks beside a body: at the paper's
+    # scale (marks under SMALL_SPOT_PX) the closing over BODY_GAP already spans a 10-15 px face, and growing into
+    # the gloss added more false spots than marks (Cycles paper-scale sweep: recall 0.70 -> 0.73, precision 0.46 ->
+    # 0.42)
+    paint = connected_paint(lin, body_linear) if mark_px >= SMALL_SPOT_PX else paint_pixels(lin, body_linear)
+    paint = cv2.morphologyEx(paint.astype(np.uint8), cv2.MORPH_OPEN,
                              np.ones((2, 2), np.uint8))
     r = max(int(np.ceil(max(mark_px, gap_px))), 1)
     disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * r + 1, 2 * r + 1))
@@ -357,20 +382,35 @@ def _detect(bgr: np.ndarray, lin: np.ndarray, names: tuple[str, ...], palette: M
 def _coverage_centroids(lin: np.ndarray, pts: np.ndarray, radius: np.ndarray, spot: np.ndarray,
                         ring: np.ndarray) -> np.ndarray:
     """Each spot's position as the centroid of its coverage (:func:`evopose.features._coverage`: a pixel's share
-    of the spot's colour on the line ring -> spot, in linear light) within its radius + 1.5 px of the peak: the
-    covered area's centre, to a tenth of a pixel for 2-4 px marks where a peak's quadratic is coarser. Shapes:
-    lin (H, W, 3), pts (K, 2), radius (K,), spot and ring (K, 3)."""
+    of the spot's colour on the line ring -> spot, in linear light) within its radius + 1.5 px: the covered
+    area's centre, to a tenth of a pixel for 2-4 px marks where a peak's quadratic is coarser. The window is
+    re-centred on the centroid (mean shift, :data:`CENTROID_STEPS` at most, within the radius of the peak): a
+    disc seen obliquely is an ellipse whose response peaks off its centre along the long axis, and a window
+    around the peak cuts it (3 px off on a telephoto top face). Not under :data:`SMALL_SPOT_PX`, where marks 3-5
+    px apart would draw the window onto a neighbour (recall 0.73 -> 0.72 on the Cycles paper-scale sweep). Shapes: lin (H, W, 3), pts (K, 2), radius (K,),
+    spot and ring (K, 3)."""
     h, w = lin.shape[:2]
     out = pts.copy()
-    for i, ((u, v), r) in enumerate(zip(pts, radius)):
+    for i, (peak, r) in enumerate(zip(pts, radius)):
         reach = r + 1.5
-        x0, x1 = max(int(np.floor(u - reach)), 0), min(int(np.ceil(u + reach)) + 1, w)
-        y0, y1 = max(int(np.floor(v - reach)), 0), min(int(np.ceil(v + reach)) + 1, h)
-        yy, xx = np.mgrid[y0:y1, x0:x1]
-        inside = np.hypot(xx - u, yy - v) <= reach
-        a = _coverage(lin[y0:y1, x0:x1] - ring[i], (spot[i] - ring[i])[None, None, :]) * inside
-        if a.sum() > 1e-6:
-            out[i] = ((a * xx).sum() / a.sum(), (a * yy).sum() / a.sum())
+        centre = peak
+        for _ in range(CENTROID_STEPS if r >= SMALL_SPOT_PX else 1):
+            u, v = centre
+            x0, x1 = max(int(np.floor(u - reach)), 0), min(int(np.ceil(u + reach)) + 1, w)
+            y0, y1 = max(int(np.floor(v - reach)), 0), min(int(np.ceil(v + reach)) + 1, h)
+            yy, xx = np.mgrid[y0:y1, x0:x1]
+            inside = np.hypot(xx - u, yy - v) <= reach
+            a = _coverage(lin[y0:y1, x0:x1] - ring[i], (spot[i] - ring[i])[None, None, :]) * inside
+            if a.sum() <= 1e-6:
+                break
+            moved = np.array([(a * xx).sum() / a.sum(), (a * yy).sum() / a.sum()])
+            # never farther than the spot's radius from its peak: the window stays on its own spot
+            offset = moved - peak
+            moved = peak + offset * min(1.0, r / max(float(np.hypot(*offset)), 1e-9))
+            step, centre = float(np.hypot(*(moved - centre))), moved
+            if step < 0.05:
+                break
+        out[i] = centre
     return out
 
 
@@ -394,8 +434,8 @@ def _densest_cluster(pts: np.ndarray, weight: np.ndarray, radius: float) -> np.n
     return np.nonzero(np.linalg.norm(pts - mean, axis=1) <= radius)[0]
 
 
-__all__ = ["ContrastMarks", "MarkPrior", "body_region", "contrast_responses", "detect_contrast_marks", "label_colours",
-           "paint_pixels", "scales"]
+__all__ = ["ContrastMarks", "MarkPrior", "body_region", "connected_paint", "contrast_responses", "detect_contrast_marks",
+           "label_colours", "paint_pixels", "scales"]
 
 
 def mark_prior(camera, mark_radius: float, target_extent: float, lo: np.ndarray, hi: np.ndarray,

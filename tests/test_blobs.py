@@ -131,6 +131,22 @@ def test_paint_pixels_take_the_body_in_sun_in_shadow_and_under_gloss_but_not_gre
     assert paint_pixels(pixels, red).tolist() == [[True, True, True, False, False, False]]
 
 
+def test_a_glossy_face_is_paint_where_it_touches_the_surely_painted_body_and_grey_ground_never_is():
+    # a low sun's sky gloss on a red top face seen at a grazing angle leaves the paint ~0.2 of its light (Cycles
+    # telephoto g1-low: the face's five marks were outside the body and lost); ground up to ~0.16
+    from evopose.blobs import _srgb_to_linear, connected_paint, paint_pixels
+
+    red = _srgb_to_linear(np.array([40, 40, 150], np.float32) / 255)
+    glossy = 0.39 * red + 0.165                                   # share 0.21 (measured on the Cycles face)
+    image = np.zeros((20, 30, 3), np.float32) + np.float32(0.2)   # grey ground
+    image[2:18, 2:10] = red                                       # the sunlit side
+    image[2:18, 10:18] = glossy                                   # the glossy top, touching it
+    image[2:18, 22:28] = glossy                                   # the same colour apart: a grey-pink patch
+    assert not paint_pixels(image, red)[5, 12]
+    paint = connected_paint(image, red)
+    assert paint[2:18, 2:18].all() and not paint[2:18, 22:28].any() and not paint[0].any() and not paint[:, 19].any()
+
+
 @pytest.mark.parametrize("name, rms_px", [("paper", 0.5), ("telephoto", 1.0)])
 def test_on_the_committed_photoreal_frames_a_found_mark_is_placed_to_a_fraction_of_a_pixel(name, rms_px):
     # the issue's "positions sub-pixel from luminance", on Cycles frames against the marks' true projections:
@@ -141,12 +157,14 @@ def test_on_the_committed_photoreal_frames_a_found_mark_is_placed_to_a_fraction_
     assert rows and all(r["position_rms_px"] <= rms_px for r in rows), [r["position_rms_px"] for r in rows]
 
 
-@pytest.mark.parametrize("name, recall, precision", [("paper", 0.65, 0.45), ("telephoto", 0.9, 0.7)])
+@pytest.mark.parametrize("name, recall, precision", [("paper", 0.65, 0.45), ("telephoto", 0.95, 0.8)])
 def test_on_the_committed_photoreal_frames_the_contrast_front_end_with_the_body_finds_the_marks(name, recall,
                                                                                              precision):
-    # Blender Cycles frames (tests/data/photoreal, docs/datasets.md): the issue's bars (paper scale 0.8 / 0.8,
-    # telephoto 0.95) are not met yet; these are the levels measured (BENCHMARKS.md), so a regression fails
-    # the benchmark's own evaluation (match radius, recall over whole marks, precision over every detection)
+    # Blender Cycles frames (tests/data/photoreal, docs/datasets.md): at telephoto the issue's recall bar (0.95;
+    # measured 1.00, precision 0.83; 0.95 / 0.77 without re-centring an oblique disc's window); at the paper's
+    # scale its bars (0.8 / 0.8) are not met yet and these are the levels measured (BENCHMARKS.md), so a
+    # regression fails the benchmark's own evaluation (match radius, recall over whole marks, precision over every
+    # detection)
     from benchmarks.bench_photoreal_features import evaluate
 
     every = evaluate(Path(__file__).parent / "data" / "photoreal" / name)
