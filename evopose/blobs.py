@@ -22,9 +22,9 @@ scale a mark has at the target's distance. So (docs/design.md, "The feature fron
    body corner, a shadow) is dropped. Spots under :data:`SMALL_SPOT_PX` on a body take their label from
    :mod:`evopose.spot_colour` instead, which models the encoder's 4:2:0 chroma.
 5. **Context**: the marks lie on the target's body. Given the body's paint colour (the model's), a candidate
-   must lie on or inside a patch of that paint seen under any light (:func:`paint_pixels`: the dichromatic
-   reflection model, paint plus the light's own colour; :func:`body_region`); clutter in the marks' own hues lies
-   on the ground and is dropped. The scale space is then built only around the body (2.8-3.4x faster on a
+   must lie on or inside a patch of that paint seen under any light (:mod:`evopose.body_paint`: the dichromatic
+   reflection model, paint plus the light's own colour, and glossy faces touching it); clutter in the marks' own
+   hues lies on the ground and is dropped. The scale space is then built only around the body (2.8-3.4x faster on a
    640 x 480 frame) and its threshold taken from the ground beside it.
    The marks of one target lie within its image extent; with the prior's extent the densest such cluster is
    kept and far specks are dropped.
@@ -40,6 +40,7 @@ from dataclasses import dataclass, replace
 import cv2
 import numpy as np
 
+from .body_paint import body_region
 from .features import MarkDetections, _coverage, _to_bgr
 from .spot_colour import label_small_spots, ring_colours
 
@@ -67,14 +68,6 @@ BODY_GAP = 0.12
 #: Least pixels beside the body for the response's spread to be taken there (else over the whole crop), and the
 #: least margin of ground kept around the body (the spread is the ground's texture, not the body's outline).
 MIN_BACKGROUND_PX, MIN_MARGIN_PX = 200, 48
-#: Body context (:func:`paint_pixels`): the largest residual of a paint pixel's fit, relative to the pixel, and the
-#: least share of its light the paint carries (a low sun's gloss on a red body's top face leaves it ~0.45; grey
-#: ground ~0.05).
-PAINT_RESIDUAL, PAINT_SHARE, PAINT_NOISE = 0.12, 0.3, 0.01
-#: A face whose paint carries less of its light (a low sun's sky gloss on a red top face seen at a grazing angle
-#: leaves ~0.2; grey ground up to ~0.16 in 1 of 1000 pixels) is paint where it touches the surely painted pixels
-#: (:func:`body_region`: hysteresis, as Canny's edges): this share and up, connected to a pixel of PAINT_SHARE.
-PAINT_SHARE_CONNECTED = 0.18
 #: Most re-centrings of a spot's coverage window (:func:`_coverage_centroids`).
 CENTROID_STEPS = 6
 #: With the body context, where the prior's largest mark radius is under :data:`SMALL_SPOT_PX`, a spot may misfit
@@ -179,65 +172,6 @@ class ContrastMarks(MarkDetections):
     contrast: np.ndarray = None  # type: ignore[assignment]
 
 
-def paint_pixels(lin: np.ndarray, body_linear: np.ndarray, min_share: float = PAINT_SHARE) -> np.ndarray:
-    """Which pixels (bool (H, W)) show the body's paint, under any light: the dichromatic reflection model, a
-    pixel ``p = a c + b w`` of the paint's colour ``c`` (the body lit by the sun, or only by the sky in a shadow)
-    and the light's own colour ``w`` (neutral in a white-balanced image: the gloss reflecting the sky), ``a, b >=
-    0``. Paint when the fit leaves at most :data:`PAINT_RESIDUAL` of the pixel and the paint carries at least
-    ``min_share`` of its light (grey ground fits ``w`` alone; the marks' hues fit neither)."""
-    c = body_linear.astype(np.float32)
-    basis = np.stack([c, np.ones(3, np.float32)], axis=1)                       # (3, 2): [c, w]
-    coef = lin @ np.linalg.pinv(basis).T.astype(np.float32)                       # (H, W, 2)
-    a, b = coef[..., 0], coef[..., 1]
-    # b < 0: the best fit without gloss is the paint alone
-    alone = np.maximum((lin @ c) / max(float(c @ c), 1e-12), 0)
-    a, b = np.where(b < 0, alone, a), np.maximum(b, 0)
-    fit = a[..., None] * c + b[..., None]
-    norm = np.linalg.norm(lin, axis=2)
-    residual = np.linalg.norm(lin - fit, axis=2)
-    share = a * float(c.sum()) / np.maximum(a * float(c.sum()) + 3 * b, 1e-9)
-    return (a > 0) & (residual <= PAINT_RESIDUAL * norm + PAINT_NOISE) & (share >= min_share) & (norm > 0.005)
-
-
-def connected_paint(lin: np.ndarray, body_linear: np.ndarray) -> np.ndarray:
-    """The body's paint with its glossy faces (bool (H, W)): :func:`paint_pixels` at :data:`PAINT_SHARE`, and the
-    8-connected patches of pixels at :data:`PAINT_SHARE_CONNECTED` that touch them (hysteresis). ``lin`` (H, W, 3)
-    linear BGR, ``body_linear`` (3,)."""
-    sure = paint_pixels(lin, body_linear)
-    weak = paint_pixels(lin, body_linear, PAINT_SHARE_CONNECTED) | sure
-    count, patches = cv2.connectedComponents(weak.astype(np.uint8), connectivity=8)
-    touching = np.zeros(count, bool)
-    touching[np.unique(patches[sure])] = True
-    touching[0] = False
-    return touching[patches]
-
-
-def body_region(lin: np.ndarray, body_linear: np.ndarray, mark_px: float, gap_px: float = 0.0) -> np.ndarray:
-    """Where the target's marks can be (bool (H, W)): the pixels of the body's paint (:func:`connected_paint` when
-    ``mark_px`` is at least :data:`SMALL_SPOT_PX`, else :func:`paint_pixels`) less
-    single specks; closed with a disc of the largest mark's radius ``mark_px`` and its holes filled (a mark inside
-    a face is a hole in the paint, a mark on a face's outline a notch), then grown by half that radius, at least
-    2 px (a mark on the outline of a face lies half outside its paint; a 2-3 px mark's pixels are mixed with what
-    lies beside the body). ``lin`` (H, W, 3) linear BGR, ``body_linear`` (3,)."""
-    # glossy faces (hysteresis) where a mark is large enough to be told from the specks beside a body: at the paper's
-    # scale (marks under SMALL_SPOT_PX) the closing over BODY_GAP already spans a 10-15 px face, and growing into
-    # the gloss added more false spots than marks (Cycles paper-scale sweep: recall 0.70 -> 0.73, precision 0.46 ->
-    # 0.42)
-    paint = connected_paint(lin, body_linear) if mark_px >= SMALL_SPOT_PX else paint_pixels(lin, body_linear)
-    paint = cv2.morphologyEx(paint.astype(np.uint8), cv2.MORPH_OPEN,
-                             np.ones((2, 2), np.uint8))
-    r = max(int(np.ceil(max(mark_px, gap_px))), 1)
-    disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * r + 1, 2 * r + 1))
-    closed = cv2.morphologyEx(paint, cv2.MORPH_CLOSE, disc)
-    # fill the holes: everything the outside (flooded from a padded border) does not reach
-    padded = cv2.copyMakeBorder(closed, 1, 1, 1, 1, cv2.BORDER_CONSTANT, value=0)
-    outside = padded.copy()
-    cv2.floodFill(outside, np.zeros((padded.shape[0] + 2, padded.shape[1] + 2), np.uint8), (0, 0), 2)
-    filled = (outside[1:-1, 1:-1] != 2).astype(np.uint8)
-    g = max(2, int(np.ceil(mark_px / 2)))
-    return cv2.dilate(filled, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * g + 1, 2 * g + 1))) > 0
-
-
 def detect_contrast_marks(image_bgr: np.ndarray, palette: Mapping[str, tuple[int, int, int]],
                           prior: MarkPrior = MarkPrior(), *, body: tuple[int, int, int] | None = None,
                           k_sigma: float = K_SIGMA, max_edge_ratio: float = MAX_EDGE_RATIO,
@@ -261,7 +195,12 @@ def detect_contrast_marks(image_bgr: np.ndarray, palette: Mapping[str, tuple[int
         return _detect(bgr, lin, names, palette, prior, None, **settings)
     body_linear = _srgb_to_linear(np.array(body, np.float32) / 255.0)
     gap = 0.0 if prior.extent_px is None else BODY_GAP * prior.extent_px
-    region = body_region(lin, body_linear, prior.radius_px[1], gap)
+    # glossy faces (hysteresis) where a mark is large enough to be told from the specks beside a body: at the paper's
+    # scale (marks under SMALL_SPOT_PX) the closing over BODY_GAP already spans a 10-15 px face, and growing into
+    # the gloss added more false spots than marks (Cycles paper-scale sweep: recall 0.70 -> 0.73, precision 0.46 ->
+    # 0.42)
+    region = body_region(lin, body_linear, prior.radius_px[1], gap,
+                         glossy_faces=prior.radius_px[1] >= SMALL_SPOT_PX)
     if not region.any():
         return _detect(bgr[:0, :0], lin[:0, :0], names, palette, prior, region[:0, :0], **settings)
     ys, xs = np.nonzero(region)
@@ -387,8 +326,8 @@ def _coverage_centroids(lin: np.ndarray, pts: np.ndarray, radius: np.ndarray, sp
     re-centred on the centroid (mean shift, :data:`CENTROID_STEPS` at most, within the radius of the peak): a
     disc seen obliquely is an ellipse whose response peaks off its centre along the long axis, and a window
     around the peak cuts it (3 px off on a telephoto top face). Not under :data:`SMALL_SPOT_PX`, where marks 3-5
-    px apart would draw the window onto a neighbour (recall 0.73 -> 0.72 on the Cycles paper-scale sweep). Shapes: lin (H, W, 3), pts (K, 2), radius (K,),
-    spot and ring (K, 3)."""
+    px apart would draw the window onto a neighbour (recall 0.73 -> 0.72 on the Cycles paper-scale sweep).
+    Shapes: lin (H, W, 3), pts (K, 2), radius (K,), spot and ring (K, 3)."""
     h, w = lin.shape[:2]
     out = pts.copy()
     for i, (peak, r) in enumerate(zip(pts, radius)):
@@ -434,8 +373,7 @@ def _densest_cluster(pts: np.ndarray, weight: np.ndarray, radius: float) -> np.n
     return np.nonzero(np.linalg.norm(pts - mean, axis=1) <= radius)[0]
 
 
-__all__ = ["ContrastMarks", "MarkPrior", "body_region", "connected_paint", "contrast_responses", "detect_contrast_marks",
-           "label_colours", "paint_pixels", "scales"]
+__all__ = ["ContrastMarks", "MarkPrior", "contrast_responses", "detect_contrast_marks", "label_colours", "scales"]
 
 
 def mark_prior(camera, mark_radius: float, target_extent: float, lo: np.ndarray, hi: np.ndarray,

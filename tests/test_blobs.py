@@ -123,7 +123,8 @@ def test_with_the_body_context_a_mark_coloured_ball_on_the_ground_is_dropped_and
 
 
 def test_paint_pixels_take_the_body_in_sun_in_shadow_and_under_gloss_but_not_grey_ground_or_marks():
-    from evopose.blobs import _srgb_to_linear, paint_pixels
+    from evopose.blobs import _srgb_to_linear
+    from evopose.body_paint import paint_pixels
 
     red = _srgb_to_linear(np.array([40, 40, 150], np.float32) / 255)
     pixels = np.array([[red, 0.2 * red, 0.4 * red + 0.06,                # sunlit, sky-lit shadow, gloss
@@ -134,7 +135,8 @@ def test_paint_pixels_take_the_body_in_sun_in_shadow_and_under_gloss_but_not_gre
 def test_a_glossy_face_is_paint_where_it_touches_the_surely_painted_body_and_grey_ground_never_is():
     # a low sun's sky gloss on a red top face seen at a grazing angle leaves the paint ~0.2 of its light (Cycles
     # telephoto g1-low: the face's five marks were outside the body and lost); ground up to ~0.16
-    from evopose.blobs import _srgb_to_linear, connected_paint, paint_pixels
+    from evopose.blobs import _srgb_to_linear
+    from evopose.body_paint import connected_paint, paint_pixels
 
     red = _srgb_to_linear(np.array([40, 40, 150], np.float32) / 255)
     glossy = 0.39 * red + 0.165                                   # share 0.21 (measured on the Cycles face)

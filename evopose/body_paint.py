@@ -1,0 +1,80 @@
+"""The target's body in a camera image: where its marks can be (docs/design.md, "The feature front-end").
+
+The marks lie on the body's paint. A pixel shows that paint under any light when the dichromatic reflection model
+fits it (:func:`paint_pixels`); a glossy face whose paint carries less of its light is paint where it touches the
+surely painted pixels (:func:`connected_paint`); the region a mark may lie in is that paint closed over the marks'
+holes and notches (:func:`body_region`). Images are linear-light BGR float32 (H, W, 3).
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+#: Body context (:func:`paint_pixels`): the largest residual of a paint pixel's fit, relative to the pixel, and the
+#: least share of its light the paint carries (a low sun's gloss on a red body's top face leaves it ~0.45; grey
+#: ground ~0.05).
+PAINT_RESIDUAL, PAINT_SHARE, PAINT_NOISE = 0.12, 0.3, 0.01
+#: A face whose paint carries less of its light (a low sun's sky gloss on a red top face seen at a grazing angle
+#: leaves ~0.2; grey ground up to ~0.16 in 1 of 1000 pixels) is paint where it touches the surely painted pixels
+#: (:func:`connected_paint`: hysteresis, as Canny's edges): this share and up, connected to a pixel of PAINT_SHARE.
+PAINT_SHARE_CONNECTED = 0.18
+
+
+def paint_pixels(lin: np.ndarray, body_linear: np.ndarray, min_share: float = PAINT_SHARE) -> np.ndarray:
+    """Which pixels (bool (H, W)) show the body's paint, under any light: the dichromatic reflection model, a
+    pixel ``p = a c + b w`` of the paint's colour ``c`` (the body lit by the sun, or only by the sky in a shadow)
+    and the light's own colour ``w`` (neutral in a white-balanced image: the gloss reflecting the sky), ``a, b >=
+    0``. Paint when the fit leaves at most :data:`PAINT_RESIDUAL` of the pixel and the paint carries at least
+    ``min_share`` of its light (grey ground fits ``w`` alone; the marks' hues fit neither)."""
+    c = body_linear.astype(np.float32)
+    basis = np.stack([c, np.ones(3, np.float32)], axis=1)                       # (3, 2): [c, w]
+    coef = lin @ np.linalg.pinv(basis).T.astype(np.float32)                       # (H, W, 2)
+    a, b = coef[..., 0], coef[..., 1]
+    # b < 0: the best fit without gloss is the paint alone
+    alone = np.maximum((lin @ c) / max(float(c @ c), 1e-12), 0)
+    a, b = np.where(b < 0, alone, a), np.maximum(b, 0)
+    fit = a[..., None] * c + b[..., None]
+    norm = np.linalg.norm(lin, axis=2)
+    residual = np.linalg.norm(lin - fit, axis=2)
+    share = a * float(c.sum()) / np.maximum(a * float(c.sum()) + 3 * b, 1e-9)
+    return (a > 0) & (residual <= PAINT_RESIDUAL * norm + PAINT_NOISE) & (share >= min_share) & (norm > 0.005)
+
+
+def connected_paint(lin: np.ndarray, body_linear: np.ndarray) -> np.ndarray:
+    """The body's paint with its glossy faces (bool (H, W)): :func:`paint_pixels` at :data:`PAINT_SHARE`, and the
+    8-connected patches of pixels at :data:`PAINT_SHARE_CONNECTED` that touch them (hysteresis). ``lin`` (H, W, 3)
+    linear BGR, ``body_linear`` (3,)."""
+    sure = paint_pixels(lin, body_linear)
+    weak = paint_pixels(lin, body_linear, PAINT_SHARE_CONNECTED) | sure
+    count, patches = cv2.connectedComponents(weak.astype(np.uint8), connectivity=8)
+    touching = np.zeros(count, bool)
+    touching[np.unique(patches[sure])] = True
+    touching[0] = False
+    return touching[patches]
+
+
+def body_region(lin: np.ndarray, body_linear: np.ndarray, mark_px: float, gap_px: float = 0.0,
+                glossy_faces: bool = True) -> np.ndarray:
+    """Where the target's marks can be (bool (H, W)): the pixels of the body's paint (:func:`connected_paint`, or
+    :func:`paint_pixels` without ``glossy_faces``) less
+    single specks; closed with a disc of the largest mark's radius ``mark_px`` and its holes filled (a mark inside
+    a face is a hole in the paint, a mark on a face's outline a notch), then grown by half that radius, at least
+    2 px (a mark on the outline of a face lies half outside its paint; a 2-3 px mark's pixels are mixed with what
+    lies beside the body). ``lin`` (H, W, 3) linear BGR, ``body_linear`` (3,)."""
+    paint = connected_paint(lin, body_linear) if glossy_faces else paint_pixels(lin, body_linear)
+    paint = cv2.morphologyEx(paint.astype(np.uint8), cv2.MORPH_OPEN,
+                             np.ones((2, 2), np.uint8))
+    r = max(int(np.ceil(max(mark_px, gap_px))), 1)
+    disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * r + 1, 2 * r + 1))
+    closed = cv2.morphologyEx(paint, cv2.MORPH_CLOSE, disc)
+    # fill the holes: everything the outside (flooded from a padded border) does not reach
+    padded = cv2.copyMakeBorder(closed, 1, 1, 1, 1, cv2.BORDER_CONSTANT, value=0)
+    outside = padded.copy()
+    cv2.floodFill(outside, np.zeros((padded.shape[0] + 2, padded.shape[1] + 2), np.uint8), (0, 0), 2)
+    filled = (outside[1:-1, 1:-1] != 2).astype(np.uint8)
+    g = max(2, int(np.ceil(mark_px / 2)))
+    return cv2.dilate(filled, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * g + 1, 2 * g + 1))) > 0
+
+
+__all__ = ["PAINT_SHARE", "PAINT_SHARE_CONNECTED", "body_region", "connected_paint", "paint_pixels"]
