@@ -333,7 +333,8 @@ def _coverage_centroids(lin: np.ndarray, pts: np.ndarray, radius: np.ndarray, sp
     for i, (peak, r) in enumerate(zip(pts, radius)):
         reach = r + 1.5
         centre = peak
-        for _ in range(CENTROID_STEPS if r >= SMALL_SPOT_PX else 1):
+        steps = CENTROID_STEPS if r >= SMALL_SPOT_PX else 1
+        for _ in range(steps):
             u, v = centre
             x0, x1 = max(int(np.floor(u - reach)), 0), min(int(np.ceil(u + reach)) + 1, w)
             y0, y1 = max(int(np.floor(v - reach)), 0), min(int(np.ceil(v + reach)) + 1, h)
@@ -343,9 +344,9 @@ def _coverage_centroids(lin: np.ndarray, pts: np.ndarray, radius: np.ndarray, sp
             if a.sum() <= 1e-6:
                 break
             moved = np.array([(a * xx).sum() / a.sum(), (a * yy).sum() / a.sum()])
-            # never farther than the spot's radius from its peak: the window stays on its own spot
-            offset = moved - peak
-            moved = peak + offset * min(1.0, r / max(float(np.hypot(*offset)), 1e-9))
+            if steps > 1:  # re-centring: never farther than the spot's radius from its peak (its own spot)
+                offset = moved - peak
+                moved = peak + offset * min(1.0, r / max(float(np.hypot(*offset)), 1e-9))
             step, centre = float(np.hypot(*(moved - centre))), moved
             if step < 0.05:
                 break
