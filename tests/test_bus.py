@@ -151,6 +151,21 @@ def test_stale_data_is_counted_and_never_returned(endpoint):
         assert first.age_s() >= 2.0
 
 
+def test_a_vehicle_playing_a_recording_behind_the_wall_clock_judges_staleness_at_the_instant_it_plays(endpoint):
+    # a team playing a dataset 20 s behind the wall clock: a team-mate's view of that instant is fresh for it,
+    # data 5 s older than that instant is stale (on the wall clock both are stale; the fleet paired nothing)
+    with open_bus("tx", endpoint, listen=True) as tx, open_bus("rx", endpoint, max_age_s=1.0) as rx:
+        rx.playback_lag_ns = 20 * 10**9
+        rx.subscribe(Topic.ATTITUDE)
+        assert rx.wait_for_teammates({"tx"}, DEADLINE) and tx.wait_for_subscribers(Topic.ATTITUDE, DEADLINE)
+        tx.publish(message(tx, Topic.ATTITUDE, seq=0, age_s=25.0))  # 5 s before the instant played
+        tx.publish(message(tx, Topic.ATTITUDE, seq=1, age_s=20.2))  # the instant played, 0.2 s ago
+        got = rx.recv(Topic.ATTITUDE, timeout=DEADLINE)
+        assert got is not None and got.message.seq == 1 and rx.recv(Topic.ATTITUDE, timeout=0) is None
+        assert rx.counters.snapshot()["rejected"] == {"stale": 1}
+        assert rx.latest(Topic.ATTITUDE)["tx"].message.seq == 1  # latest() ages on the same clock
+
+
 def test_sequence_gaps_are_counted_and_a_restart_is_not_a_gap(endpoint):
     seqs = [0, 1, 2, 5, 6, 10, 0, 1]  # 2 missing, 3 missing, then the sender starts again at 0
     with open_bus("tx", endpoint, listen=True) as tx, open_bus("rx", endpoint) as rx:

@@ -11,8 +11,9 @@ overwritten inside Zenoh and never costs Python time, and a flooding sender over
 sample is checked cheaply (our own echoes dropped, size limit before any copy, the sender's budget) and its bytes
 handed to a bounded inbox (images into a ring of the newest few); what does not fit is dropped and counted
 (``overflow``). One worker thread decodes, checks the sender against the key, drops stale data (``stamp_ns`` older
-than ``max_age_s``), counts lost messages by ``seq`` (as ``rate-limited`` when the sender was over its budget
-since its previous message: they were overwritten in its ring), keeps the newest message per team-mate and
+than ``max_age_s`` before the instant the vehicle is at: the wall clock less :attr:`FleetBus.playback_lag_ns`),
+counts lost messages by ``seq`` (as ``rate-limited`` when the sender was over its budget since its previous
+message: they were overwritten in its ring), keeps the newest message per team-mate and
 hands messages to :meth:`recv` (a bounded queue: the oldest unread one is pushed out and counted
 as ``unread``) and to handlers. At close, what was already received is still handled.
 A bad payload is counted under its reason, logged (rate-limited), and never stops the receiver.
@@ -105,7 +106,8 @@ class FleetBus:
     fleet, vehicle : str
         Names (``protocol.check_name``).
     max_age_s : float or None
-        Data acquired longer ago are ignored (rejected as ``stale``); ``None`` keeps everything.
+        Data acquired longer ago are ignored (rejected as ``stale``); ``None`` keeps everything. "Ago" is on the
+        vehicle's own clock: the wall clock less :attr:`playback_lag_ns`.
     image_ring : int
         Newest image frames kept by the receiver; older ones are dropped (counted as ``overflow``).
     queue_size : int
@@ -125,6 +127,13 @@ class FleetBus:
         self.session = session
         self.fleet, self.vehicle = check_name(fleet, "fleet"), check_name(vehicle, "vehicle")
         self.max_age_s, self.stats_period_s = max_age_s, stats_period_s
+        #: How far the instant this vehicle is at runs behind the wall clock, ns (>= 0): 0 for a live camera; for a
+        #: recording played slower than it was taken (``--source DIR``: every frame is processed, so a slow team
+        #: falls behind) the lag of the frame it plays. A team-mate's data are stale when older than ``max_age_s``
+        #: at that instant; on the wall clock a whole team playing a recording 1 s behind would refuse each
+        #: other's feature sets (the views of the very instant they play) as stale. Written by the vehicle's
+        #: frame loop only, read by the worker.
+        self.playback_lag_ns = 0
         self.counters = TrafficCounters()
         self._owns_session = owns_session
         self._on_join, self._on_leave = on_join, on_leave
@@ -322,7 +331,7 @@ class FleetBus:
         """Newest message of ``topic`` per team-mate, without those older than ``max_age_s`` (default the bus's)."""
         topic = check_topic(topic)
         max_age_s = self.max_age_s if max_age_s is None else max_age_s
-        now_ns = time.time_ns()
+        now_ns = time.time_ns() - self.playback_lag_ns
         with self._lock:
             return {vehicle: rx for vehicle, rx in self._latest[topic].items()
                     if max_age_s is None or rx.age_s(now_ns) <= max_age_s}
@@ -367,9 +376,10 @@ class FleetBus:
             return
         rx = Received(topic, key_parts.vehicle, message, len(payload), received_ns)
         if isinstance(message, Message):
-            if self.max_age_s is not None and rx.age_s(received_ns) > self.max_age_s:
-                self._reject(topic, "stale", f"{key}: acquired {rx.age_s(received_ns):.3f} s ago "
-                                             f"(max age {self.max_age_s} s)")
+            now_ns = received_ns - self.playback_lag_ns
+            if self.max_age_s is not None and rx.age_s(now_ns) > self.max_age_s:
+                self._reject(topic, "stale", f"{key}: acquired {rx.age_s(now_ns):.3f} s before this vehicle's "
+                                             f"instant (max age {self.max_age_s} s)")
                 return
             last = self._last_seq.get((topic, rx.vehicle))
             if last is not None and message.seq > last + 1:
