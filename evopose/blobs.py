@@ -98,6 +98,10 @@ def _srgb_to_linear(x: np.ndarray) -> np.ndarray:
     return np.where(x <= 0.04045, x / 12.92, ((x + 0.055) / 1.055) ** 2.4).astype(np.float32)
 
 
+#: :func:`_srgb_to_linear` of the 256 values of an 8-bit channel (an image is decoded by look-up, not by power).
+_LINEAR_OF_BYTE = _srgb_to_linear(np.arange(256, dtype=np.float32) / np.float32(255.0))
+
+
 def scales(prior: MarkPrior) -> np.ndarray:
     """The blur sigmas of the scale space, pixels: one step below the smallest mark's sigma = r / sqrt(2) to one
     above the largest (a DoG between levels i and i + 1 is centred between them)."""
@@ -190,7 +194,7 @@ def detect_contrast_marks(image_bgr: np.ndarray, palette: Mapping[str, tuple[int
     if not names:
         raise ValueError("the palette names no colour")
     settings = dict(k_sigma=k_sigma, max_edge_ratio=max_edge_ratio, max_misfit=max_misfit, max_marks=max_marks)
-    lin = _srgb_to_linear(bgr.astype(np.float32) / 255.0)
+    lin = _LINEAR_OF_BYTE[bgr]
     if body is None:
         return _detect(bgr, lin, names, palette, prior, None, **settings)
     body_linear = _srgb_to_linear(np.array(body, np.float32) / 255.0)
