@@ -119,11 +119,15 @@ def _opencv_image(scenario: Scenario, render_world: Scenario, k: int, camera: st
     return captured.encoded, captured.suffix
 
 
-def _develop_exr(scenario: Scenario, exr: Path, k: int, camera: str) -> tuple[bytes, str]:
+def develop_exr(scenario: Scenario, exr: Path, k: int, camera: str,
+                spec: CameraModelSpec | None = None) -> tuple[bytes, str]:
+    """``camera``'s frame ``k`` of ``scenario`` from its radiance ``exr`` (the engine's ``raw/`` image): encoded bytes
+    and file suffix, through the world's camera model or ``spec``, seeded per world, camera and frame (the same
+    sensor noise whatever ``spec`` encodes)."""
     veh = scenario.vehicle(camera)
     cam = veh.camera_at(scenario.time(k))
-    captured = develop_radiance(read_exr(exr), cam, camera_model_of(scenario), camera_rng(scenario, veh.index, k),
-                                scenario.render.blur_sigma)
+    captured = develop_radiance(read_exr(exr), cam, spec or camera_model_of(scenario),
+                                camera_rng(scenario, veh.index, k), scenario.render.blur_sigma)
     return captured.encoded, captured.suffix
 
 
@@ -212,7 +216,7 @@ def _render_cycles(writer: DatasetWriter, scenario: Scenario, pending: list[tupl
     def on_image(event: dict) -> None:
         k, c = int(event["frame"]), event["camera"]
         exr = Path(event["path"])
-        data, suffix = _develop_exr(scenario, exr, k, c)
+        data, suffix = develop_exr(scenario, exr, k, c)
         _write_bytes(writer.image_path(c, k, suffix), data)
         if not keep_raw:
             exr.unlink(missing_ok=True)

@@ -1,8 +1,7 @@
 """FleetBus: one vehicle's view of the fleet over ONE Zenoh session (docs/design.md §4).
 
-Sending: one publisher per topic with the topic's QoS (``protocol.QOS``): BLOCK for hints,
-features, attitude and poses (hints also ``express``), DROP for images; every message gets the
-vehicle as ``sender`` and a per-topic ``seq``.
+Sending: one publisher per topic with the topic's QoS (``protocol.QOS``): BLOCK for hints, features, attitude and
+poses (hints also ``express``), DROP for images; every message gets the vehicle as ``sender`` and a per-topic ``seq``.
 
 Receiving (``agents.transport.receiver``): per subscribed topic, samples land in Zenoh's ring channels (Rust, no
 GIL): one ring shared by every sender and one per present team-mate. One thread per topic pulls from them only as
@@ -11,16 +10,15 @@ overwritten inside Zenoh and never costs Python time, and a flooding sender over
 sample is checked cheaply (our own echoes dropped, size limit before any copy, the sender's budget) and its bytes
 handed to a bounded inbox (images into a ring of the newest few); what does not fit is dropped and counted
 (``overflow``). One worker thread decodes, checks the sender against the key, drops stale data (``stamp_ns`` older
-than ``max_age_s`` before the instant the vehicle is at: the wall clock less :attr:`FleetBus.playback_lag_ns`),
-counts lost messages by ``seq`` (as ``rate-limited`` when the sender was over its budget since its previous
-message: they were overwritten in its ring), keeps the newest message per team-mate and
-hands messages to :meth:`recv` (a bounded queue: the oldest unread one is pushed out and counted
-as ``unread``) and to handlers. At close, what was already received is still handled.
-A bad payload is counted under its reason, logged (rate-limited), and never stops the receiver.
+than ``max_age_s`` before the instant the vehicle plays), counts lost messages by ``seq`` (as ``rate-limited`` when
+the sender was over its budget since its previous message: they were overwritten in its ring), keeps the newest
+message per team-mate and hands messages to :meth:`recv` (a bounded queue: the oldest unread one is pushed out and
+counted as ``unread``) and to handlers. At close, what was already received is still handled. A bad payload is
+counted under its reason, logged (rate-limited), and never stops the receiver.
 
-Presence: the vehicle's liveliness token ``evopose/<fleet>/@alive/<vehicle>``; a liveliness
-subscriber (with history) tracks which team-mates are alive. A team-mate that leaves is dropped
-from :meth:`teammates` and :meth:`latest`; when it returns it is used again.
+Presence: the vehicle's liveliness token ``evopose/<fleet>/@alive/<vehicle>``; a liveliness subscriber (with history)
+tracks which team-mates are alive. A team-mate that leaves is dropped from :meth:`teammates` and :meth:`latest`;
+when it returns it is used again.
 
 Typical agent loop::
 
@@ -106,8 +104,7 @@ class FleetBus:
     fleet, vehicle : str
         Names (``protocol.check_name``).
     max_age_s : float or None
-        Data acquired longer ago are ignored (rejected as ``stale``); ``None`` keeps everything. "Ago" is on the
-        vehicle's own clock: the wall clock less :attr:`playback_lag_ns`.
+        Data acquired longer ago (less :attr:`playback_lag_ns`) are rejected as ``stale``; ``None`` keeps all.
     image_ring : int
         Newest image frames kept by the receiver; older ones are dropped (counted as ``overflow``).
     queue_size : int
@@ -127,12 +124,8 @@ class FleetBus:
         self.session = session
         self.fleet, self.vehicle = check_name(fleet, "fleet"), check_name(vehicle, "vehicle")
         self.max_age_s, self.stats_period_s = max_age_s, stats_period_s
-        #: How far the instant this vehicle is at runs behind the wall clock, ns (>= 0): 0 for a live camera; for a
-        #: recording played slower than it was taken (``--source DIR``: every frame is processed, so a slow team
-        #: falls behind) the lag of the frame it plays. A team-mate's data are stale when older than ``max_age_s``
-        #: at that instant; on the wall clock a whole team playing a recording 1 s behind would refuse each
-        #: other's feature sets (the views of the very instant they play) as stale. Written by the vehicle's
-        #: frame loop only, read by the worker.
+        #: How far the instant the vehicle plays lags the wall clock, ns (a recording played slower than it was
+        #: taken, agents/vehicle/dataset_source.py); written by its frame loop only.
         self.playback_lag_ns = 0
         self.counters = TrafficCounters()
         self._owns_session = owns_session
@@ -378,8 +371,7 @@ class FleetBus:
         if isinstance(message, Message):
             now_ns = received_ns - self.playback_lag_ns
             if self.max_age_s is not None and rx.age_s(now_ns) > self.max_age_s:
-                self._reject(topic, "stale", f"{key}: acquired {rx.age_s(now_ns):.3f} s before this vehicle's "
-                                             f"instant (max age {self.max_age_s} s)")
+                self._reject(topic, "stale", f"{key}: acquired {rx.age_s(now_ns):.3f} s ago (max {self.max_age_s} s)")
                 return
             last = self._last_seq.get((topic, rx.vehicle))
             if last is not None and message.seq > last + 1:
