@@ -235,7 +235,8 @@ class CameraVehicle(Vehicle):
         return []
 
     def paired_views(self, stamp_ns: int) -> list:
-        """Team-mates' views of this instant: wait up to ``sync_wait_s`` for each live, sharing team-mate."""
+        """Team-mates' views of this instant: wait up to ``sync_wait_s`` (the first frame: ``max_age_s``) for each live,
+        sharing team-mate."""
         topic = self.policy.shares
         if topic is None:
             return []
@@ -261,9 +262,13 @@ class CameraVehicle(Vehicle):
         expected = self.team.sharing(alive, stamp_ns, max_age + self.period_s)
         self._report_staleness(alive, expected, stamp_ns)
         expected = self.team.on_clock(expected, lambda stamp: self.clock.index_of(stamp) is not None)
-        if not self.record.frames:  # the first frame: the team waited for is expected before anything came from it
+        wait_s = self.sync_wait_s
+        if not self.record.frames:  # the first frame: the team waited for is expected before anything came from it,
             expected |= set(self.config.wait_for) & set(alive)
-        deadline = time.monotonic() + self.sync_wait_s
+            # and given up to max_age: team-mates start their first frame as unevenly as processes start (imports,
+            # first calls); a first frame solved alone is a first pose the team does not share
+            wait_s = max(wait_s, max_age)
+        deadline = time.monotonic() + wait_s
         wait_until(lambda: set(self.team.at(stamp_ns, expected)) >= expected, deadline, poll)
         found = self.team.at(stamp_ns, expected)
         # a team-mate whose frame of this instant did not come in time: its newest fresh one
