@@ -62,7 +62,8 @@ def register(app: typer.Typer) -> None:
                                                                    "IMU bias).")] = None,
         max_age: Annotated[float, typer.Option(help="Ignore team-mates' data older than S seconds.")] = 1.0,
         sync_wait: Annotated[float | None, typer.Option(min=0, help="Wait up to S seconds for team-mates' data "
-                                                                    "of each frame (default: half a frame).")]
+                                                                    "of each frame (default: half a frame; the first "
+                                                                    "frame: at least --max-age).")]
         = None,
         hint_rate: Annotated[float, typer.Option(help="Most hints per second.")] = 200.0,
         image_encoding: Annotated[str, typer.Option(help=f"Shared images: {', '.join(ENCODINGS)}.")] = "raw",
