@@ -27,7 +27,7 @@ from scenarios.dataset import open_dataset
 from scenarios.photoreal.develop import camera_model_of
 
 from . import bench_photoreal_features, bench_photoreal_tracking
-from .report import provenance
+from .report import md_table, provenance, write_section
 
 RESULTS = Path(__file__).resolve().parent / "results" / "photoreal_encoding.md"
 #: Encoder variants: name -> the camera model's fields replaced (None: the world's own, 4:2:0 JPEG).
@@ -59,23 +59,15 @@ def redevelop(source: Path, out: Path, changes: dict) -> Path:
 
 
 def measure(directories: list[Path]) -> dict:
-    """Pooled front-end numbers and tracking counts over ``directories`` (one encoder's copies)."""
-    marks = detections = found = correct = labelled = 0.0
-    good = wrong = frames = 0
+    """Pooled front-end numbers (:func:`benchmarks.bench_photoreal_features.pooled`) and tracking counts over
+    ``directories`` (one encoder's copies)."""
+    rows, good, wrong, frames = [], 0, 0, 0
     for directory in directories:
-        for row in bench_photoreal_features.evaluate(directory):
-            if row["front_end"] != "contrast":
-                continue
-            marks += row["marks"]
-            detections += row["detections"]
-            found += row["recall"] * row["marks"]
-            correct += row["precision"] * row["detections"]
-            labelled += row["labels"] * row["precision"] * row["detections"]
-        rows = bench_photoreal_tracking.run(directory)
-        summary = bench_photoreal_tracking.summary(directory.name, rows)
-        good, wrong, frames = good + int(summary[2]), wrong + int(summary[3]), frames + len(rows)
-    return {"recall": found / max(marks, 1), "precision": correct / max(detections, 1),
-            "labels": labelled / max(correct, 1), "good": good, "wrong": wrong, "frames": frames}
+        rows += bench_photoreal_features.evaluate(directory)
+        tracked = bench_photoreal_tracking.run(directory)
+        summary = bench_photoreal_tracking.summary(directory.name, tracked)
+        good, wrong, frames = good + int(summary[2]), wrong + int(summary[3]), frames + len(tracked)
+    return {**bench_photoreal_features.pooled(rows, "contrast"), "good": good, "wrong": wrong, "frames": frames}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -95,13 +87,10 @@ def main(argv: list[str] | None = None) -> int:
                + " ".join(argv if argv is not None else sys.argv[1:]))
     header = ["encoder", "recall", "precision", "labels right", "two cameras tracking: good frames",
               "good but > 5 deg or 0.5 m off"]
-    lines = ["## What the encoder costs (the same Cycles radiance, three encoders)", "",
-             f"Produced by `.venv/bin/{command}`; {provenance()}.", "",
-             next(part for part in (__doc__ or "").split("\n\n") if part.startswith("Each dataset")).replace("\n", " "),
-             "", "| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
-    lines += ["| " + " | ".join(row) + " |" for row in table]
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    body = [f"Produced by `.venv/bin/{command}`; {provenance()}.", "",
+            next(part for part in (__doc__ or "").split("\n\n") if part.startswith("Each dataset")).replace("\n", " "),
+            "", *md_table(header, table)]
+    write_section(args.out, "What the encoder costs (the same Cycles radiance, three encoders)", "\n".join(body))
     print(f"wrote {args.out}")
     return 0
 

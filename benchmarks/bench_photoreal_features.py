@@ -93,6 +93,18 @@ def pooled_by_colour(rows: list[dict], front_end: str) -> dict:
     return out
 
 
+def pooled(rows: list[dict], front_end: str) -> dict:
+    """Recall, precision and labels of ``front_end`` over all ``rows`` (every camera and frame counted once):
+    found marks over marks, true detections over detections, right labels over true detections."""
+    mine = [r for r in rows if r["front_end"] == front_end]
+    marks, detections = sum(r["marks"] for r in mine), sum(r["detections"] for r in mine)
+    found = sum(r["recall"] * r["marks"] for r in mine)
+    correct = sum(r["precision"] * r["detections"] for r in mine)
+    right = sum(r["labels"] * r["precision"] * r["detections"] for r in mine)
+    return {"recall": found / max(marks, 1), "precision": correct / max(detections, 1),
+            "labels": right / max(correct, 1e-9)}
+
+
 def markdown(rows: list[dict], command: str) -> str:
     lines = ["## Feature front-ends on rendered datasets", "",
              f"Produced by `{command}`; {provenance()}, OpenCV {cv2.__version__}, load average "
@@ -108,6 +120,9 @@ def markdown(rows: list[dict], command: str) -> str:
                      f"| {r['frames']} | {r['marks']} | {r['detections']} | {r['match_px']:g} | {r['recall']:.2f} "
                      f"| {r['precision']:.2f} | {r['labels']:.2f} | {r['position_rms_px']:.2f} "
                      f"| {_by_colour(r['labels_by_colour'])} |")
+    lines += ["", "Pooled over every camera and frame: " + "; ".join(
+        f"{name} recall {p['recall']:.3f}, precision {p['precision']:.3f}, labels {p['labels']:.3f}"
+        for name, p in ((name, pooled(rows, name)) for name in FRONT_ENDS)) + "."]
     lines += ["", "Labels by true colour, pooled: " + "; ".join(
         f"{name}: {_by_colour(pooled_by_colour(rows, name))}" for name in FRONT_ENDS) + "."]
     return "\n".join(lines) + "\n"

@@ -29,7 +29,7 @@ from evopose import PoseProblem, View, pose_mismatch, solve, track
 from geometry import pose_error
 from scenarios.dataset import open_dataset
 
-from .report import provenance
+from .report import md_table, provenance, write_section
 
 RESULTS = Path(__file__).resolve().parent / "results" / "photoreal_tracking.md"
 #: A good frame further off than this is confident and wrong (issue 18's bar).
@@ -96,14 +96,10 @@ def main(argv: list[str] | None = None) -> int:
         table.append(summary(directory.name, run(directory)))
         print(" | ".join(table[-1]), flush=True)
     command = "python -m benchmarks.bench_photoreal_tracking " + " ".join(argv if argv is not None else sys.argv[1:])
-    lines = ["## Two cameras tracking on rendered datasets (in process)", "",
-             f"Produced by `.venv/bin/{command}`; {provenance()}.", "",
-             next(part for part in (__doc__ or "").split("\n\n") if part.startswith("Per dataset")).replace("\n", " "),
-             "",
-             "| " + " | ".join(HEADER) + " |", "|" + "---|" * len(HEADER)]
-    lines += ["| " + " | ".join(row) + " |" for row in table]
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    body = [f"Produced by `.venv/bin/{command}`; {provenance()}.", "",
+            next(part for part in (__doc__ or "").split("\n\n") if part.startswith("Per dataset")).replace("\n", " "),
+            "", *md_table(HEADER, table)]
+    write_section(args.out, "Two cameras tracking on rendered datasets (in process)", "\n".join(body))
     print(f"wrote {args.out}")
     return 0
 

@@ -41,7 +41,9 @@ def code_version() -> str:
         except (OSError, subprocess.SubprocessError):
             return ""
     commit = git("rev-parse", "--short", "HEAD") or "unknown commit"
-    dirty = git("status", "--porcelain", "--", "agents", "evopose", "scenarios", "protocol", "benchmarks")
+    # the code, not the results a benchmark run is writing
+    dirty = git("status", "--porcelain", "--", "agents", "evopose", "scenarios", "protocol", "benchmarks",
+                ":(exclude)benchmarks/results")
     return f"{commit} + uncommitted changes" if dirty else commit
 
 
