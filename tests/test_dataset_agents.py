@@ -9,6 +9,7 @@ import json
 import shutil
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -16,7 +17,7 @@ import pytest
 import yaml
 
 from scenarios.render import render_frame
-from tests.fleet_procs import ROOT
+from tests.fleet_procs import ROOT, Proc, free_port
 from tests.test_dataset import edit_line, write_dataset
 from tests.test_sources import FRAMES, agent_error, frames_of
 from tests.test_sources import run_agents as run_agents_on_sources
@@ -175,6 +176,34 @@ def test_a_datasets_frame_is_stamped_with_the_tick_it_was_taken_at_however_late_
         assert stamps == [own.stamp_ns(t) for t in (7, 8, 9)]
     finally:
         alone.close()
+
+
+def test_a_team_playing_a_recording_behind_the_wall_clock_still_pairs_its_views(datasets):
+    # H1 and H2 play the recording at 1000 frames/s, faster than they can process it: every frame is played (none
+    # skipped), so the team falls further behind the wall clock each frame, past --max-age 0.1 s. Staleness is
+    # judged at the instant played (FleetBus.playback_lag_ns), so a team-mate's view of that very instant is not
+    # refused as stale (on the wall clock it was, and each then solved a problem of its own)
+    exp2, _ = datasets
+    epoch, port = time.time_ns() + int(3e9), free_port()
+    base = ["--fleet", "behind", "--source", str(exp2), "--share", "features", "--fps", "1000", "--max-age", "0.1",
+            "--epoch-ns", str(epoch), "--wait-for", "H1,H2", "--json", "--no-multicast"]
+    procs = {"H1": Proc([sys.executable, "-m", "agents.cli", "agent", "--vehicle", "H1", *base,
+                         "--listen", f"tcp/127.0.0.1:{port}"]),
+             "H2": Proc([sys.executable, "-m", "agents.cli", "agent", "--vehicle", "H2", *base,
+                         "--connect", f"tcp/127.0.0.1:{port}"])}
+    try:
+        done = {v: (p.wait(120), p.all_records()) for v, p in procs.items()}
+    finally:
+        for p in procs.values():
+            p.kill()
+    for vehicle, (code, records) in done.items():
+        assert code == 0, (vehicle, records[-3:])
+        summary = summary_of(records)
+        assert summary["frames"] == FRAMES
+        # the hard case was reached: the recording lasts FRAMES ms, its playing took longer than that plus --max-age
+        assert summary["run_s"] > FRAMES / 1000 + 0.1, summary["run_s"]
+        assert "stale" not in summary["traffic"]["rejected"], summary["traffic"]
+        assert summary["multi_view_frames"] == FRAMES  # every frame solved on both views
 
 
 # -- one line and exit 2 ----------------------------------------------------------------------------------------
