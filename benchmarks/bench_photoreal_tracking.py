@@ -56,7 +56,7 @@ def run(directory: Path) -> list[dict]:
         previous = solution if solution.converged and solution.confident else None
         truth = data.truth(k).target_pose
         error = pose_error(solution.pose, truth)
-        rotation = np.linalg.eigvalsh(solution.covariance[3:, 3:]) if solution.covariance is not None else [np.nan]
+        rotation = np.linalg.eigvalsh(solution.covariance[3:, 3:]) if np.all(np.isfinite(solution.covariance)) else [np.nan]
         rows.append({"frame": k, "converged": solution.converged, "confident": solution.confident,
                      "precise": solution.precise, "position_m": error["position"],
                      "rotation_deg": max(error[a] for a in ("roll", "pitch", "yaw")),

@@ -22,8 +22,9 @@ from .loop import Evaluator, Run, evolve
 from .options import SearchOptions
 from .problem import PoseProblem, View
 from .refine import TRACK_HARD_SCHEDULE, TRACK_SCHEDULE, annealing, refine
+from .robust_fit import robust_pose
 from .search import EvoPose
-from .uncertainty import Confidence, assess, imprecise, track_confidence
+from .uncertainty import Confidence, assess, covariance, imprecise, track_confidence
 from .weights import rule_weights
 
 #: Final polish of the best pose: hard nearest-neighbour steps (accepted only when the fitness drops).
@@ -149,6 +150,16 @@ def solve(problem: PoseProblem, options: SearchOptions | None = None,
     return solution_of(problem, options, run, time.perf_counter() - t0)
 
 
+def published(objective: PoseObjective, basin: np.ndarray, verdict: Confidence) -> tuple[np.ndarray, Confidence]:
+    """The pose (6,) to publish for the basin at ``basin`` (6,) that ``verdict`` judged, and the verdict with the
+    covariance of that pose: the basin's pose fitted without the false points within tau
+    (:func:`evopose.robust_fit.robust_pose`). Which basin, and how sure, is judged where the search and its
+    rivals were polished alike (least squares within tau); the covariance is the published pose's, over all its
+    pairs within tau (the false ones too: no tighter than the points allow)."""
+    pose = robust_pose(objective, basin)
+    return pose, replace(verdict, covariance=covariance(objective, pose))
+
+
 def solution_of(problem: PoseProblem, options: SearchOptions, run: Run, seconds: float) -> Solution:
     """The :class:`Solution` of a global search's run (:func:`evopose.loop.evolve` of :class:`EvoPose`): its best
     pose polished; ``converged`` only when the run stopped for a good reason (an unfinished run, stopped at a
@@ -166,7 +177,6 @@ def solution_of(problem: PoseProblem, options: SearchOptions, run: Run, seconds:
         pose, fitness = polished[0], float(fit[0])
     mismatch = objective.mismatch(fitness)
     match = Match(None if mismatch is None else float(mismatch), state.best_match.unmatched)
-    terms = objective.view_terms(pose[None])[0]
     rivals, checked = _rivals(state, objective, options, deadline)
     if checked and options.refine_steps:  # repeated structure: the best moved by the model's own spacing
         rivals = np.concatenate([rivals, shifted_rivals(objective, pose)])
@@ -177,6 +187,10 @@ def solution_of(problem: PoseProblem, options: SearchOptions, run: Run, seconds:
                         judge=objective.with_weights(objective.base_weights))
     if not checked and confidence.confident:  # the other basins were not polished in time: not sure
         confidence = replace(confidence, confident=False, reason="out of time")
+    if options.refine_steps and in_time:
+        pose, confidence = published(objective, pose, confidence)
+        fitness = float(objective(pose[None])[0])
+    terms = objective.view_terms(pose[None])[0]
     return Solution(
         pose=pose, fitness=fitness, view_terms=terms, view_weights=objective.weights.copy(),
         generations=state.generation, evaluations=objective.evaluations, seconds=seconds + time.perf_counter() - t0,
@@ -325,14 +339,16 @@ def track(previous: Solution, new_views: list[View] | tuple[View, ...], *, probl
     tracked = run.told.stop_reason == "tracked"
     if tracked or not search_when_lost:
         best, objective = run.state, run.evaluator.objective
-        terms = objective.view_terms(best.best_pose[None])[0]
-        pose = np.array(best.best_pose)
+        basin = np.array(best.best_pose)
         # confident only while the fit holds inside the previous uncertainty (no population to find rivals in)
-        current = assess(objective, pose, None, options.confidence,
+        current = assess(objective, basin, None, options.confidence,
                          judge=objective.with_weights(objective.base_weights))
         confidence = track_confidence(previous.pose, previous.covariance, previous.confident and tracked, current,
-                                      pose, options.confidence)
-        return Solution(pose=pose, fitness=best.best_fitness, view_terms=terms,
+                                      basin, options.confidence)
+        pose, confidence = published(objective, basin, confidence)
+        fitness = float(objective(pose[None])[0])
+        terms = objective.view_terms(pose[None])[0]
+        return Solution(pose=pose, fitness=fitness, view_terms=terms,
                         view_weights=objective.weights.copy(), generations=0, evaluations=objective.evaluations,
                         seconds=time.perf_counter() - t0, converged=tracked, stop_reason="tracked" if tracked else "lost",
                         history=[best.best_fitness], from_hint=best.best_from_hint, problem=prob, options=options,
