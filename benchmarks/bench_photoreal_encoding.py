@@ -27,7 +27,7 @@ from scenarios.dataset import open_dataset
 from scenarios.photoreal.develop import camera_model_of
 
 from . import bench_photoreal_features, bench_photoreal_tracking
-from .report import md_table, provenance, write_section
+from .report import documented_table, write_section
 
 RESULTS = Path(__file__).resolve().parent / "results" / "photoreal_encoding.md"
 #: Encoder variants: name -> the camera model's fields replaced (None: the world's own, 4:2:0 JPEG).
@@ -87,10 +87,8 @@ def main(argv: list[str] | None = None) -> int:
                + " ".join(argv if argv is not None else sys.argv[1:]))
     header = ["encoder", "recall", "precision", "labels right", "two cameras tracking: good frames",
               "good but > 5 deg or 0.5 m off"]
-    body = [f"Produced by `.venv/bin/{command}`; {provenance()}.", "",
-            next(part for part in (__doc__ or "").split("\n\n") if part.startswith("Each dataset")).replace("\n", " "),
-            "", *md_table(header, table)]
-    write_section(args.out, "What the encoder costs (the same Cycles radiance, three encoders)", "\n".join(body))
+    write_section(args.out, "What the encoder costs (the same Cycles radiance, three encoders)",
+                  documented_table(command, __doc__, "Each dataset", header, table))
     print(f"wrote {args.out}")
     return 0
 

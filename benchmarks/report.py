@@ -60,6 +60,13 @@ def md_table(header: list[str], rows: list[list]) -> list[str]:
     return out
 
 
+def documented_table(command: str, doc: str | None, paragraph: str, header: list[str], rows: list[list]) -> str:
+    """A section's body: "Produced by `.venv/bin/COMMAND`" with its :func:`provenance`, the paragraph of the
+    benchmark's docstring ``doc`` that starts with ``paragraph`` (what the columns mean), and the table."""
+    said = next(part for part in (doc or "").split("\n\n") if part.startswith(paragraph)).replace("\n", " ")
+    return "\n".join([f"Produced by `.venv/bin/{command}`; {provenance()}.", "", said, "", *md_table(header, rows)])
+
+
 def write_section(path: Path, title: str, body: str) -> None:
     """Write one section file (``## title`` + body)."""
     path = Path(path)

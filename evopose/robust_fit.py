@@ -86,11 +86,10 @@ def view_cutoffs(matches: Matches, n_free: int) -> np.ndarray:
                      for k in range(len(matches.weights))])
 
 
-def robust_cost(objective: PoseObjective, pose: np.ndarray, cutoffs: np.ndarray, kind: str) -> float:
-    """The loss (:func:`loss_and_weight`, view ``k`` at ``cutoffs[k]``) of ``pose`` (6,) summed over its mutual
-    pairs, plus the loss's ceiling for each visible mark without a pair (a pose does not gain by leaving the
+def robust_cost(matches: Matches, cutoffs: np.ndarray, kind: str) -> float:
+    """The loss (:func:`loss_and_weight`, view ``k`` at ``cutoffs[k]``) summed over a pose's mutual pairs
+    ``matches``, plus the loss's ceiling for each visible mark without a pair (a pose does not gain by leaving the
     marks), per view times its eq. (4) weight."""
-    matches = mutual_matches(objective, pose)
     distance = np.linalg.norm(matches.residuals, axis=1)
     total = 0.0
     for k, w in enumerate(matches.weights):
@@ -101,16 +100,16 @@ def robust_cost(objective: PoseObjective, pose: np.ndarray, cutoffs: np.ndarray,
     return total
 
 
-def _reweighted(objective: PoseObjective, pose: np.ndarray, kind: str, cutoffs: np.ndarray,
-                iterations: int) -> np.ndarray:
-    """IRLS of ``kind`` at ``cutoffs`` (V,) pixels from ``pose`` (6,): Gauss-Newton steps on the free parameters,
-    re-matched each time, each taken (or its half, or its quarter) only when it lowers :func:`robust_cost`."""
+def _reweighted(objective: PoseObjective, pose: np.ndarray, matches: Matches, kind: str, cutoffs: np.ndarray,
+                iterations: int) -> tuple[np.ndarray, Matches]:
+    """IRLS of ``kind`` at ``cutoffs`` (V,) pixels from ``pose`` (6,) and its pairs ``matches``: Gauss-Newton steps
+    on the free parameters, re-matched each time, each taken (or its half, or its quarter) only when it lowers
+    :func:`robust_cost`. Returns the pose and its pairs."""
     bounds = objective.problem.bounds
     free = bounds.free
     n_free = int(np.count_nonzero(free))
     current = np.asarray(pose, float).reshape(6).copy()
     for _ in range(iterations):
-        matches = mutual_matches(objective, current)
         distance = np.linalg.norm(matches.residuals, axis=1)
         weight = np.zeros(len(distance))
         for k in range(len(cutoffs)):
@@ -127,37 +126,45 @@ def _reweighted(objective: PoseObjective, pose: np.ndarray, kind: str, cutoffs: 
             break
         if not np.all(np.isfinite(step)):
             break
-        before = robust_cost(objective, current, cutoffs, kind)
+        before = robust_cost(matches, cutoffs, kind)
         for fraction in (1.0, 0.5, 0.25):
             moved = current.copy()
             moved[free] += fraction * step
             moved = bounds.project(moved)
-            if robust_cost(objective, moved, cutoffs, kind) <= before:
+            moved_matches = mutual_matches(objective, moved)
+            if robust_cost(moved_matches, cutoffs, kind) <= before:
                 break
         else:
             break
-        current = moved
+        current, matches = moved, moved_matches
         if float(np.max(np.abs(fraction * step))) < SETTLED_STEP:
             break
-    return current
+    return current, matches
 
 
-def robust_pose(objective: PoseObjective, pose: np.ndarray, iterations: int = MAX_ITERATIONS) -> np.ndarray:
+def robust_fit(objective: PoseObjective, pose: np.ndarray,
+               iterations: int = MAX_ITERATIONS) -> tuple[np.ndarray, Matches]:
     """The pose (6,) near ``pose`` (6,) fitted to its mutual pairs under ``objective`` (its views, eq. (4)
-    weights and tau) without the false ones (see the module's docstring): the biweight finds which pairs are
-    false, then least squares on the rest (the biweight alone down-weighs the true pairs too, and is the less
-    precise for it). ``pose`` itself when there are too few pairs for a step (fewer weighted coordinates than
-    free parameters)."""
+    weights and tau) without the false ones (see the module's docstring), and its mutual pairs there: the
+    biweight finds which pairs are false, then least squares on the rest (the biweight alone down-weighs the true
+    pairs too, and is the less precise for it). ``pose`` itself when there are too few pairs for a step (fewer
+    weighted coordinates than free parameters)."""
     n_free = int(np.count_nonzero(objective.problem.bounds.free))
     start = np.asarray(pose, float).reshape(6).copy()
+    matches = mutual_matches(objective, start)
     if n_free == 0:
-        return start
+        return start, matches
     # the biweight at each view's scale of the pairs as they are sorts them (a false pair 3 of their sigmas off no
     # longer weighs); at the pose it settles on, the true pairs agree more tightly, and least squares keeps those
     # within 3 of their new scale
-    core = _reweighted(objective, start, "tukey", view_cutoffs(mutual_matches(objective, start), n_free), iterations)
-    return _reweighted(objective, core, "trimmed", view_cutoffs(mutual_matches(objective, core), n_free), iterations)
+    core, matches = _reweighted(objective, start, matches, "tukey", view_cutoffs(matches, n_free), iterations)
+    return _reweighted(objective, core, matches, "trimmed", view_cutoffs(matches, n_free), iterations)
 
 
-__all__ = ["MIN_SCALE_PX", "TUKEY_C", "loss_and_weight", "residual_scale", "robust_cost", "robust_pose",
+def robust_pose(objective: PoseObjective, pose: np.ndarray, iterations: int = MAX_ITERATIONS) -> np.ndarray:
+    """:func:`robust_fit`'s pose (6,)."""
+    return robust_fit(objective, pose, iterations)[0]
+
+
+__all__ = ["MIN_SCALE_PX", "TUKEY_C", "loss_and_weight", "residual_scale", "robust_cost", "robust_fit", "robust_pose",
            "tukey_weights", "view_cutoffs"]

@@ -22,7 +22,7 @@ from .loop import Evaluator, Run, evolve
 from .options import SearchOptions
 from .problem import PoseProblem, View
 from .refine import TRACK_HARD_SCHEDULE, TRACK_SCHEDULE, annealing, refine
-from .robust_fit import robust_pose
+from .robust_fit import robust_fit
 from .search import EvoPose
 from .uncertainty import Confidence, assess, covariance, imprecise, track_confidence
 from .weights import rule_weights
@@ -153,11 +153,11 @@ def solve(problem: PoseProblem, options: SearchOptions | None = None,
 def published(objective: PoseObjective, basin: np.ndarray, verdict: Confidence) -> tuple[np.ndarray, Confidence]:
     """The pose (6,) to publish for the basin at ``basin`` (6,) that ``verdict`` judged, and the verdict with the
     covariance of that pose: the basin's pose fitted without the false points within tau
-    (:func:`evopose.robust_fit.robust_pose`). Which basin, and how sure, is judged where the search and its
+    (:func:`evopose.robust_fit.robust_fit`). Which basin, and how sure, is judged where the search and its
     rivals were polished alike (least squares within tau); the covariance is the published pose's, over all its
     pairs within tau (the false ones too: no tighter than the points allow)."""
-    pose = robust_pose(objective, basin)
-    return pose, replace(verdict, covariance=covariance(objective, pose))
+    pose, matches = robust_fit(objective, basin)
+    return pose, replace(verdict, covariance=covariance(objective, pose, matches))
 
 
 def solution_of(problem: PoseProblem, options: SearchOptions, run: Run, seconds: float) -> Solution:
