@@ -178,6 +178,35 @@ def test_sequence_gaps_are_counted_and_a_restart_is_not_a_gap(endpoint):
     assert rx.counters.snapshot()["lost"] == {"attitude": 5}
 
 
+def test_a_stream_across_a_join_is_delivered_once_each_without_a_gap(endpoint):
+    """A team-mate streaming while the receiver hands its samples over from the shared ring to the team-mate's own
+    (the join races with the stream): every message from the first one received on arrives once, none is lost."""
+    stop = threading.Event()
+    with open_bus("tx", endpoint, listen=True) as tx:
+
+        def stream() -> None:
+            seq = 0
+            while not stop.is_set():  # 150 a second, within the receiver's 200/s for the topic
+                tx.publish(message(tx, Topic.ATTITUDE, seq=seq))
+                seq += 1
+                time.sleep(1 / 150)
+
+        sender = threading.Thread(target=stream, daemon=True)
+        sender.start()
+        try:
+            for trial in range(4):
+                with open_bus(f"rx{trial}", endpoint) as rx:
+                    assert rx.wait_for_teammates({"tx"}, DEADLINE)
+                    rx.subscribe(Topic.ATTITUDE)  # the join is requested at once, in the middle of the stream
+                    got = [rx.recv(Topic.ATTITUDE, timeout=DEADLINE) for _ in range(60)]
+                    seqs = [r.message.seq for r in got if r is not None]
+                    assert seqs == list(range(seqs[0], seqs[0] + 60)), (trial, seqs)
+                    assert rx.counters.snapshot()["lost"] == {}, trial
+        finally:
+            stop.set()
+            sender.join(DEADLINE)
+
+
 def test_bad_payloads_are_counted_by_reason_and_not_delivered(endpoint):
     with open_bus("tx", endpoint, listen=True) as tx, open_bus("rx", endpoint) as rx:
         rx.subscribe(Topic.ATTITUDE)

@@ -21,8 +21,15 @@ rings themselves: right after declaring the team-mate's ring the thread puts a s
 with an attachment no remote sender can forge (a random nonce), which lands in both rings behind what was already
 there: shared copies before it are handed on, after it skipped; the team-mate's ring is read once the shared ring
 passed the marker, from its marker on. When the team-mate goes, another marker after its ring is undeclared ends
-the skipping. Zenoh dispatches a sample to matching subscribers one after the other, so a sample arriving in the
-same microseconds as a marker can be delivered twice or not at all: only at a join or a leave.
+the skipping.
+
+Zenoh dispatches a sample to matching subscribers one after the other, and the marker too, from another thread: a
+sample dispatched while the marker is (this thread may be descheduled between the two rings for milliseconds) can
+sit before the marker in one ring and after it in the other. The join is made exact by the payloads handed on from
+the shared ring since the team-mate's ring was declared (their hashes, :attr:`_MateRing.handed`): samples before
+the marker in the team-mate's ring that were not handed on (skipped in the shared ring) are handed on from it, and
+its first samples after the marker that were handed on already are skipped. At a leave, a sample arriving in the
+same instant may still be lost.
 
 Counting: a sample pulled and refused is counted at once (``oversized``, ``rate-limited``, ``overflow``). Samples
 overwritten in a team-mate's ring while it was over its budget are never seen; the first sample pulled after that
@@ -43,7 +50,7 @@ import threading
 import time
 from collections import deque
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import zenoh
 
@@ -102,6 +109,8 @@ class _MateRing:
     past_marker: bool = False  #: its ring was read up to the hand-over marker (what came before is in the shared one)
     throttled: bool = False  #: it was over its budget since its last sample pulled: samples may be overwritten
     owed: int = 0  #: shared copies seen whose sample was not yet pulled from this ring
+    #: hashes of its payloads handed on from the shared ring since this ring was declared; None once the join is over
+    handed: set[int] | None = field(default_factory=set)
 
 
 class TopicReceiver:
@@ -283,8 +292,11 @@ class TopicReceiver:
                     self._owed_at, self._owed_until = time.monotonic(), now + OWED_S
                 return
             del self._routed[vehicle]  # the unrouting marker was overwritten (a flood): end the skipping now
+        mate = self._mates.get(vehicle)
         if self._admit(sample, key, key if self._alive(vehicle) else UNKNOWN_SENDER, self._shared_dropped):
             self._shared_dropped = False
+            if mate is not None and mate.handed is not None:  # its ring is declared: the join is under way
+                mate.handed.add(hash(sample.payload.to_bytes()))
 
     def _ready(self, mate: _MateRing, now: float) -> bool:
         """Whether the team-mate's own ring is read now: once the shared ring passed its marker (or that marker was
@@ -293,11 +305,13 @@ class TopicReceiver:
             if now - mate.declared < HANDOVER_S:
                 return False  # its samples still come through the shared ring, up to the marker
             self._routed[mate.vehicle] = float("inf")  # the marker was overwritten in a full shared ring
-        if not mate.past_marker:  # what its ring got before the marker was handed on from the shared ring
-            for _ in range(self._capacity + 1):
+        if not mate.past_marker:  # what its ring got before the marker was handed on from the shared ring, except
+            for _ in range(self._capacity + 1):  # what the shared ring got after its marker (see the docstring)
                 sample = mate.subscriber.try_recv()
                 if sample is None or self._marker(sample) == _ROUTED:
                     break  # (an empty ring without the marker: it was overwritten, and what followed is skipped)
+                if sample.kind == _PUT and hash(sample.payload.to_bytes()) not in mate.handed:
+                    self._on_mate(mate, sample, now)
             mate.past_marker = True
         return True
 
@@ -321,6 +335,10 @@ class TopicReceiver:
         mate.owed = max(0, mate.owed - 1)
         if sample.kind != _PUT:  # its marker, or a DELETE
             return
+        if mate.handed is not None and mate.past_marker:  # its first samples after the marker: handed on already?
+            if hash(sample.payload.to_bytes()) in mate.handed:
+                return
+            mate.handed = None  # the first one that was not: the join is over
         if self._admit(sample, mate.key, mate.key, mate.throttled):
             mate.throttled = False
 
