@@ -24,7 +24,8 @@ scale a mark has at the target's distance. So (docs/design.md, "The feature fron
 5. **Context**: the marks lie on the target's body. Given the body's paint colour (the model's), a candidate
    must lie on or inside a patch of that paint seen under any light (:mod:`evopose.body_paint`: the dichromatic
    reflection model, paint plus the light's own colour, and glossy faces touching it); clutter in the marks' own
-   hues lies on the ground and is dropped. The scale space is then built only around the body (2.8-3.4x faster on a
+   hues lies on the ground and is dropped, and so is a spot on the body's outline, which paint does not ring
+   (:data:`MIN_PAINT_AROUND`). The scale space is then built only around the body (2.8-3.4x faster on a
    640 x 480 frame) and its threshold taken from the ground beside it.
    The marks of one target lie within its image extent; with the prior's extent the densest such cluster is
    kept and far specks are dropped.
@@ -40,7 +41,7 @@ from dataclasses import dataclass, replace
 import cv2
 import numpy as np
 
-from .body_paint import body_region
+from .body_paint import body_paint, body_region, paint_around
 from .features import MarkDetections, _coverage, _to_bgr
 from .spot_colour import label_small_spots, ring_colours
 
@@ -65,6 +66,12 @@ CHROMA_WEIGHT = 1.0
 #: The body's paint is closed over gaps up to this share of the target's extent too (at the paper's scale marks
 #: 3-5 px apart break a face's paint into pieces).
 BODY_GAP = 0.12
+#: Least share of the ring 1-2 px outside a spot that is the body's paint, glossy faces included
+#: (:func:`evopose.body_paint.paint_around`): a mark on a face is ringed by paint, about half of it on the face's
+#: outline; a spot on the body's outline, or on the ground beside it, is not. Cycles sweeps: precision 0.456 ->
+#: 0.486 at the paper's scale (recall 0.697 -> 0.695; without the glossy faces 0.517 but 0.685, and low-sun top faces
+#: lost), 0.484 -> 0.547 at telephoto (recall 0.972 -> 0.966); 0.3 took telephoto recall to 0.956.
+MIN_PAINT_AROUND = 0.2
 #: Least pixels beside the body for the response's spread to be taken there (else over the whole crop), and the
 #: least margin of ground kept around the body (the spread is the ground's texture, not the body's outline).
 MIN_BACKGROUND_PX, MIN_MARGIN_PX = 200, 48
@@ -199,12 +206,13 @@ def detect_contrast_marks(image_bgr: np.ndarray, palette: Mapping[str, tuple[int
         return _detect(bgr, lin, names, palette, prior, None, **settings)
     body_linear = _srgb_to_linear(np.array(body, np.float32) / 255.0)
     gap = 0.0 if prior.extent_px is None else BODY_GAP * prior.extent_px
-    # glossy faces (hysteresis) where a mark is large enough to be told from the specks beside a body: at the paper's
-    # scale (marks under SMALL_SPOT_PX) the closing over BODY_GAP already spans a 10-15 px face, and growing into
-    # the gloss added more false spots than marks (Cycles paper-scale sweep: recall 0.70 -> 0.73, precision 0.46 ->
-    # 0.42)
+    # the region grows into the glossy faces (hysteresis) where a mark is large enough to be told from the specks
+    # beside a body: at the paper's scale (marks under SMALL_SPOT_PX) the closing over BODY_GAP already spans a 10-15
+    # px face, and growing into the gloss added more false spots than marks (Cycles paper-scale sweep: recall 0.70 ->
+    # 0.73, precision 0.46 -> 0.42); the ring of paint a mark needs (MIN_PAINT_AROUND) counts them at every scale
+    sure_paint, paint = body_paint(lin, body_linear)
     region = body_region(lin, body_linear, prior.radius_px[1], gap,
-                         glossy_faces=prior.radius_px[1] >= SMALL_SPOT_PX)
+                         paint=paint if prior.radius_px[1] >= SMALL_SPOT_PX else sure_paint)
     if not region.any():
         return _detect(bgr[:0, :0], lin[:0, :0], names, palette, prior, region[:0, :0], **settings)
     ys, xs = np.nonzero(region)
@@ -213,15 +221,17 @@ def detect_contrast_marks(image_bgr: np.ndarray, palette: Mapping[str, tuple[int
     y0, y1 = max(int(ys.min()) - margin, 0) // 2 * 2, min(int(ys.max()) + margin + 1, bgr.shape[0])
     x0, x1 = max(int(xs.min()) - margin, 0) // 2 * 2, min(int(xs.max()) + margin + 1, bgr.shape[1])
     found = _detect(bgr[y0:y1, x0:x1], lin[y0:y1, x0:x1], names, palette, prior, region[y0:y1, x0:x1], **settings,
-                    body=body)
+                    body=body, paint=paint[y0:y1, x0:x1])
     return replace(found, points=found.points + (x0, y0))
 
 
 def _detect(bgr: np.ndarray, lin: np.ndarray, names: tuple[str, ...], palette: Mapping[str, tuple[int, int, int]],
             prior: MarkPrior, region: np.ndarray | None, *, k_sigma: float, max_edge_ratio: float,
-            max_misfit: float | None, max_marks: int, body: tuple[int, int, int] | None = None) -> ContrastMarks:
+            max_misfit: float | None, max_marks: int, body: tuple[int, int, int] | None = None,
+            paint: np.ndarray | None = None) -> ContrastMarks:
     """:func:`detect_contrast_marks` in ``bgr`` (H, W, 3) uint8 (``lin`` the same in linear light, float32), the
-    marks kept on ``region`` (H, W) bool when given (the body's paint ``body``, BGR)."""
+    marks kept on ``region`` (H, W) bool when given (the body's paint ``body``, BGR, whose pixels are ``paint``
+    (H, W) bool)."""
     h, w = bgr.shape[:2]
     if h < 5 or w < 5:
         empty = np.zeros(0)
@@ -278,7 +288,7 @@ def _detect(bgr: np.ndarray, lin: np.ndarray, names: tuple[str, ...], palette: M
         off = -np.linalg.solve(np.array([[dxx, dxy], [dxy, dyy]]), np.array([gx, gy]))
         pts[i] = (x + np.clip(off[0], -0.5, 0.5), y + np.clip(off[1], -0.5, 0.5))
     lvl, ys, xs, radius, pts = lvl[ok], ys[ok], xs[ok], radius[ok], pts[ok]
-    if region is not None:  # context: on or beside the body's paint
+    if region is not None:  # context: on or beside the body's paint, and (a mark on a face) ringed by it
         on = region[ys, xs]
         lvl, ys, xs, radius, pts = lvl[on], ys[on], xs[on], radius[on], pts[on]
     # colours: the spot (finest blur at the centre) and its ring (median around, outside the mark), linear light
@@ -307,6 +317,8 @@ def _detect(bgr: np.ndarray, lin: np.ndarray, names: tuple[str, ...], palette: M
         if len(taken) >= max_marks:
             break
     sel = np.array(sorted(taken), int)
+    if paint is not None and len(sel):  # a mark on a face is ringed by the body's paint
+        sel = sel[paint_around(paint, pts[sel], radius[sel]) >= MIN_PAINT_AROUND]
     pts, labels, conf, radius, contrast = pts[sel], labels[sel], conf[sel], radius[sel], contrast[sel]
     if prior.extent_px is not None and len(pts) > 1:
         keep = _densest_cluster(pts, contrast, 0.75 * prior.extent_px)

@@ -52,24 +52,50 @@ def connected_paint(lin: np.ndarray, body_linear: np.ndarray) -> np.ndarray:
     """The body's paint with its glossy faces (bool (H, W)): :func:`paint_pixels` at :data:`PAINT_SHARE`, and the
     8-connected patches of pixels at :data:`PAINT_SHARE_CONNECTED` that touch them (hysteresis). ``lin`` (H, W, 3)
     linear BGR, ``body_linear`` (3,)."""
+    return body_paint(lin, body_linear)[1]
+
+
+def body_paint(lin: np.ndarray, body_linear: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The body's paint, bool (H, W) each: the sure pixels (:func:`paint_pixels`) and those with the glossy faces
+    touching them (:func:`connected_paint`), from one :func:`paint_share`."""
     share = paint_share(lin, body_linear)
     sure, weak = share >= PAINT_SHARE, share >= PAINT_SHARE_CONNECTED
     count, patches = cv2.connectedComponents(weak.astype(np.uint8), connectivity=8)
     touching = np.zeros(count, bool)
     touching[np.unique(patches[sure])] = True
     touching[0] = False
-    return touching[patches]
+    return sure, touching[patches]
+
+
+def paint_around(paint: np.ndarray, points: np.ndarray, radius: np.ndarray) -> np.ndarray:
+    """The share of the ring between ``radius`` + 1 and ``radius`` + 2 px around each point that is the body's
+    ``paint`` (bool (H, W)); outside the image counts as no paint. ``points`` (K, 2) (u, v) pixels, ``radius``
+    (K,) px. A mark on the body is ringed by paint (on a face's outline, about half of it); a spot on the body's
+    outline or on the ground beside it is not (float (K,))."""
+    h, w = paint.shape
+    share = np.zeros(len(points))
+    for i, ((u, v), r) in enumerate(zip(np.asarray(points, float), np.asarray(radius, float))):
+        reach = int(np.ceil(r + 2))
+        yy, xx = np.mgrid[-reach:reach + 1, -reach:reach + 1]
+        cu, cv = int(round(u)), int(round(v))
+        d = np.hypot(xx + cu - u, yy + cv - v)
+        ring = (d >= r + 1) & (d <= r + 2)
+        ys, xs = yy[ring] + cv, xx[ring] + cu
+        inside = (ys >= 0) & (ys < h) & (xs >= 0) & (xs < w)
+        share[i] = np.count_nonzero(paint[ys[inside], xs[inside]]) / max(int(ring.sum()), 1)
+    return share
 
 
 def body_region(lin: np.ndarray, body_linear: np.ndarray, mark_px: float, gap_px: float = 0.0,
-                glossy_faces: bool = True) -> np.ndarray:
+                glossy_faces: bool = True, paint: np.ndarray | None = None) -> np.ndarray:
     """Where the target's marks can be (bool (H, W)): the pixels of the body's paint (:func:`connected_paint`, or
-    :func:`paint_pixels` without ``glossy_faces``) less
+    :func:`paint_pixels` without ``glossy_faces``; ``paint`` when given) less
     single specks; closed with a disc of the largest mark's radius ``mark_px`` and its holes filled (a mark inside
     a face is a hole in the paint, a mark on a face's outline a notch), then grown by half that radius, at least
     2 px (a mark on the outline of a face lies half outside its paint; a 2-3 px mark's pixels are mixed with what
     lies beside the body). ``lin`` (H, W, 3) linear BGR, ``body_linear`` (3,)."""
-    paint = connected_paint(lin, body_linear) if glossy_faces else paint_pixels(lin, body_linear)
+    if paint is None:
+        paint = connected_paint(lin, body_linear) if glossy_faces else paint_pixels(lin, body_linear)
     paint = cv2.morphologyEx(paint.astype(np.uint8), cv2.MORPH_OPEN,
                              np.ones((2, 2), np.uint8))
     region = np.zeros(paint.shape, bool)
@@ -94,4 +120,5 @@ def body_region(lin: np.ndarray, body_linear: np.ndarray, mark_px: float, gap_px
     return region
 
 
-__all__ = ["PAINT_SHARE", "PAINT_SHARE_CONNECTED", "body_region", "connected_paint", "paint_pixels", "paint_share"]
+__all__ = ["PAINT_SHARE", "PAINT_SHARE_CONNECTED", "body_paint", "body_region", "connected_paint", "paint_around",
+           "paint_pixels", "paint_share"]

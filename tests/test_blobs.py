@@ -149,6 +149,20 @@ def test_a_glossy_face_is_paint_where_it_touches_the_surely_painted_body_and_gre
     assert paint[2:18, 2:18].all() and not paint[2:18, 22:28].any() and not paint[0].any() and not paint[:, 19].any()
 
 
+def test_a_mark_on_a_face_is_ringed_by_paint_and_a_spot_on_or_beside_the_outline_is_not():
+    from evopose.body_paint import paint_around
+
+    paint = np.zeros((30, 40), bool)
+    paint[5:25, 5:30] = True                   # a face, with a 2 px mark's hole in it
+    paint[13:17, 13:17] = False
+    points = np.array([[14.5, 14.5],           # the mark inside the face
+                       [15.0, 5.0],            # a spot centred on the face's top outline
+                       [32.5, 15.0],           # a spot on the ground 3 px beside the face
+                       [38.5, 15.0]])          # near the image's edge: outside the image is no paint
+    share = paint_around(paint, points, np.array([2.0, 1.0, 1.0, 1.0]))
+    assert share[0] == 1.0 and 0.3 < share[1] < 0.7 and share[2] < 0.1 and share[3] == 0.0
+
+
 @pytest.mark.parametrize("name, rms_px", [("paper", 0.5), ("telephoto", 1.0)])
 def test_on_the_committed_photoreal_frames_a_found_mark_is_placed_to_a_fraction_of_a_pixel(name, rms_px):
     # the issue's "positions sub-pixel from luminance", on Cycles frames against the marks' true projections:
