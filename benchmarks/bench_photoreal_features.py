@@ -31,6 +31,8 @@ from .report import provenance
 
 DEFAULT_OUT = Path(__file__).resolve().parent / "results" / "photoreal_features.md"
 FRONT_ENDS = ("marks", "contrast")
+#: Distances (px) from the nearest mark that band the false detections in the pooled line.
+FALSE_BANDS_PX = (3.0, 6.0, 10.0)
 
 
 def evaluate(directory: Path) -> list[dict]:
@@ -43,6 +45,7 @@ def evaluate(directory: Path) -> list[dict]:
         acc = {name: np.zeros(5) for name in FRONT_ENDS}
         by_colour = {name: {c: np.zeros(2) for c in world.model.palette} for name in FRONT_ENDS}  # matched, right
         squared = {name: np.zeros(2) for name in FRONT_ENDS}  # sum of squared position errors (px^2), pairs
+        false_at = {name: np.zeros(len(FALSE_BANDS_PX) + 1, int) for name in FRONT_ENDS}  # by distance to a mark
         match_px = 3.0
         for k in range(dataset.frames):
             image = cv2.imread(str(dataset.image_path(cam, k)), cv2.IMREAD_COLOR)
@@ -60,6 +63,11 @@ def evaluate(directory: Path) -> list[dict]:
                 found, _ = match_to_truth(det.points, uv[whole], match_px)
                 correct, _ = match_to_truth(det.points, uv, match_px)
                 labelled = sum(det.names[det.labels[i]] == colours[j] for i, j in correct)
+                matched = {i for i, _ in correct}
+                for i in range(len(det.points)):
+                    if i not in matched:  # a false detection: how far from the nearest mark (seen or hidden)
+                        nearest = float(np.min(np.linalg.norm(uv - det.points[i], axis=1))) if len(uv) else np.inf
+                        false_at[name][int(np.searchsorted(FALSE_BANDS_PX, nearest))] += 1
                 for i, j in correct:
                     by_colour[name][colours[j]] += [1, det.names[det.labels[i]] == colours[j]]
                     squared[name] += [float(np.sum((det.points[i] - uv[j]) ** 2)), 1]
@@ -73,7 +81,8 @@ def evaluate(directory: Path) -> list[dict]:
                          # of a found mark's position, per axis: how well a true mark is located (the detections
                          # within match px of one; a mislabelled or false point is a matching error, not this)
                          "position_rms_px": float(np.sqrt(squared[name][0] / max(2 * squared[name][1], 1))),
-                         "labels_by_colour": {c: (int(n[0]), int(n[1])) for c, n in by_colour[name].items()}})
+                         "labels_by_colour": {c: (int(n[0]), int(n[1])) for c, n in by_colour[name].items()},
+                         "false_at": false_at[name].tolist()})
     return rows
 
 
@@ -91,6 +100,14 @@ def pooled_by_colour(rows: list[dict], front_end: str) -> dict:
                 m, k = out.get(c, (0, 0))
                 out[c] = (m + matched, k + right)
     return out
+
+
+def _bands(rows: list[dict], front_end: str) -> str:
+    """The false detections of ``front_end`` pooled over ``rows``, by distance band: "under 3 px 285, 3-6 px ..."."""
+    counts = np.sum([r["false_at"] for r in rows if r["front_end"] == front_end], axis=0)
+    edges = ("under", *FALSE_BANDS_PX)
+    names = [f"{a:g}-{b:g} px" if a != "under" else f"under {b:g} px" for a, b in zip(edges, FALSE_BANDS_PX)]
+    return ", ".join(f"{n} {int(c)}" for n, c in zip([*names, f"over {FALSE_BANDS_PX[-1]:g} px"], counts))
 
 
 def pooled(rows: list[dict], front_end: str) -> dict:
@@ -123,6 +140,8 @@ def markdown(rows: list[dict], command: str) -> str:
     lines += ["", "Pooled over every camera and frame: " + "; ".join(
         f"{name} recall {p['recall']:.3f}, precision {p['precision']:.3f}, labels {p['labels']:.3f}"
         for name, p in ((name, pooled(rows, name)) for name in FRONT_ENDS)) + "."]
+    lines += ["", "False detections by distance to the nearest mark's projection (seen or hidden), pooled: "
+              + "; ".join(f"{name}: {_bands(rows, name)}" for name in FRONT_ENDS) + "."]
     lines += ["", "Labels by true colour, pooled: " + "; ".join(
         f"{name}: {_by_colour(pooled_by_colour(rows, name))}" for name in FRONT_ENDS) + "."]
     return "\n".join(lines) + "\n"

@@ -292,11 +292,12 @@ class TopicReceiver:
                     self._owed_at, self._owed_until = time.monotonic(), now + OWED_S
                 return
             del self._routed[vehicle]  # the unrouting marker was overwritten (a flood): end the skipping now
-        mate = self._mates.get(vehicle)
-        if self._admit(sample, key, key if self._alive(vehicle) else UNKNOWN_SENDER, self._shared_dropped):
+        payload = self._admit(sample, key, key if self._alive(vehicle) else UNKNOWN_SENDER, self._shared_dropped)
+        if payload is not None:
             self._shared_dropped = False
+            mate = self._mates.get(vehicle)
             if mate is not None and mate.handed is not None:  # its ring is declared: the join is under way
-                mate.handed.add(hash(sample.payload.to_bytes()))
+                mate.handed.add(hash(payload))
 
     def _ready(self, mate: _MateRing, now: float) -> bool:
         """Whether the team-mate's own ring is read now: once the shared ring passed its marker (or that marker was
@@ -339,7 +340,7 @@ class TopicReceiver:
             if hash(sample.payload.to_bytes()) in mate.handed:
                 return
             mate.handed = None  # the first one that was not: the join is over
-        if self._admit(sample, mate.key, mate.key, mate.throttled):
+        if self._admit(sample, mate.key, mate.key, mate.throttled) is not None:
             mate.throttled = False
 
     def _idle_wait(self, now: float) -> float | None:
@@ -359,22 +360,23 @@ class TopicReceiver:
                 mate.owed = 0
         return min(waits) if waits else None
 
-    def _admit(self, sample: zenoh.Sample, key: str, sender: str, throttled: bool) -> bool:
-        """Check ``sample`` cheaply and hand its bytes to the inbox; whether it went in."""
+    def _admit(self, sample: zenoh.Sample, key: str, sender: str, throttled: bool) -> bytes | None:
+        """Check ``sample`` cheaply and hand its bytes to the inbox; the bytes if they went in, else None."""
         topic = self.topic
         size = len(sample.payload)
         if size > self._limit:
             self._reject(topic, "oversized", f"{key}: payload of {size} bytes exceeds the {self._limit}-byte limit")
-            return False
+            return None
         if not self._budget.admit(topic, sender, time.monotonic()):  # dropped before any decoding
             self._reject(topic, "rate-limited", f"{key}: over {self._budget.rate(topic):g} messages/s")
-            return False
-        item = ("sample", topic, key, sample.payload.to_bytes(), time.time_ns(), throttled)
+            return None
+        payload = sample.payload.to_bytes()
+        item = ("sample", topic, key, payload, time.time_ns(), throttled)
         if not self._inbox.put(item, ring=self._ring):
             self._reject(topic, "overflow", f"{key}: receiver queue full, "
                                             f"{'oldest frame' if self._ring else 'sample'} dropped")
-            return False
-        return True
+            return None
+        return payload
 
     @staticmethod
     def _undeclare(*subscribers) -> None:
