@@ -20,7 +20,8 @@ scale a mark has at the target's distance. So (docs/design.md, "The feature fron
    lies on the line from the background through the observed spot (a blend ``p = a c + (1 - a) b``), in
    linear light; a confidence from the margin to the second colour. A spot that fits no paint colour (a
    body corner, a shadow) is dropped. Spots under :data:`SMALL_SPOT_PX` on a body take their label from
-   :mod:`evopose.spot_colour` instead, which models the encoder's 4:2:0 chroma.
+   :mod:`evopose.spot_colour` instead, which models the encoder's 4:2:0 chroma, and drop a spot whose colour
+   explains too little of it (the body's own shading).
 5. **Context**: the marks lie on the target's body. Given the body's paint colour (the model's), a candidate
    must lie on or inside a patch of that paint seen under any light (:mod:`evopose.body_paint`: the dichromatic
    reflection model, paint plus the light's own colour, and glossy faces touching it); clutter in the marks' own

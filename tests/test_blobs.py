@@ -173,7 +173,7 @@ def test_on_the_committed_photoreal_frames_a_found_mark_is_placed_to_a_fraction_
     assert rows and all(r["position_rms_px"] <= rms_px for r in rows), [r["position_rms_px"] for r in rows]
 
 
-@pytest.mark.parametrize("name, recall, precision", [("paper", 0.65, 0.45), ("telephoto", 0.95, 0.8)])
+@pytest.mark.parametrize("name, recall, precision", [("paper", 0.65, 0.6), ("telephoto", 0.95, 0.8)])
 def test_on_the_committed_photoreal_frames_the_contrast_front_end_with_the_body_finds_the_marks(name, recall,
                                                                                              precision):
     # Blender Cycles frames (tests/data/photoreal, docs/datasets.md): at telephoto the recall bar (0.95;

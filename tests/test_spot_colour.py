@@ -17,13 +17,14 @@ BODY = (40, 40, 150)
 CENTRES = np.array([(20.3, 24.6), (38.7, 23.2), (57.1, 25.5), (75.6, 24.1)])
 
 
-def _body_with_marks(quality: int = 90) -> np.ndarray:
-    """A grey ground, the red body and the four marks, area-sampled from 8x, through OpenCV's JPEG at 4:2:0."""
+def _body_with_marks(quality: int = 90, spots: tuple = ()) -> np.ndarray:
+    """A grey ground, the red body and the four marks (and ``spots``: ((u, v), BGR) more discs of their size),
+    area-sampled from 8x, through OpenCV's JPEG at 4:2:0."""
     s = 8
     big = np.zeros((48 * s, 96 * s, 3), np.float32)
     big[:] = (120, 125, 130)
     cv2.rectangle(big, (8 * s, 8 * s), (88 * s, 40 * s), BODY, -1)
-    for (u, v), colour in zip(CENTRES, PALETTE.values()):
+    for (u, v), colour in [*zip(CENTRES, PALETTE.values()), *spots]:
         cv2.circle(big, (int((u + 0.5) * s), int((v + 0.5) * s)), int(1.4 * s), colour, -1)
     image = cv2.resize(big, (96, 48), interpolation=cv2.INTER_AREA).astype(np.uint8)
     ok, data = cv2.imencode(".jpg", image, [cv2.IMWRITE_JPEG_QUALITY, quality, cv2.IMWRITE_JPEG_SAMPLING_FACTOR,
@@ -52,6 +53,19 @@ def test_through_4_2_0_chroma_every_small_mark_gets_its_colour_where_an_rgb_fit_
     assert [list(PALETTE)[i] for i in labels] == list(PALETTE)
     assert np.all(confidence > 0.2)
     assert _rgb_labels(image) != list(PALETTE)   # the diluted chroma misleads the RGB fit (the reason for the module)
+
+
+def test_a_spot_of_the_body_in_shade_is_no_colour_and_gets_no_label():
+    # a dent or gap in the body's red: the same paint, darker. Every paint colour is lighter than the body, so none
+    # explains it (MIN_EXPLAINED); the marks beside it keep their colours
+    shade = (np.array([66.2, 32.9]), (20, 20, 75))
+    image = _body_with_marks(spots=(shade,))
+    points = np.concatenate([CENTRES, shade[0][None]])
+    palette = np.array(list(PALETTE.values()), np.uint8)
+    labels, _ = label_small_spots(image, points, np.full(5, 1.4), palette, BODY)
+    assert [list(PALETTE)[i] for i in labels[:4]] == list(PALETTE) and labels[4] == -1
+    without, _ = label_small_spots(image, points, np.full(5, 1.4), palette, BODY, min_explained=0.0)
+    assert without[4] >= 0   # the nearest colour by misfit alone: a false mark
 
 
 def test_the_4_2_0_operator_keeps_a_block_aligned_field_and_averages_a_pixel_over_its_block():
