@@ -67,7 +67,7 @@ def pair(team: Team, share: str, frames: int, *extra: str) -> dict[str, dict]:
     return team.summaries()
 
 
-#: Frames a search from scratch may take before the first good pose: one generation per frame on shared views,
+#: Frames a search from scratch may take before the first good pose: a few generations per frame on shared views,
 #: then a confirming search when the pose came from a team-mate (the time itself: BENCHMARKS.md, bench_fleet).
 SEARCH_FRAMES = 10
 

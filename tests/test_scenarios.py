@@ -118,7 +118,7 @@ def test_scenario_run_is_watchable_and_leaves_nothing_running():
     assert set(by_vehicle) == {"H1", "H2"}
     for vehicle in ("H1", "H2"):  # a few frames of search, then the target is held
         first, held = good_from_first(result["runs"][0]["agents"][vehicle])
-        assert first <= 10 and held, vehicle  # one generation per frame, then held
+        assert first <= 10 and held, vehicle  # a few generations per frame, then held
     assert agreement(result["runs"], "H1", "H2")["position_max"] <= 0.01
     # the rows, by hand from the run's agent summaries: one run, so each mean is that run's value and each σ 0
     [run] = result["runs"]

@@ -73,7 +73,9 @@ def test_each_share_mode_is_one_policy():
                                                                                    None]
     assert [m for m, p in POLICIES.items() if p.idle_generations] == ["none", "hint"]
     assert [m for m, p in POLICIES.items() if p.sends_hints and p.takes_hints] == ["hint"]
-    assert share_policy("features").generations_per_frame == 1 and share_policy("hint").candidate_margin > 0
+    features = share_policy("features")   # as many generations as the views' points allow, 1 to 4 (agreeing mates)
+    assert [features.generations_per_frame(n) for n in (20, 40, 80, 160, 1000)] == [4, 4, 2, 1, 1]
+    assert share_policy("hint").generations_per_frame(40) is None and share_policy("hint").candidate_margin > 0
     with pytest.raises(ValueError, match="share mode must be one of none, raw, features, hint, got 'x'"):
         share_policy("x")
 
