@@ -3,7 +3,7 @@
 Eq. (1)'s distance, truncated at tau (:mod:`evopose.fitness`), keeps the search robust to points far from every
 mark. It does not stop a false point *within* tau of a projected mark from pulling the pose with the full weight
 of a true one. On camera frames at the paper's scale that was most of the error: tau is 4 px there, a mark 2-4
-px wide, and about half the image points are not marks (the contrast front-end's precision is 0.49,
+px wide, and about half the image points were not marks (the contrast front-end's precision was 0.49, 0.60 now,
 ``benchmarks/bench_photoreal_features.py``), many of them the body's own structure a few px from a mark. Good
 frames were tilted 5-11 deg by them while their position stayed right to a few cm (9 of 72 good frames on nine
 paper-scale Cycles datasets, ``benchmarks/bench_photoreal_tracking.py``; 1 with this fit). At the pose this fit
