@@ -212,8 +212,7 @@ def detect_contrast_marks(image_bgr: np.ndarray, palette: Mapping[str, tuple[int
     # px face, and growing into the gloss added more false spots than marks (Cycles paper-scale sweep: recall 0.70 ->
     # 0.73, precision 0.46 -> 0.42); the ring of paint a mark needs (MIN_PAINT_AROUND) counts them at every scale
     sure_paint, paint = body_paint(lin, body_linear)
-    region = body_region(lin, body_linear, prior.radius_px[1], gap,
-                         paint=paint if prior.radius_px[1] >= SMALL_SPOT_PX else sure_paint)
+    region = body_region(paint if prior.radius_px[1] >= SMALL_SPOT_PX else sure_paint, prior.radius_px[1], gap)
     if not region.any():
         return _detect(bgr[:0, :0], lin[:0, :0], names, palette, prior, region[:0, :0], **settings)
     ys, xs = np.nonzero(region)

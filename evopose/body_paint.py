@@ -86,16 +86,12 @@ def paint_around(paint: np.ndarray, points: np.ndarray, radius: np.ndarray) -> n
     return share
 
 
-def body_region(lin: np.ndarray, body_linear: np.ndarray, mark_px: float, gap_px: float = 0.0,
-                glossy_faces: bool = True, paint: np.ndarray | None = None) -> np.ndarray:
-    """Where the target's marks can be (bool (H, W)): the pixels of the body's paint (:func:`connected_paint`, or
-    :func:`paint_pixels` without ``glossy_faces``; ``paint`` when given) less
-    single specks; closed with a disc of the largest mark's radius ``mark_px`` and its holes filled (a mark inside
-    a face is a hole in the paint, a mark on a face's outline a notch), then grown by half that radius, at least
-    2 px (a mark on the outline of a face lies half outside its paint; a 2-3 px mark's pixels are mixed with what
-    lies beside the body). ``lin`` (H, W, 3) linear BGR, ``body_linear`` (3,)."""
-    if paint is None:
-        paint = connected_paint(lin, body_linear) if glossy_faces else paint_pixels(lin, body_linear)
+def body_region(paint: np.ndarray, mark_px: float, gap_px: float = 0.0) -> np.ndarray:
+    """Where the target's marks can be (bool (H, W)): the body's ``paint`` (bool (H, W): :func:`body_paint`'s sure
+    pixels, or with the glossy faces) less single specks; closed with a disc of the largest mark's radius
+    ``mark_px`` and its holes filled (a mark inside a face is a hole in the paint, a mark on a face's outline a
+    notch), then grown by half that radius, at least 2 px (a mark on the outline of a face lies half outside its
+    paint; a 2-3 px mark's pixels are mixed with what lies beside the body)."""
     paint = cv2.morphologyEx(paint.astype(np.uint8), cv2.MORPH_OPEN,
                              np.ones((2, 2), np.uint8))
     region = np.zeros(paint.shape, bool)
