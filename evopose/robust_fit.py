@@ -111,6 +111,7 @@ def _reweighted(objective: PoseObjective, pose: np.ndarray, matches: Matches, ki
     free = bounds.free
     n_free = int(np.count_nonzero(free))
     current = np.asarray(pose, float).reshape(6).copy()
+    cost = robust_cost(matches, cutoffs, kind)
     for _ in range(iterations):
         distance = np.linalg.norm(matches.residuals, axis=1)
         weight = np.zeros(len(distance))
@@ -128,17 +129,17 @@ def _reweighted(objective: PoseObjective, pose: np.ndarray, matches: Matches, ki
             break
         if not np.all(np.isfinite(step)):
             break
-        before = robust_cost(matches, cutoffs, kind)
         for fraction in (1.0, 0.5, 0.25):
             moved = current.copy()
             moved[free] += fraction * step
             moved = bounds.project(moved)
             moved_matches = mutual_matches(objective, moved)
-            if robust_cost(moved_matches, cutoffs, kind) <= before:
+            moved_cost = robust_cost(moved_matches, cutoffs, kind)
+            if moved_cost <= cost:
                 break
         else:
             break
-        current, matches = moved, moved_matches
+        current, matches, cost = moved, moved_matches, moved_cost
         if float(np.max(np.abs(fraction * step))) < SETTLED_STEP:
             break
     return current, matches
