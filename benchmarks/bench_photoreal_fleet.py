@@ -81,7 +81,11 @@ def frame_rows(dataset: Path, scenario: str, features: str) -> list[dict]:
                          "first_good": first_good, "median_m": statistics.median(good_errors) if good_errors
                          else None, "max_m": max(good_errors) if good_errors else None, "wrong": wrong, "right": right,
                          "median_all_m": statistics.median(all_errors) if all_errors else None,
-                         "agreed": None if agreement is None else (agreement["agreed"], agreement["frames"])})
+                         "agreed": None if agreement is None else (agreement["agreed"], agreement["frames"]),
+                         # the agent's own timing: its frames' median time (estimate and publish) and the clock's
+                         # frames it skipped because one ran late
+                         "frame_ms": 1000 * summary.get("frame_seconds_median", float("nan")),
+                         "late": summary.get("late_frames", 0)})
     return rows
 
 
@@ -104,7 +108,9 @@ def markdown(rows: list[dict], command: str) -> str:
              "position error over the good frames, confident-and-wrong frames (good, > 0.5 m or > 5 deg off; on a "
              "dataset without the target every good frame), and for shared feature sets the frames on which both "
              "published the same pose; \"right\" counts the published poses within 10 cm and 5 deg of the truth, "
-             "good or not (what a stricter or looser verdict would have to work with) (benchmarks/bench_photoreal_fleet.py says how).", "",
+             "good or not (what a stricter or looser verdict would have to work with); \"frame ms\" the median time an agent "
+             "took per frame and the clock's frames it skipped (its first frame waits for its team-mates) "
+             "(benchmarks/bench_photoreal_fleet.py says how).", "",
              "### Summary", "", "| scale | front-end | scenario | helicopter-runs | good frames | median error cm "
              "| confident and wrong | right (<= 10 cm, 5 deg), good or not | median error cm, every frame |",
              "|---|---|---|---|---|---|---|---|---|"]
@@ -122,17 +128,18 @@ def markdown(rows: list[dict], command: str) -> str:
                      f"| {sum(r['wrong'] for r in done)} | {sum(r['right'] for r in done)}/{frames} "
                      f"| {_cm(statistics.median(every) if every else None)} |")
     lines += ["", "### Every run", "", "| dataset | front-end | scenario | vehicle | good | first good frame "
-              "| median cm | max cm | confident and wrong | right | median cm, every frame | same pose |",
-              "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+              "| median cm | max cm | confident and wrong | right | median cm, every frame | same pose | frame ms (skipped) |",
+              "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         if r["error"]:
             lines.append(f"| {r['dataset']} | {r['features']} | {r['scenario']} | {r['vehicle']} | failed: "
-                         f"{r['error']} | | | | | | | |")
+                         f"{r['error']} | | | | | | | | |")
             continue
         agreed = "" if r["agreed"] is None else f"{r['agreed'][0]}/{r['agreed'][1]}"
         lines.append(f"| {r['dataset']} | {r['features']} | {r['scenario']} | {r['vehicle']} | {r['good']}/"
                      f"{r['frames']} | {'-' if r['first_good'] is None else r['first_good']} | {_cm(r['median_m'])} "
-                     f"| {_cm(r['max_m'])} | {r['wrong']} | {r['right']} | {_cm(r['median_all_m'])} | {agreed} |")
+                     f"| {_cm(r['max_m'])} | {r['wrong']} | {r['right']} | {_cm(r['median_all_m'])} | {agreed} "
+                     f"| {r['frame_ms']:.0f} ({r['late']}) |")
     return "\n".join(lines) + "\n"
 
 
