@@ -27,8 +27,9 @@ from agents.vehicle.team_views import MateView, build_views, encode_image
 
 #: When team-mates share the same views, a search from scratch runs a fixed number of generations per frame (so
 #: their bests agree): as many as POINTS_PER_FRAME image points in all allow, 1 to MAX_GENERATIONS_PER_FRAME. A
-#: generation on two views of ~20 points each takes ~6 ms here, and a search from scratch at the paper's scale 20-80
-#: generations: at one a frame it outlasts a 2 s sequence.
+#: search from scratch makes 256-1024 fresh starts (SearchOptions.min_starts, _unsure; up to 4x on a small problem),
+#: ~51 a generation: 20-80 generations, which at one a frame outlast a 2 s sequence. Four on two paper-scale views
+#: take 24-36 ms of a 100 ms frame (benchmarks/bench_photoreal_fleet.py, "frame ms").
 POINTS_PER_FRAME, MAX_GENERATIONS_PER_FRAME = 160, 4
 #: Hint mode: a team-mate's pose whose mismatch on the own views is at most this much higher than the own
 #: best's is taken (the own views cannot tell the two apart; the team-mate sees from elsewhere).
