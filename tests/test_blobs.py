@@ -173,12 +173,13 @@ def test_on_the_committed_photoreal_frames_a_found_mark_is_placed_to_a_fraction_
     assert rows and all(r["position_rms_px"] <= rms_px for r in rows), [r["position_rms_px"] for r in rows]
 
 
-@pytest.mark.parametrize("name, recall, precision", [("paper", 0.65, 0.6), ("telephoto", 0.95, 0.8)])
+@pytest.mark.parametrize("name, recall, precision", [("paper", 0.75, 0.5), ("telephoto", 0.95, 0.8)])
 def test_on_the_committed_photoreal_frames_the_contrast_front_end_with_the_body_finds_the_marks(name, recall,
                                                                                              precision):
     # Blender Cycles frames (tests/data/photoreal, docs/datasets.md): at telephoto the recall bar (0.95;
     # measured 1.00, precision 0.83; 0.95 / 0.77 without re-centring an oblique disc's window); at the paper's
-    # scale its bars (0.8 / 0.8) are not met yet and these are the levels measured (BENCHMARKS.md), so a
+    # scale its bars (0.8 / 0.8) are not met yet and these are the levels measured (BENCHMARKS.md: recall 0.79,
+    # precision 0.56 here; the front-end takes a weak mark beside a strong one, which costs precision), so a
     # regression fails the benchmark's own evaluation (match radius, recall over whole marks, precision over every
     # detection)
     from benchmarks.bench_photoreal_features import evaluate
