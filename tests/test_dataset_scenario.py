@@ -90,7 +90,10 @@ def test_two_helicopters_on_the_committed_cycles_frames_agree_and_no_good_pose_i
     from geometry import pose_error
     from scenarios.dataset import open_dataset
 
-    folder = ROOT / "tests" / "data" / "photoreal" / scale
+    # at the paper's scale the 16-frame sequence: a search from scratch takes ~22 generations there, 4 a frame, and
+    # may end in a wrong basin, unsure (3 of 10 seeds on its first frame, whose features mislead it), so the pair
+    # needs a second search before it is good (frame 7 in process); 4 frames only showed whether the first won
+    folder = ROOT / "tests" / "data" / "photoreal" / ("paper-sequence" if scale == "paper" else scale)
     done = subprocess.run([sys.executable, "-m", "agents.cli", "scenario", "run", "exp2a-features", "--dataset",
                            str(folder), "--features", "contrast", "--listen", f"tcp/127.0.0.1:{free_port()}",
                            "--json"], cwd=ROOT, capture_output=True, text=True, timeout=300)
@@ -116,8 +119,9 @@ def test_two_helicopters_on_the_committed_cycles_frames_agree_and_no_good_pose_i
         for i, r in good:
             error = pose_error(np.array(r.pose), data.truth(i).target_pose)
             assert error["position"] <= 0.5 and max(error[a] for a in ("roll", "pitch", "yaw")) <= 5.0, (i, error)
-        if scale == "telephoto":
-            assert good, vehicle  # at ~150 px the pair confirms a pose within the dataset's 4 frames
+        # at ~150 px the pair confirms a pose within the dataset's 4 frames; at the paper's scale within its 16
+        # (9 of 16 good, from frame 7, measured)
+        assert good, vehicle
         # the last published pose, good or not, is right: within 10 cm and 5 deg (the paper's scale: 1.5 cm, 1.6 deg,
         # and good, when the search has finished)
         last = pose_error(np.array(published[-1].pose), data.truth(len(published) - 1).target_pose)
