@@ -10,7 +10,8 @@ scale a mark has at the target's distance. So (docs/design.md, "The feature fron
    chroma axes), blurred at scales sigma_i = r / sqrt(2) for the mark radii r the geometry allows
    (:class:`MarkPrior`); a difference of Gaussians per channel is the scale-normalised Laplacian, whose
    magnitude over the three channels peaks at a disc's centre and scale.
-2. **Candidates** (:func:`detect_contrast_marks`): local maxima in position and scale above a threshold of
+2. **Candidates** (:func:`detect_contrast_marks`): local maxima in position and scale (in position only for marks
+   under :data:`SMALL_SPOT_PX`, 3-5 px apart, where a neighbour's response outgrows a weak mark's) above a threshold of
    ``k_sigma`` times the image's own robust spread of the response (the ground's texture and the sensor's
    noise set it, so no exposure or gain is assumed), whose Hessian is not an edge's (a ridge along the body's
    outline, a wheel, a shadow's border) and whose scale fits a mark, not the body.
