@@ -208,9 +208,10 @@ def detect_contrast_marks(image_bgr: np.ndarray, palette: Mapping[str, tuple[int
         return _detect(bgr, lin, names, palette, prior, None, **settings)
     body_linear = _srgb_to_linear(np.array(body, np.float32) / 255.0)
     gap = 0.0 if prior.extent_px is None else BODY_GAP * prior.extent_px
-    # the region grows into the glossy faces (hysteresis: a low sun's gloss on a red top face) at every scale; at the
-    # paper's scale the sure paint alone lost the marks on such faces (recall 0.772 -> 0.808, precision 0.606 ->
-    # 0.569: benchmarks/bench_photoreal_features.py on datasets/photoreal/photoreal-paper-g*, either region), and the spots the gloss adds are the body's shading that MIN_EXPLAINED drops
+    # the region grows into the glossy faces (hysteresis: a low sun's gloss on a red top face) at every scale; at
+    # the paper's scale the sure paint alone lost the marks on such faces (recall 0.772 -> 0.808, precision 0.606
+    # -> 0.569: benchmarks/bench_photoreal_features.py on datasets/photoreal/photoreal-paper-g*, either region),
+    # and the spots the gloss adds are the body's shading that MIN_EXPLAINED drops
     _, paint = body_paint(lin, body_linear)
     region = body_region(paint, prior.radius_px[1], gap)
     if not region.any():
