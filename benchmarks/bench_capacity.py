@@ -47,7 +47,6 @@ import argparse
 import json
 import math
 import os
-import socket
 import struct
 import subprocess
 import sys
@@ -58,6 +57,8 @@ from array import array
 from pathlib import Path
 
 import numpy as np
+
+from agents.transport.ports import free_loopback_port as free_port
 
 from .report import md_table, provenance, write_section
 
@@ -86,12 +87,6 @@ HINT = struct.Struct("<6f")
 MASK20 = (1 << 20) - 1
 WRAP_US = 1 << 40
 CLK_TCK = os.sysconf("SC_CLK_TCK")
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def vehicle_name(index: int) -> str:

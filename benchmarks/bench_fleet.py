@@ -12,12 +12,12 @@ pose and the mean position error. Writes ``benchmarks/results/fleet.md``.
 from __future__ import annotations
 
 import argparse
-import socket
 import statistics
 import threading
 from pathlib import Path
 
 from agents.experiments.runner import run_scenario
+from agents.transport.ports import free_loopback_port as free_port
 from scenarios.fleet import load_fleet_scenario
 
 from .report import provenance
@@ -26,9 +26,7 @@ from .report import provenance
 
 def free_endpoint() -> str:
     """A loopback endpoint on a port nobody listens on now."""
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        return f"tcp/127.0.0.1:{sock.getsockname()[1]}"
+    return f"tcp/127.0.0.1:{free_port()}"
 
 RESULTS = Path(__file__).resolve().parent / "results" / "fleet.md"
 CONFIGS = (("exp2-solo", 10.0), ("exp2a-features", 10.0), ("exp2a-features", 30.0), ("exp2b-hints", 10.0),

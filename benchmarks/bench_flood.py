@@ -39,6 +39,8 @@ from pathlib import Path
 
 import numpy as np
 
+from agents.transport.ports import free_loopback_port as free_port
+
 from .report import md_table, provenance, write_section
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -106,17 +108,9 @@ def _proc_sample(pid: int) -> tuple[float, int] | None:
     return cpu, rss
 
 
-def _free_port() -> int:
-    import socket
-
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        return sock.getsockname()[1]
-
-
 def measure(condition: str, flood_s: float, rate: float, victim_args: list[str]) -> dict:
     """One victim run under ``condition``; the metrics of its flood window."""
-    port, fleet = _free_port(), f"flood{os.getpid()}x{time.monotonic_ns() % 100000}"
+    port, fleet = free_port(), f"flood{os.getpid()}x{time.monotonic_ns() % 100000}"
     endpoint = f"tcp/127.0.0.1:{port}"
     epoch = time.time_ns() + int(EPOCH_LEAD_S * 1e9)
     start_ns = epoch + int(BEFORE_S * 1e9)

@@ -32,7 +32,6 @@ import json
 import os
 import platform
 import signal
-import socket
 import subprocess
 import sys
 import tempfile
@@ -41,6 +40,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+
+from agents.transport.ports import free_loopback_port as free_port
 
 from .report import code_version, md_table, write_section
 
@@ -121,13 +122,6 @@ def read_memory(pid: int) -> tuple[float, float, float | None, float | None, flo
 
 
 # -- agents ---------------------------------------------------------------------------------------------
-
-def free_port() -> int:
-    """A loopback TCP port nobody listens on now (bound to port 0, then released)."""
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
 
 def start_pair(config: Config, logs: Path) -> list[Agent]:
     """Start H1 (listening) and H2 (connecting) sharing ``config.share``; frame 0 in EPOCH_LEAD_S seconds."""

@@ -17,7 +17,6 @@ from __future__ import annotations
 import argparse
 import os
 import shutil
-import socket
 import subprocess
 import sys
 import threading
@@ -26,18 +25,14 @@ from pathlib import Path
 
 import numpy as np
 
+from agents.transport.ports import free_loopback_port as free_port
+
 from .bench_capacity import stop
 from .report import md_table, provenance, write_section
 
 ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_OUT = Path(__file__).resolve().parent / "results" / "latency.md"
 FLEET = "latency"
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def pong(connect: list[str], listen: list[str], mode: str) -> None:

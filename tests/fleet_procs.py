@@ -7,7 +7,6 @@ import contextlib
 import json
 import queue
 import signal
-import socket
 import subprocess
 import sys
 import threading
@@ -16,14 +15,9 @@ from collections.abc import Iterator
 from pathlib import Path
 
 from agents.runs import pose_rows
+from agents.transport.ports import free_loopback_port as free_port
 
 ROOT = Path(__file__).resolve().parents[1]
-
-
-def free_port() -> int:
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        return sock.getsockname()[1]
 
 
 class Proc:

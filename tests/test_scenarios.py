@@ -53,12 +53,19 @@ def watch(endpoint: str) -> Proc:
     return Proc([sys.executable, "-m", "agents.cli", "meter", "--connect", endpoint, "--no-multicast", "--json"])
 
 
-def published(meter: Proc, *key_suffixes: str, timeout: float = 60.0) -> None:
-    """Wait until the meter has seen messages on keys ending with each of ``key_suffixes`` (e.g. ``/H1/pose``)."""
+def published(meter: Proc, runner: Proc, *key_suffixes: str, timeout: float = 60.0) -> None:
+    """Wait until the meter has seen messages on keys ending with each of ``key_suffixes`` (e.g. ``/H1/pose``);
+    fail at once, with the runner's error, if the run ends before that."""
     missing = set(key_suffixes)
     deadline = time.monotonic() + timeout
     while missing:
-        record = meter.next_record(max(deadline - time.monotonic(), 0.01), lambda r: r.get("type") == "rate")
+        assert runner.popen.poll() is None, f"the run ended before {sorted(missing)}: {runner.stderr_now()}"
+        assert time.monotonic() < deadline, f"the meter saw nothing on {sorted(missing)} in {timeout} s: " \
+                                            f"{meter.stderr_now()}"
+        try:
+            record = meter.next_record(1.0, lambda r: r.get("type") == "rate")
+        except AssertionError:  # nothing metered in this second: look at the run again
+            continue
         missing = {suffix for suffix in missing if not record["key"].endswith(suffix)}
 
 
@@ -148,7 +155,7 @@ def test_sigint_stops_every_agent_of_a_running_scenario():
     runner, endpoint = start_endless_run("exp2b-hints")
     meter = watch(endpoint)
     try:
-        published(meter, "/H1/pose", "/H1/hint")  # past frame 0: H1 has published an estimate and a hint
+        published(meter, runner, "/H1/pose", "/H1/hint")  # past frame 0: H1 has published an estimate and a hint
         meter.kill()
         code, seconds = runner.stop(signal.SIGINT, timeout=20)
         result = runner.next_record(5, lambda r: "rows" in r)
@@ -177,7 +184,7 @@ def test_a_crashed_agent_ends_the_run_with_one_line_and_stops_the_others():
     try:
         victim = wait_for(lambda: [pid for pid in running_with(endpoint) if pid in running_with("--vehicle H2 ")])
         assert victim
-        published(meter, "/H2/features")  # running: H2 shares its feature sets
+        published(meter, runner, "/H2/features")  # running: H2 shares its feature sets
         meter.kill()
         os.kill(victim[0], signal.SIGKILL)
         code = runner.wait(30)
