@@ -29,7 +29,7 @@ import cv2
 import numpy as np
 
 from agents.problem.extract import feature_extractor
-from evopose import PoseObjective, PoseProblem, View, pose_mismatch, solve, track
+from evopose import PoseObjective, PoseProblem, SearchOptions, View, pose_mismatch, solve, track
 from evopose.blobs import SMALL_SPOT_PX, mark_prior
 from evopose.covariance import mutual_matches
 from geometry import pose_error
@@ -66,6 +66,8 @@ def run(directory: Path) -> list[dict]:
     world = data.world()
     extract = feature_extractor("contrast", world.model, world.bounds())
     model, previous, rows = world.model.evopose_model(), None, []
+    # the tracking gate's motion allowance from the model file's motion, per frame at the dataset's rate
+    options = SearchOptions(confidence=world.model.confidence_rules(1.0 / data.fps))
     for k in range(data.frames):
         views, truths, match_px = [], [], []
         for name in data.cameras:
@@ -77,7 +79,7 @@ def run(directory: Path) -> list[dict]:
                                world.bounds().hi[:3])
             match_px.append(1.5 if prior.radius_px[1] < SMALL_SPOT_PX else 3.0)
         problem = PoseProblem(model, tuple(views), world.bounds())
-        solution = (solve(problem, seed=k) if previous is None
+        solution = (solve(problem, options, seed=k) if previous is None
                     else track(previous, views, problem=problem, search_when_lost=False, seed=k))
         previous = solution if solution.converged and solution.confident else None
         truth = data.truth(k).target_pose

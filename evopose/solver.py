@@ -24,7 +24,7 @@ from .problem import PoseProblem, View
 from .refine import TRACK_HARD_SCHEDULE, TRACK_SCHEDULE, annealing, refine
 from .robust_fit import robust_fit
 from .search import EvoPose
-from .uncertainty import Confidence, assess, covariance, imprecise, track_confidence
+from .uncertainty import Confidence, TrackReference, assess, covariance, imprecise, track_confidence
 from .weights import rule_weights
 
 #: Final polish of the best pose: hard nearest-neighbour steps (accepted only when the fitness drops).
@@ -86,6 +86,10 @@ class Solution:
     precise : bool (property)
         The covariance places the pose within the target's own size: a pose to act on is converged, confident and
         precise (one camera at the paper's scale is confident, not precise).
+    track_reference : TrackReference or None
+        (track) The confident frames of the track so far fused into one pose, which the next frame's pose is
+        gated against (:func:`evopose.uncertainty.track_confidence`); None when this frame is not confident
+        (the next frame starts from this pose and covariance).
     """
 
     pose: np.ndarray
@@ -105,6 +109,7 @@ class Solution:
     confidence: Confidence | None = field(default=None, repr=False)
     problem: PoseProblem | None = field(default=None, repr=False)
     options: SearchOptions | None = field(default=None, repr=False)
+    track_reference: TrackReference | None = field(default=None, repr=False)
 
     def with_(self, **changes) -> "Solution":
         return replace(self, **changes)
@@ -343,9 +348,12 @@ def track(previous: Solution, new_views: list[View] | tuple[View, ...], *, probl
         # confident only while the fit holds inside the previous uncertainty (no population to find rivals in)
         current = assess(objective, basin, None, options.confidence,
                          judge=objective.with_weights(objective.base_weights))
-        confidence = track_confidence(previous.pose, previous.covariance, previous.confident and tracked, current,
-                                      basin, options.confidence)
+        reference = previous.track_reference or TrackReference.of(previous.pose, previous.covariance)
+        confidence = track_confidence(reference, previous.confident and tracked, current, basin, options.confidence)
         pose, confidence = published(objective, basin, confidence)
+        if confidence.confident:  # this frame joins the track's pose
+            reference = reference.predicted(np.asarray(options.confidence.track_motion, float)).fused(
+                pose, confidence.covariance.matrix)
         fitness = float(objective(pose[None])[0])
         terms = objective.view_terms(pose[None])[0]
         return Solution(pose=pose, fitness=fitness, view_terms=terms,
@@ -353,7 +361,7 @@ def track(previous: Solution, new_views: list[View] | tuple[View, ...], *, probl
                         seconds=time.perf_counter() - t0, converged=tracked, stop_reason="tracked" if tracked else "lost",
                         history=[best.best_fitness], from_hint=best.best_from_hint, problem=prob, options=options,
                         covariance=confidence.covariance.matrix, confident=confidence.confident,
-                        confidence=confidence)
+                        confidence=confidence, track_reference=reference if confidence.confident else None)
     starts = np.atleast_2d(previous.pose)
     if hints is not None and np.size(hints):
         starts = np.concatenate([starts, np.atleast_2d(hints)])

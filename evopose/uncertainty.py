@@ -26,6 +26,9 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.spatial import cKDTree
+from scipy.spatial.transform import Rotation
+
+from geometry import euler_from_rotation, rotation_from_euler
 
 from .covariance import (CovarianceEstimate, Matches, covariance, deviation, in_box_second_moment, mutual_matches,
                          projection_jacobian, untruncated_variance)
@@ -33,7 +36,8 @@ from .fitness import POINT_NOISE_PX, PoseObjective
 
 __all__ = ["Confidence", "ConfidenceRules", "CovarianceEstimate", "Matches", "assess", "covariance", "deviation",
            "imprecise", "in_box_second_moment", "mahalanobis", "mutual_matches", "projection_jacobian",
-           "same_image", "shared_pairs", "sum_of_squares", "track_confidence", "untruncated_variance"]
+           "same_image", "shared_pairs", "sum_of_squares", "track_confidence", "TrackReference",
+           "untruncated_variance"]
 
 
 @dataclass(frozen=True)
@@ -63,11 +67,14 @@ class ConfidenceRules:
         ...and it shares fewer than this share of the estimate's mutual pairs (the same marks on the same image
         points are one basin) and does not show the model the same (:func:`same_image`, a symmetry).
     track_sigmas : float
-        (tracking) The new pose must lie within this Mahalanobis distance of the previous one, under the sum of
-        both covariances and the motion allowance...
+        (tracking) The new pose must lie within this Mahalanobis distance of the track's fused pose
+        (:class:`TrackReference`), under the sum of its covariance, the new pose's and the motion allowance...
     track_motion : tuple of 6 floats
-        ...``diag(track_motion^2)``: the 1-sigma change of each parameter from one frame to the next (metres,
-        radians; 0.1 m and 0.1 rad: a vehicle at a few m/s filmed at 10 fps, not a flip).
+        ...``diag(track_motion^2)``, added per frame: the 1-sigma change of each coordinate from one frame to the
+        next (metres, then radians about the fixed X, Y, Z axes). The default, 0.1 m and 0.1 rad, suits any
+        vehicle at a few m/s filmed at 10 fps; a target model file that says how its target moves
+        (``motion``, docs/design.md "Tracking") sets it per frame: the Pioneer does
+        not tilt, and a frame that takes a neighbouring basin 10 deg away in roll is no longer let through.
     converged_margin : float
         :attr:`evopose.solver.Solution.converged` also needs the runner-up worse by this margin (a search that
         stopped with a distinct pose about as good has not settled anything).
@@ -249,24 +256,69 @@ def same_image(objective: PoseObjective, a: np.ndarray, b: np.ndarray, tolerance
     return True
 
 
-def track_confidence(previous_pose: np.ndarray, previous_cov: np.ndarray, previous_confident: bool,
-                     current: Confidence, pose: np.ndarray, rules: ConfidenceRules = ConfidenceRules()) -> Confidence:
+@dataclass(frozen=True, eq=False)
+class TrackReference:
+    """Eq. (2)'s chain of confident tracked frames as one estimate of the target's pose, for the tracking gate.
+
+    Each confident frame's pose is fused in by its covariance (a Kalman update), and between frames the fused
+    pose's covariance grows by the motion allowance (``ConfidenceRules.track_motion``: a random walk). A single
+    frame at the paper's scale knows its rotation to 2-5 deg (marks 3-5 px apart), so a frame that takes a
+    neighbouring basin (its points paired with the marks beside their own) can move 10 deg and still lie within
+    4 sigma of the last frame; the chain's pose, known to a fraction of that when the target moves little, shows it.
+
+    Attributes
+    ----------
+    pose : array (6,)
+    covariance : array (6, 6)
+        In the ROS convention (:func:`evopose.covariance.deviation`'s coordinates).
+    frames : int
+        Frames fused (1: a single estimate).
+    """
+
+    pose: np.ndarray
+    covariance: np.ndarray
+    frames: int = 1
+
+    @classmethod
+    def of(cls, pose: np.ndarray, cov: np.ndarray) -> "TrackReference | None":
+        """The reference of one estimate; None when its covariance is not finite."""
+        cov = np.asarray(cov, float)
+        return cls(np.asarray(pose, float).reshape(6).copy(), cov.copy()) if np.all(np.isfinite(cov)) else None
+
+    def predicted(self, motion: np.ndarray) -> "TrackReference":
+        """One frame later: the covariance grown by ``diag(motion^2)`` (motion (6,), 1 sigma per frame)."""
+        return TrackReference(self.pose, self.covariance + np.diag(np.asarray(motion, float) ** 2), self.frames)
+
+    def fused(self, pose: np.ndarray, cov: np.ndarray) -> "TrackReference":
+        """The reference updated by an estimate ``pose`` (6,) with covariance ``cov`` (6, 6): the Kalman gain
+        ``K = P (P + C)^+`` applied to :func:`deviation`, the rotation part turned about the fixed axes."""
+        P, C = self.covariance, np.asarray(cov, float)
+        gain = P @ np.linalg.pinv(P + C, rcond=1e-12, hermitian=True)
+        step = gain @ deviation(pose, self.pose)
+        rotation = Rotation.from_rotvec(step[3:]).as_matrix() @ rotation_from_euler(self.pose[3:])
+        fused = np.concatenate([self.pose[:3] + step[:3], euler_from_rotation(rotation)])
+        cov_fused = (np.eye(6) - gain) @ P
+        return TrackReference(fused, 0.5 * (cov_fused + cov_fused.T), self.frames + 1)
+
+
+def track_confidence(reference: TrackReference | None, previous_confident: bool, current: Confidence,
+                     pose: np.ndarray, rules: ConfidenceRules = ConfidenceRules()) -> Confidence:
     """Confidence of a warm-started estimate (eq. 2), which has no population of other basins to compare with.
 
     Confident when the previous estimate was, the new pose (6,) is still matched well (``current``, from
-    :func:`assess` without alternatives, passes the match rules) and it moved less than ``rules.track_sigmas``
-    under ``previous_cov + current covariance + diag(rules.track_motion^2)``. The runner-up margin is not
-    re-examined: the previous verdict carries over while the fit holds and stays within the previous
-    uncertainty plus a frame's motion.
+    :func:`assess` without alternatives, passes the match rules) and it lies within ``rules.track_sigmas`` of the
+    track's ``reference`` (the confident frames since the last search fused, :class:`TrackReference`), under the
+    reference's covariance grown by a frame's motion (``diag(rules.track_motion^2)``) plus the current one. The
+    runner-up margin is not re-examined: the previous verdict carries over while the fit holds and stays
+    where the track has been, give or take the motion the target can make.
     """
-    motion = np.asarray(rules.track_motion, float)
     cov = current.covariance
     reason = current.reason if current.reason != "ambiguous" else ""
-    if not reason and not previous_confident:
+    if not reason and (not previous_confident or reference is None):
         reason = "previous not confident"
     if not reason:
-        gate = np.asarray(previous_cov, float) + cov.matrix + np.diag(np.asarray(motion, float) ** 2)
-        if mahalanobis(deviation(pose, previous_pose), gate)[0] > rules.track_sigmas:
+        expected = reference.predicted(np.asarray(rules.track_motion, float))
+        if mahalanobis(deviation(pose, expected.pose), expected.covariance + cov.matrix)[0] > rules.track_sigmas:
             reason = "jumped"
     return Confidence(reason == "", cov, current.n_pairs, current.unmatched, current.margin, current.runner_up,
                       reason, current.sum_of_squares, current.runner_up_sum_of_squares)

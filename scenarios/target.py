@@ -13,7 +13,13 @@ parts:                              # the body, for drawing and self-occlusion
   - {polygon: [[x, y, z], ...], colour: [...], two_sided: true}
 marks:                              # the features EvoPose matches
   - {position: [0.1, 0.0, 0.22], normal: [0, 0, 1], colour: yellow}
+motion: {speed: 0.5, climb: 0.05, tilt: 0.05, turn: 0.5}   # optional: 1-sigma rates, m/s and rad/s
 ```
+
+``motion`` is what the target can do between two frames, for the tracking gate
+(:class:`evopose.uncertainty.TrackReference`): 1-sigma rates of horizontal speed, vertical speed, tilt (turning
+about a horizontal axis) and turn (about the vertical). Without it the gate allows 0.1 m and 0.1 rad per frame on
+every axis (:class:`evopose.uncertainty.ConfidenceRules`).
 
 :func:`load_model` validates the file (one-line errors naming the field) and returns a :class:`TargetModel`.
 """
@@ -28,6 +34,7 @@ import numpy as np
 from pydantic import Field, field_validator, model_validator
 
 from evopose import Model
+from evopose.uncertainty import ConfidenceRules
 
 from .documents import Strict, read_mapping, validate
 from .errors import ModelFileError
@@ -91,6 +98,22 @@ class MarkSpec(Strict):
         return n
 
 
+class MotionSpec(Strict):
+    """The target's 1-sigma rates between frames: metres per second horizontally and vertically, radians per
+    second about a horizontal axis (tilt) and about the vertical (turn)."""
+
+    speed: Annotated[float, Field(gt=0)]
+    climb: Annotated[float, Field(gt=0)]
+    tilt: Annotated[float, Field(gt=0)]
+    turn: Annotated[float, Field(gt=0)]
+
+    def per_frame(self, period_s: float) -> tuple[float, float, float, float, float, float]:
+        """The 1-sigma change per frame of ``period_s`` seconds, in the covariance's coordinates (x, y, z, then
+        rotations about the fixed X, Y, Z axes): :attr:`evopose.uncertainty.ConfidenceRules.track_motion`."""
+        s = float(period_s)
+        return (self.speed * s, self.speed * s, self.climb * s, self.tilt * s, self.tilt * s, self.turn * s)
+
+
 class ModelFileSpec(Strict):
     name: str
     description: str = ""
@@ -100,6 +123,7 @@ class ModelFileSpec(Strict):
     colours: Annotated[dict[str, BGR], Field(min_length=1)]
     parts: list[PartSpec] = []
     marks: Annotated[list[MarkSpec], Field(min_length=1)]
+    motion: MotionSpec | None = None
 
     @model_validator(mode="after")
     def _known_colours(self) -> "ModelFileSpec":
@@ -127,6 +151,8 @@ class TargetModel:
     mark_radius : float
         Metres.
     body : Mesh
+    motion : MotionSpec or None
+        What the target can do between frames (1-sigma rates), for the tracking gate; None: the gate's default.
     """
 
     name: str
@@ -140,6 +166,13 @@ class TargetModel:
     #: The body's parts as in the file (shapes, colours, roughness), for a physically based renderer.
     parts: tuple[PartSpec, ...] = ()
     mark_roughness: float = 0.35
+    motion: MotionSpec | None = None
+
+    def confidence_rules(self, period_s: float) -> ConfidenceRules:
+        """The confidence rules for this target filmed every ``period_s`` s: the tracking gate's motion allowance
+        from ``motion`` (:meth:`MotionSpec.per_frame`), the defaults without it."""
+        return ConfidenceRules() if self.motion is None else ConfidenceRules(
+            track_motion=self.motion.per_frame(period_s))
 
     @property
     def size(self) -> float:
@@ -181,7 +214,8 @@ def model_from_spec(spec: ModelFileSpec) -> TargetModel:
         body = body + part.mesh()
     return TargetModel(spec.name, np.array([m.position for m in spec.marks], float), normals,
                        tuple(m.colour for m in spec.marks), {k: tuple(v) for k, v in spec.colours.items()},
-                       spec.mark_radius, body, spec.description, tuple(spec.parts), spec.mark_roughness)
+                       spec.mark_radius, body, spec.description, tuple(spec.parts), spec.mark_roughness,
+                       spec.motion)
 
 
 def resolve_model_path(name_or_path: str | Path, base: Path | None = None) -> Path:

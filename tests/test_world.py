@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 import yaml
 
+from evopose.uncertainty import ConfidenceRules
 from geometry import rotation_from_euler
 from scenarios.errors import FrameError, ModelFileError, ScenarioError, WorldError
 from scenarios.sensors import GpsModel, ImuModel
@@ -152,6 +153,20 @@ def test_malformed_model_file(tmp_path):
     path.write_text("name: x\nname: y\n", encoding="utf-8")
     with pytest.raises(ModelFileError, match="duplicate key"):
         load_model(path)
+    path.write_text("name: x\nmark_radius: 0.02\ncolours: {red: [0, 0, 255]}\n"
+                    "marks: [{position: [0, 0, 0], normal: [0, 0, 1], colour: red}]\n"
+                    "motion: {speed: 0.5, climb: 0.05, tilt: -1, turn: 0.5}\n", encoding="utf-8")
+    with pytest.raises(ModelFileError) as info:
+        load_model(path)
+    assert "motion.tilt" in str(info.value) and "\n" not in str(info.value)
+
+
+def test_the_pioneers_motion_sets_the_tracking_gate_per_frame():
+    """The model file's 1-sigma rates times the frame period: the Pioneer drives and turns, it does not tilt."""
+    rules = load_model("pioneer").confidence_rules(0.1)
+    np.testing.assert_allclose(rules.track_motion, [0.05, 0.05, 0.005, 0.005, 0.005, 0.05])
+    np.testing.assert_allclose(load_model("pioneer").confidence_rules(0.5).track_motion[5], 0.25)
+    assert load_model("airship").confidence_rules(0.1) == ConfidenceRules()  # no motion in its file: the defaults
 
 
 def test_frame_and_vehicle_out_of_range():

@@ -157,7 +157,8 @@ class CameraVehicle(Vehicle):
         self.plausible = Plausibility(scenario.bounds(), config.operating_radius_m, config.max_clock_offset_s)
         self.state = VehicleState(
             Cooperation(scenario.model.evopose_model(), scenario.bounds(),
-                        SearchOptions(time_budget=config.time_budget_s, view_weights=config.view_weights),
+                        SearchOptions(time_budget=config.time_budget_s, view_weights=config.view_weights,
+                                      confidence=scenario.model.confidence_rules(self.period_s)),
                         config.seed),
             self.policy, config.vehicle, scenario.spec.target.name, config.image_encoding)
         self.hints = HintInbox()
