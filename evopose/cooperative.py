@@ -180,7 +180,7 @@ class Cooperation:
             return st, solution
         distance = mahalanobis(deviation(found.pose, search.anchor), found.covariance)[0]
         if distance <= CONFIRM_SIGMAS:  # the search's confident answer is the pose tracked then: confident again
-            return st, solution.with_(confident=True, confidence=found.confidence)
+            return st, solution.with_(confident=True, confidence=found.confidence, track_reference=None)
         moved = pose_difference(solution.pose, search.anchor)  # the target's motion since the search began
         relocated = track(found.with_(pose=found.pose + moved), list(problem.views), problem=problem,
                           options=self.options,

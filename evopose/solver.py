@@ -88,8 +88,10 @@ class Solution:
         precise (one camera at the paper's scale is confident, not precise).
     track_reference : TrackReference or None
         (track) The confident frames of the track so far fused into one pose, which the next frame's pose is
-        gated against (:func:`evopose.uncertainty.track_confidence`); None when this frame is not confident
-        (the next frame starts from this pose and covariance).
+        gated against (:func:`evopose.uncertainty.track_confidence`). A frame that jumped away from it is set
+        aside (not confident) and the track stands: the next frame starts from its pose too, and is confident
+        again if it lies where the track is (at most ``ConfidenceRules.track_set_aside`` such frames in a row).
+        None when the track broke otherwise: the next frame starts from this pose and covariance.
     """
 
     pose: np.ndarray
@@ -340,6 +342,11 @@ def track(previous: Solution, new_views: list[View] | tuple[View, ...], *, probl
     state = local.start(previous.pose)
     if hints is not None and np.size(hints):
         state = local.inject(state, hints)
+    # a frame set aside as a jump (below) left the track standing: its pose is a start too
+    set_aside = not previous.confident and previous.confidence is not None and previous.confidence.reason == "jumped"
+    chained = previous.track_reference if set_aside else None
+    if chained is not None:
+        state = local.inject(state, chained.pose[None])
     run = evolve(local, state, evaluator)
     tracked = run.told.stop_reason == "tracked"
     if tracked or not search_when_lost:
@@ -349,11 +356,16 @@ def track(previous: Solution, new_views: list[View] | tuple[View, ...], *, probl
         current = assess(objective, basin, None, options.confidence,
                          judge=objective.with_weights(objective.base_weights))
         reference = previous.track_reference or TrackReference.of(previous.pose, previous.covariance)
-        confidence = track_confidence(reference, previous.confident and tracked, current, basin, options.confidence)
+        on_track = (previous.confident or chained is not None) and tracked
+        confidence = track_confidence(reference, on_track, current, basin, options.confidence)
         pose, confidence = published(objective, basin, confidence)
+        motion = np.asarray(options.confidence.track_motion, float)
         if confidence.confident:  # this frame joins the track's pose
-            reference = reference.predicted(np.asarray(options.confidence.track_motion, float)).fused(
-                pose, confidence.covariance.matrix)
+            reference = reference.predicted(motion).fused(pose, confidence.covariance.matrix)
+        elif confidence.reason == "jumped":  # set aside: the track stands, a frame on
+            reference = reference.jumped(motion, options.confidence.track_set_aside)
+        else:
+            reference = None
         fitness = float(objective(pose[None])[0])
         terms = objective.view_terms(pose[None])[0]
         return Solution(pose=pose, fitness=fitness, view_terms=terms,
@@ -361,7 +373,7 @@ def track(previous: Solution, new_views: list[View] | tuple[View, ...], *, probl
                         seconds=time.perf_counter() - t0, converged=tracked, stop_reason="tracked" if tracked else "lost",
                         history=[best.best_fitness], from_hint=best.best_from_hint, problem=prob, options=options,
                         covariance=confidence.covariance.matrix, confident=confidence.confident,
-                        confidence=confidence, track_reference=reference if confidence.confident else None)
+                        confidence=confidence, track_reference=reference)
     starts = np.atleast_2d(previous.pose)
     if hints is not None and np.size(hints):
         starts = np.concatenate([starts, np.atleast_2d(hints)])

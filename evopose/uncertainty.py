@@ -22,7 +22,7 @@ against the truth on seeded problems at the telephoto and the paper's image scal
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -75,6 +75,9 @@ class ConfidenceRules:
         vehicle at a few m/s filmed at 10 fps; a target model file that says how its target moves
         (``motion``, docs/design.md "Tracking") sets it per frame: the Pioneer does
         not tilt, and a frame that takes a neighbouring basin 10 deg away in roll is no longer let through.
+    track_set_aside : int
+        A tracked frame that jumped is set aside, not confident, and the track stands for the next frame (which
+        also starts from the track's pose); after this many such frames in a row it does not.
     converged_margin : float
         :attr:`evopose.solver.Solution.converged` also needs the runner-up worse by this margin (a search that
         stopped with a distinct pose about as good has not settled anything).
@@ -97,6 +100,7 @@ class ConfidenceRules:
     same_pairs: float = 0.5
     track_sigmas: float = 4.0
     track_motion: tuple[float, float, float, float, float, float] = (0.1, 0.1, 0.1, 0.1, 0.1, 0.1)
+    track_set_aside: int = 3
     converged_margin: float = 4.0
     max_position_sigma: float = 1.0 / 3.0
     max_rotation_sigma: float = float(np.deg2rad(5.0))
@@ -273,11 +277,14 @@ class TrackReference:
         In the ROS convention (:func:`evopose.covariance.deviation`'s coordinates).
     frames : int
         Frames fused (1: a single estimate).
+    set_aside : int
+        Frames since the last one fused that were set aside as jumps (:func:`evopose.solver.track`).
     """
 
     pose: np.ndarray
     covariance: np.ndarray
     frames: int = 1
+    set_aside: int = 0
 
     @classmethod
     def of(cls, pose: np.ndarray, cov: np.ndarray) -> "TrackReference | None":
@@ -287,7 +294,14 @@ class TrackReference:
 
     def predicted(self, motion: np.ndarray) -> "TrackReference":
         """One frame later: the covariance grown by ``diag(motion^2)`` (motion (6,), 1 sigma per frame)."""
-        return TrackReference(self.pose, self.covariance + np.diag(np.asarray(motion, float) ** 2), self.frames)
+        return TrackReference(self.pose, self.covariance + np.diag(np.asarray(motion, float) ** 2), self.frames,
+                              self.set_aside)
+
+    def jumped(self, motion: np.ndarray, most: int) -> "TrackReference | None":
+        """One frame later past a frame set aside as a jump (:meth:`predicted`); None after ``most`` of them in a
+        row: the track no longer stands for the target."""
+        ahead = self.predicted(motion)
+        return None if self.set_aside >= most else replace(ahead, set_aside=self.set_aside + 1)
 
     def fused(self, pose: np.ndarray, cov: np.ndarray) -> "TrackReference":
         """The reference updated by an estimate ``pose`` (6,) with covariance ``cov`` (6, 6): the Kalman gain
@@ -298,7 +312,7 @@ class TrackReference:
         rotation = Rotation.from_rotvec(step[3:]).as_matrix() @ rotation_from_euler(self.pose[3:])
         fused = np.concatenate([self.pose[:3] + step[:3], euler_from_rotation(rotation)])
         cov_fused = (np.eye(6) - gain) @ P
-        return TrackReference(fused, 0.5 * (cov_fused + cov_fused.T), self.frames + 1)
+        return TrackReference(fused, 0.5 * (cov_fused + cov_fused.T), self.frames + 1, 0)
 
 
 def track_confidence(reference: TrackReference | None, previous_confident: bool, current: Confidence,

@@ -265,8 +265,20 @@ def test_a_jump_within_one_frames_uncertainty_is_caught_by_the_track_of_a_slow_t
         jumped = track(previous, views, search_when_lost=False)
         assert jumped.stop_reason == "tracked" and abs(jumped.pose[3] - tilted[3]) < np.radians(2.0)
         assert np.radians(12.0) < 4 * np.sqrt(2) * single  # within 4 sigma of the frame before alone
-        verdicts[name] = jumped.confidence.reason
-    assert verdicts == {"slow": "jumped", "default": ""}
+        verdicts[name] = jumped
+    assert {name: j.confidence.reason for name, j in verdicts.items()} == {"slow": "jumped", "default": ""}
+    jumped = verdicts["slow"]
+    # the jump was set aside and the track stands: the next frame, back where the target is, is confident again;
+    # after track_set_aside jumps in a row the track no longer stands
+    assert not jumped.confident and jumped.track_reference.set_aside == 1
+    views = [observe(sp.problem.model, c, sp.true_pose, rng, noise=0.7, clutter=0.1, missing=0.1)[0] for c in cameras]
+    back = track(jumped, views)
+    assert back.confident and back.track_reference.set_aside == 0
+    for _ in range(slow.confidence.track_set_aside):
+        jumped = track(jumped, views_jumped := [observe(sp.problem.model, c, tilted, rng, noise=0.7, clutter=0.1,
+                                                        missing=0.1)[0] for c in cameras], search_when_lost=False)
+        assert jumped.confidence.reason == "jumped"
+    assert track(jumped, views_jumped, search_when_lost=False).track_reference is None
 
 
 def test_rules_are_options():
