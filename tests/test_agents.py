@@ -100,6 +100,18 @@ def test_feature_sharing_pairs_both_views_and_both_publish_the_same_pose(teams):
         assert np.linalg.norm(d[:3]) <= 0.01 and np.degrees(np.abs(d[3:])).max() <= 0.1, (n, d)
 
 
+def test_the_first_frame_waits_for_the_camera_team_mates_not_for_the_target_they_waited_for(teams):
+    """A scenario's agents wait for every other vehicle, the target too; the first frame then waits up to --max-age
+    for the team's views, and the target has none to share: it waited them out (1 s of frames at the default)."""
+    team = teams("first-frame")
+    team.start("H1", "--share", "features", "--max-age", "5", frames=10, wait_for="H2,pioneer", listen=True)
+    team.start("H2", "--share", "features", "--max-age", "5", frames=10, wait_for="H1,pioneer")
+    team.start("pioneer", "--share", "none", frames=10, wait_for="H1,H2")
+    s = team.summaries()
+    for vehicle in ("H1", "H2"):  # 5 s waited out would skip ~50 frames of the 10 fps clock
+        assert s[vehicle]["late_frames"] < 20 and s[vehicle]["multi_view_frames"] >= 8, s[vehicle]
+
+
 def test_hints_are_24_bytes_flow_above_100_hz_and_leave_the_pose_as_good_as_alone(teams):
     alone = pair(teams("alone"), "none", 30)
     hinted = pair(teams("hints"), "hint", 30)

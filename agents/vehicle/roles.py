@@ -264,8 +264,9 @@ class CameraVehicle(Vehicle):
         self._report_staleness(alive, expected, stamp_ns)
         expected = self.team.on_clock(expected, lambda stamp: self.clock.index_of(stamp) is not None)
         wait_s = self.sync_wait_s
-        if not self.record.frames:  # the first frame: the team waited for is expected before anything came from it,
-            expected |= set(self.config.wait_for) & set(alive)
+        if not self.record.frames:  # the first frame: the team waited for is expected before anything came from it
+            # (its camera vehicles: the target, waited for too, has no view to share and was waited for in vain),
+            expected |= set(self.config.wait_for) & set(alive) & {v.name for v in self.scenario.spec.vehicles}
             # and given up to max_age: team-mates start their first frame as unevenly as processes start (imports,
             # first calls); a first frame solved alone is a first pose the team does not share
             wait_s = max(wait_s, max_age)
