@@ -7,7 +7,9 @@ Run from the repository root on dataset directories (``evopose render WORLD --ou
 Per dataset both cameras' images go through the contrast front-end, frame 0 is solved from scratch
 (:func:`evopose.solve`) and every later frame tracked (eq. 2, :func:`evopose.track`) from the last converged and
 confident pose, else solved from scratch again (a vehicle keeps searching beside a pose it is unsure of), as a
-vehicle that shares feature sets does, without its time slices. Each estimate is compared with the truth.
+vehicle that shares feature sets does, without its time slices, and with the tracking gate's motion allowance of
+the dataset's model file (``motion``, per frame at the dataset's rate) as an agent has it. Each estimate is compared
+with the truth.
 Reported: the frames converged and confident; of those, how many are ``precise`` (good) and how many of the good
 are more than 5 deg or 0.5 m off (issue 18's bar); the covariance's worst rotation sigma (1 sigma, deg) against the
 rotation error actually made; and the mismatch of the tracked pose (eq. 4's unexplained share), with the number of

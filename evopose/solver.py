@@ -356,14 +356,15 @@ def track(previous: Solution, new_views: list[View] | tuple[View, ...], *, probl
         current = assess(objective, basin, None, options.confidence,
                          judge=objective.with_weights(objective.base_weights))
         reference = previous.track_reference or TrackReference.of(previous.pose, previous.covariance)
+        expected = None if reference is None else reference.predicted(
+            np.asarray(options.confidence.track_motion, float))  # this frame's: a frame's motion on
         on_track = (previous.confident or chained is not None) and tracked
-        confidence = track_confidence(reference, on_track, current, basin, options.confidence)
+        confidence = track_confidence(expected, on_track, current, basin, options.confidence)
         pose, confidence = published(objective, basin, confidence)
-        motion = np.asarray(options.confidence.track_motion, float)
         if confidence.confident:  # this frame joins the track's pose
-            reference = reference.predicted(motion).fused(pose, confidence.covariance.matrix)
-        elif confidence.reason == "jumped":  # set aside: the track stands, a frame on
-            reference = reference.jumped(motion, options.confidence.track_set_aside)
+            reference = expected.fused(pose, confidence.covariance.matrix)
+        elif confidence.reason == "jumped":  # set aside: the track stands
+            reference = expected.passed_over(options.confidence.track_set_aside)
         else:
             reference = None
         fitness = float(objective(pose[None])[0])

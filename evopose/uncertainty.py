@@ -297,11 +297,10 @@ class TrackReference:
         return TrackReference(self.pose, self.covariance + np.diag(np.asarray(motion, float) ** 2), self.frames,
                               self.set_aside)
 
-    def jumped(self, motion: np.ndarray, most: int) -> "TrackReference | None":
-        """One frame later past a frame set aside as a jump (:meth:`predicted`); None after ``most`` of them in a
-        row: the track no longer stands for the target."""
-        ahead = self.predicted(motion)
-        return None if self.set_aside >= most else replace(ahead, set_aside=self.set_aside + 1)
+    def passed_over(self, most: int) -> "TrackReference | None":
+        """This (predicted) reference past a frame set aside as a jump; None after ``most`` of them in a row: the
+        track no longer stands for the target."""
+        return None if self.set_aside >= most else replace(self, set_aside=self.set_aside + 1)
 
     def fused(self, pose: np.ndarray, cov: np.ndarray) -> "TrackReference":
         """The reference updated by an estimate ``pose`` (6,) with covariance ``cov`` (6, 6): the Kalman gain
@@ -315,23 +314,23 @@ class TrackReference:
         return TrackReference(fused, 0.5 * (cov_fused + cov_fused.T), self.frames + 1, 0)
 
 
-def track_confidence(reference: TrackReference | None, previous_confident: bool, current: Confidence,
+def track_confidence(expected: TrackReference | None, previous_confident: bool, current: Confidence,
                      pose: np.ndarray, rules: ConfidenceRules = ConfidenceRules()) -> Confidence:
     """Confidence of a warm-started estimate (eq. 2), which has no population of other basins to compare with.
 
     Confident when the previous estimate was, the new pose (6,) is still matched well (``current``, from
-    :func:`assess` without alternatives, passes the match rules) and it lies within ``rules.track_sigmas`` of the
-    track's ``reference`` (the confident frames since the last search fused, :class:`TrackReference`), under the
-    reference's covariance grown by a frame's motion (``diag(rules.track_motion^2)``) plus the current one. The
+    :func:`assess` without alternatives, passes the match rules) and it lies within ``rules.track_sigmas`` of where
+    the track ``expected`` it (the confident frames since the last search fused, :class:`TrackReference`, already
+    :meth:`~TrackReference.predicted` by a frame's motion ``rules.track_motion``), under that covariance plus the
+    current one. The
     runner-up margin is not re-examined: the previous verdict carries over while the fit holds and stays
     where the track has been, give or take the motion the target can make.
     """
     cov = current.covariance
     reason = current.reason if current.reason != "ambiguous" else ""
-    if not reason and (not previous_confident or reference is None):
+    if not reason and (not previous_confident or expected is None):
         reason = "previous not confident"
     if not reason:
-        expected = reference.predicted(np.asarray(rules.track_motion, float))
         if mahalanobis(deviation(pose, expected.pose), expected.covariance + cov.matrix)[0] > rules.track_sigmas:
             reason = "jumped"
     return Confidence(reason == "", cov, current.n_pairs, current.unmatched, current.margin, current.runner_up,
