@@ -295,11 +295,16 @@ def test_scenario_run_with_ros2_mirrors_every_camera_vehicle_and_the_truth():
         with zenoh.open(peer_config(endpoint)) as session, Ros2Listener(session) as ros:
             prefix = "/exp2a_features_H1_H2_0"
             wanted = {f"{prefix}/H1/target_pose", f"{prefix}/H2/target_pose", f"{prefix}/pioneer/true_pose"}
-            assert ros.wait_for(lambda r: wanted <= {s.topic for s in r.samples()}, 120), (ros.topics(), ros.errors)
+            transforms = {("map", "H1/base_link"), ("H1/base_link", "H1/camera_optical"), ("map", "H2/base_link"),
+                          ("map", "pioneer/truth")}
+
+            def frames(r) -> set[tuple[str, str]]:
+                return {(t.header.frame_id, t.child_frame_id) for s in r.samples("/tf") for t in s.message.transforms}
+
+            # a pose and its /tf are two messages of the mirror: either may come first, so wait for both
+            assert ros.wait_for(lambda r: wanted <= {s.topic for s in r.samples()} and transforms <= frames(r), 120), \
+                (ros.topics(), sorted(frames(ros)), ros.errors)
             assert not ros.errors
-            frames = {(t.header.frame_id, t.child_frame_id) for s in ros.samples("/tf") for t in s.message.transforms}
-        assert {("map", "H1/base_link"), ("H1/base_link", "H1/camera_optical"), ("map", "H2/base_link"),
-                ("map", "pioneer/truth")} <= frames
         result = run.next_record(120, lambda r: "runs" in r)
         assert result["runs"][0]["fleet"] == "exp2a-features-H1-H2-0"
     finally:
