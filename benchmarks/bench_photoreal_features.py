@@ -4,9 +4,11 @@ Run from the repository root on one or more dataset directories (``evopose rende
 
     .venv/bin/python -m benchmarks.bench_photoreal_features datasets/first-paper datasets/first-telephoto
 
-For every camera of every dataset both colour front-ends run on every image: ``marks`` (preset hue bands,
-:func:`evopose.features.detect_colour_marks`) and ``contrast`` (:func:`evopose.blobs.detect_contrast_marks`, sized
-by :func:`evopose.blobs.mark_prior` from the frame's camera and the world's operating area). A detection within the
+For every camera of every dataset the colour front-ends run on every image: ``marks`` (preset hue bands,
+:func:`evopose.features.detect_colour_marks`), ``contrast`` (:func:`evopose.blobs.detect_contrast_marks`, sized
+by :func:`evopose.blobs.mark_prior` from the frame's camera and the world's operating area, with the shipped mark
+scorer, or ``--scorer FILE``) and ``bars`` (the same without a scorer: the hand-set bars alone; for marks of 3 px
+and more the two are one front-end). A detection within the
 match radius of a visible mark's projected centre is a true positive (one-to-one, nearest first): 1.5 px when the
 marks' largest expected radius is under 3 px (the paper's scale), else 3 px. Recall counts the fully visible marks;
 precision every detection; labels the matched detections whose colour is the mark's; position the rms error per
@@ -25,18 +27,20 @@ import numpy as np
 
 from evopose.blobs import SMALL_SPOT_PX, detect_contrast_marks, mark_prior
 from evopose.features import colour_ranges, detect_colour_marks, match_to_truth
+from evopose.mark_scorer import MarkScorer
+from evopose.mark_scorer import load as load_scorer
 from scenarios.dataset import open_dataset
 
 from .report import provenance
 
 DEFAULT_OUT = Path(__file__).resolve().parent / "results" / "photoreal_features.md"
-FRONT_ENDS = ("marks", "contrast")
+FRONT_ENDS = ("marks", "contrast", "bars")
 #: Distances (px) from the nearest mark that band the false detections in the pooled line.
 FALSE_BANDS_PX = (3.0, 6.0, 10.0)
 
 
-def evaluate(directory: Path) -> list[dict]:
-    """One row per camera and front-end of the dataset in ``directory``."""
+def evaluate(directory: Path, scorer: str | MarkScorer = "shipped") -> list[dict]:
+    """One row per camera and front-end of the dataset in ``directory``; ``contrast`` with ``scorer``."""
     dataset = open_dataset(directory)
     world = dataset.world()
     area = world.bounds()
@@ -57,9 +61,9 @@ def evaluate(directory: Path) -> list[dict]:
             prior = mark_prior(camera, world.model.mark_radius, world.model.size, area.lo[:3], area.hi[:3])
             match_px = 1.5 if prior.radius_px[1] < SMALL_SPOT_PX else 3.0
             for name in FRONT_ENDS:
-                det = (detect_contrast_marks(image, world.model.palette, prior, body=world.model.body_colour)
-                       if name == "contrast"
-                       else detect_colour_marks(image, colour_ranges(world.model.palette)))
+                det = (detect_colour_marks(image, colour_ranges(world.model.palette)) if name == "marks"
+                       else detect_contrast_marks(image, world.model.palette, prior, body=world.model.body_colour,
+                                                  scorer=scorer if name == "contrast" else None))
                 found, _ = match_to_truth(det.points, uv[whole], match_px)
                 correct, _ = match_to_truth(det.points, uv, match_px)
                 labelled = sum(det.names[det.labels[i]] == colours[j] for i, j in correct)
@@ -151,12 +155,15 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("datasets", nargs="+", type=Path, help="dataset directories")
     parser.add_argument("--out", type=Path, default=DEFAULT_OUT)
+    parser.add_argument("--scorer", type=Path, default=None,
+                        help="the contrast front-end's mark scorer (JSON of evopose train-scorer; default: shipped)")
     args = parser.parse_args(argv)
+    scorer = "shipped" if args.scorer is None else load_scorer(args.scorer)
     cv2.setNumThreads(1)
     rows = []
     for directory in args.datasets:
-        rows += evaluate(directory)
-        for r in rows[-2 * 2:]:
+        rows += evaluate(directory, scorer)
+        for r in rows[-2 * len(FRONT_ENDS):]:
             print(f"{r['dataset']:20s} {r['camera']:4s} {r['front_end']:8s} recall {r['recall']:.2f} "
                   f"precision {r['precision']:.2f} labels {r['labels']:.2f}", flush=True)
     argv_text = " ".join(argv if argv is not None else sys.argv[1:])

@@ -148,10 +148,15 @@ def label_small_spots(image_bgr: np.ndarray, points: np.ndarray, radius: np.ndar
     """Each spot's colour (index into ``palette_bgr``, (K,)) and a confidence (K,) in [0, 1], 1 - best misfit over
     the second's (:func:`spot_misfits`). Label -1: no colour can be fitted (at the border), or the best explains
     less than ``min_explained`` (default :data:`MIN_EXPLAINED`) of the spot's deviation from its ring."""
+    return labels_of(*spot_misfits(image_bgr, points, radius, palette_bgr, body_bgr), min_explained)
+
+
+def labels_of(misfit: np.ndarray, explained: np.ndarray, min_explained: float | None = None
+              ) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`label_small_spots` from :func:`spot_misfits`' ``misfit`` and ``explained`` (K, C)."""
     min_explained = MIN_EXPLAINED if min_explained is None else min_explained
-    misfit, explained = spot_misfits(image_bgr, points, radius, palette_bgr, body_bgr)
     if misfit.shape[1] == 0 or len(misfit) == 0:
-        return np.full(len(points), -1, int), np.zeros(len(points))
+        return np.full(len(misfit), -1, int), np.zeros(len(misfit))
     order = np.argsort(misfit, axis=1)
     best = misfit[np.arange(len(misfit)), order[:, 0]]
     second = misfit[np.arange(len(misfit)), order[:, 1]] if misfit.shape[1] > 1 else np.full(len(misfit), np.inf)
@@ -161,4 +166,4 @@ def label_small_spots(image_bgr: np.ndarray, points: np.ndarray, radius: np.ndar
     return np.where(np.isfinite(best) & colour, order[:, 0], -1), confidence
 
 
-__all__ = ["chroma_420", "label_small_spots", "ring_colours", "spot_misfits", "to_ycrcb"]
+__all__ = ["chroma_420", "label_small_spots", "labels_of", "ring_colours", "spot_misfits", "to_ycrcb"]

@@ -1,5 +1,5 @@
-"""World commands of the ``evopose`` CLI: ``render`` (what a vehicle sees, or a whole dataset) and ``features``
-(image -> points).
+"""World commands of the ``evopose`` CLI: ``render`` (what a vehicle sees, or a whole dataset), ``features``
+(image -> points) and ``train-scorer`` (the front-end's mark scorer from datasets).
 
 Registered on :data:`agents.cli.main.app`; thin commands that call one service function each
 (:mod:`agents.tools.world`). Input problems raise :class:`scenarios.errors.WorldError`, which
@@ -131,7 +131,28 @@ def features_command(
         console.print(f"{u:9.2f} {v:9.2f}{label}")
 
 
+def train_scorer_command(
+    datasets: Annotated[list[Path], typer.Argument(metavar="DATASET...", show_default=False,
+                                                   help="Dataset directories with truth (docs/datasets.md).")],
+    out: Annotated[Path, typer.Option("--out", "-o", help="The scorer's JSON file.")] = Path("mark_scorer.json"),
+    l2: Annotated[float, typer.Option(min=0.0, max=1e6, help="L2 penalty on the weights.")] = 1.0,
+    as_json: Annotated[bool, typer.Option("--json", help="Print the summary as JSON.")] = False,
+) -> None:
+    """Fit the contrast front-end's mark scorer (2-4 px marks) on rendered datasets with truth."""
+    from agents.tools.train_scorer import train
+
+    console = Console(stderr=True)
+    summary = train(datasets, out, l2=l2, progress=None if as_json else console.print)
+    if as_json:
+        print(json_line(summary))
+        return
+    Console().print(f"{summary['out']}: {summary['candidates']} candidates, {summary['marks']} marks; threshold "
+                    f"{summary['threshold']:.2f} keeps {summary['marks_kept']:.1%} of the marks at precision "
+                    f"{summary['precision']:.1%} (on the fitting data)")
+
+
 def register(app: typer.Typer) -> None:
     """Add the world commands to the CLI ``app``."""
     app.command("render")(render_command)
     app.command("features")(features_command)
+    app.command("train-scorer")(train_scorer_command)

@@ -1,0 +1,97 @@
+"""``evopose train-scorer``: fit the contrast front-end's mark scorer (:mod:`evopose.mark_scorer`) on datasets.
+
+Every camera image of every dataset (docs/datasets.md) goes through the contrast front-end with ``scorer="all"``:
+the lenient candidates and their features. A candidate within ``match_px`` of a mark's projected centre (seen or
+hidden: the dataset's truth, one to one, nearest first) is a mark. The scorer fitted on them is written as JSON;
+the front-end takes it with ``detect_contrast_marks(..., scorer=evopose.mark_scorer.load(path))``.
+Only cameras whose marks are under ``SMALL_SPOT_PX`` (the paper's scale) have candidates to score.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from evopose import mark_scorer
+from evopose.blobs import SMALL_SPOT_PX, detect_contrast_marks, mark_prior
+from evopose.features import match_to_truth
+from scenarios.dataset import open_dataset
+from scenarios.errors import WorldError
+
+#: A candidate this close to a mark's projection (px) is that mark (the feature benchmark's radius at this scale).
+MATCH_PX = 1.5
+
+
+def candidates(directories: Sequence[Path], match_px: float = MATCH_PX,
+               progress: Callable[[str], None] | None = None
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray, tuple[str, ...]]:
+    """The features (K, F) of every small-spot candidate in the datasets, whether each is a mark (K,) bool, its
+    group (K,): the datasets whose cameras start at the same places (:func:`_place`) are one group, and the feature
+    names (:func:`evopose.mark_scorer.feature_names`)."""
+    rows, marks, groups, names, places = [], [], [], None, {}
+    for directory in directories:
+        dataset = open_dataset(Path(directory))
+        group = places.setdefault(_place(dataset), len(places))
+        world = dataset.world()
+        area = world.bounds()
+        colours = tuple(world.model.palette)
+        here = mark_scorer.feature_names(colours)
+        if names is not None and here != names:
+            raise WorldError(f"{directory}: its model's colours {colours} differ from the first dataset's")
+        names = here
+        for cam in dataset.cameras:
+            for k in range(dataset.frames):
+                image = cv2.imread(str(dataset.image_path(cam, k)), cv2.IMREAD_COLOR)
+                if image is None:
+                    raise WorldError(f"{dataset.image_path(cam, k)}: not an image OpenCV can read")
+                prior = mark_prior(dataset.camera(cam, k), world.model.mark_radius, world.model.size, area.lo[:3],
+                                   area.hi[:3])
+                if prior.radius_px[1] >= SMALL_SPOT_PX:
+                    continue
+                found = detect_contrast_marks(image, world.model.palette, prior, body=world.model.body_colour,
+                                              scorer="all")
+                if found.features is None or not len(found):
+                    continue
+                uv = np.array([m.uv for m in dataset.truth(k).cameras[cam].marks], float).reshape(-1, 2)
+                is_mark = np.zeros(len(found), bool)
+                pairs, _ = match_to_truth(found.points, uv, match_px)
+                is_mark[[i for i, _ in pairs]] = True
+                rows.append(found.features)
+                marks.append(is_mark)
+                groups.append(np.full(len(is_mark), group))
+        if progress is not None:
+            progress(f"{directory}: {sum(len(m) for m in marks)} candidates so far")
+    if names is None or not rows:
+        raise WorldError("no small-spot candidates in the datasets (the scorer is for marks under "
+                         f"{SMALL_SPOT_PX} px: the paper's scale)")
+    return np.concatenate(rows), np.concatenate(marks), np.concatenate(groups), names
+
+
+def _place(dataset) -> tuple:
+    """Where the dataset's cameras are at its first frame, to a metre: one geometry under several lights is one
+    group (its frames are alike, so a model held out from one dataset is not held out from its geometry)."""
+    return tuple((name, *np.round(dataset.camera(name, 0).world_from_camera[:3, 3]).astype(int).tolist())
+                 for name in dataset.cameras)
+
+
+def train(directories: Sequence[Path], out: Path, *, l2: float = 1.0, match_px: float = MATCH_PX,
+          progress: Callable[[str], None] | None = None) -> dict:
+    """Fit a scorer on ``directories`` and write it to ``out``; a summary (candidates, marks, threshold, and the
+    fitting data's recall and precision of marks among the candidates it keeps). The threshold is the break-even
+    of :func:`evopose.mark_scorer.fit` with each geometry (:func:`_place`) scored by a model fitted on the others."""
+    features, is_mark, groups, names = candidates(directories, match_px, progress)
+    fitted_on = "evopose train-scorer " + " ".join(Path(d).name for d in directories)
+    scorer = mark_scorer.fit(features, is_mark, names, l2=l2, groups=groups, fitted_on=fitted_on)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    scorer.save(out)
+    kept = scorer.marks(features)
+    return {"out": str(out), "candidates": int(len(is_mark)), "marks": int(is_mark.sum()),
+            "threshold": scorer.threshold, "kept": int(kept.sum()),
+            "marks_kept": float(np.sum(kept & is_mark) / max(is_mark.sum(), 1)),
+            "precision": float(np.sum(kept & is_mark) / max(kept.sum(), 1))}
+
+
+__all__ = ["MATCH_PX", "candidates", "train"]
