@@ -77,7 +77,7 @@ def _place(dataset) -> tuple:
                  for name in dataset.cameras)
 
 
-def train(directories: Sequence[Path], out: Path, *, l2: float = 1.0, match_px: float = MATCH_PX,
+def train(directories: Sequence[Path], out: Path, *, l2: float = 30.0, match_px: float = MATCH_PX,
           progress: Callable[[str], None] | None = None) -> dict:
     """Fit a scorer on ``directories`` and write it to ``out``; a summary (candidates, marks, threshold, and the
     fitting data's recall and precision of marks among the candidates it keeps). The threshold is the break-even
