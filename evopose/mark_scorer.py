@@ -221,14 +221,16 @@ def shipped() -> MarkScorer:
 
 
 def fit(features: np.ndarray, is_mark: np.ndarray, names: tuple[str, ...], *, l2: float = 1.0,
-        groups: np.ndarray | None = None, threshold: float | None = None, fitted_on: str = "") -> MarkScorer:
+        groups: np.ndarray | None = None, keep: float | None = None, threshold: float | None = None,
+        fitted_on: str = "") -> MarkScorer:
     """Fit a :class:`MarkScorer` to ``features`` (K, F) and ``is_mark`` (K,) bool: L2-penalised (``l2`` on every
     weight but the bias) logistic regression on the quadratic expansion, by L-BFGS.
 
-    ``threshold`` None: the probability where the share of marks kept equals the precision of what is kept (the
-    issue's two bars weigh alike), found on held-out data when ``groups`` (K,) names the candidates' worlds: each
-    group scored by a model fitted on the others (a world's frames are alike; a model is over-confident on the
-    frames it was fitted on), else on the fitting data."""
+    ``threshold`` None: with ``keep``, the highest probability that keeps at least that share of the marks; without,
+    where the share of marks kept equals the precision of what is kept (:func:`break_even`). Either on held-out
+    data when ``groups`` (K,) names the candidates' worlds: each group scored by a model fitted on the others (a
+    world's frames are alike; a model is over-confident on the frames it was fitted on), else on the fitting
+    data."""
     x = np.asarray(features, float)
     y = np.asarray(is_mark, bool)
     if x.ndim != 2 or x.shape != (len(y), len(names)) or len(y) < 10 or y.min() == y.max():
@@ -243,7 +245,7 @@ def fit(features: np.ndarray, is_mark: np.ndarray, names: tuple[str, ...], *, l2
                 out = groups == g
                 if y[~out].min() != y[~out].max():
                     held_out[out] = _fit(x[~out], y[~out], names, l2, "").probability(x[out])
-        threshold = break_even(held_out, y)
+        threshold = break_even(held_out, y) if keep is None else keeping(held_out, y, keep)
     return MarkScorer(scorer.names, scorer.mean, scorer.scale, scorer.weights, scorer.bias, float(threshold),
                       fitted_on)
 
@@ -254,6 +256,13 @@ def break_even(probability: np.ndarray, is_mark: np.ndarray) -> float:
     gap = [abs(np.mean(probability[is_mark] >= t) - np.mean(is_mark[probability >= t]))
            if np.any(probability >= t) else np.inf for t in grid]
     return float(grid[int(np.argmin(gap))])
+
+
+def keeping(probability: np.ndarray, is_mark: np.ndarray, share: float) -> float:
+    """The highest threshold (0.01-0.95) that keeps at least ``share`` of the marks."""
+    grid = np.linspace(0.01, 0.95, 95)
+    kept = np.array([np.mean(probability[is_mark] >= t) for t in grid])
+    return float(grid[np.nonzero(kept >= share)[0].max()]) if np.any(kept >= share) else float(grid[0])
 
 
 def _fit(x: np.ndarray, y: np.ndarray, names: tuple[str, ...], l2: float, fitted_on: str) -> MarkScorer:
@@ -275,4 +284,4 @@ def _fit(x: np.ndarray, y: np.ndarray, names: tuple[str, ...], l2: float, fitted
     return MarkScorer(tuple(names), mean, scale, w[:-1], float(w[-1]), 0.5, fitted_on)
 
 
-__all__ = ["FEATURES", "MarkScorer", "break_even", "candidate_features", "feature_names", "fit", "load", "quadratic", "shipped"]
+__all__ = ["FEATURES", "MarkScorer", "break_even", "keeping", "candidate_features", "feature_names", "fit", "load", "quadratic", "shipped"]

@@ -173,27 +173,23 @@ def test_on_the_committed_photoreal_frames_a_found_mark_is_placed_to_a_fraction_
     assert rows and all(r["position_rms_px"] <= rms_px for r in rows), [r["position_rms_px"] for r in rows]
 
 
-@pytest.mark.parametrize("name, recall, precision", [("paper", 0.75, 0.5), ("telephoto", 0.95, 0.8)])
+@pytest.mark.parametrize("name, recall, precision", [("paper", 0.75, 0.8), ("telephoto", 0.95, 0.8)])
 def test_on_the_committed_photoreal_frames_the_contrast_front_end_with_the_body_finds_the_marks(name, recall,
                                                                                              precision):
     # Blender Cycles frames (tests/data/photoreal, docs/datasets.md): at telephoto the recall bar (0.95;
     # measured 1.00, precision 0.83; 0.95 / 0.77 without re-centring an oblique disc's window); at the paper's
-    # scale its bars (0.8 / 0.8) are not met yet and these are the levels measured (BENCHMARKS.md: recall 0.79,
-    # precision 0.56 here; the front-end takes a weak mark beside a strong one, which costs precision), so a
-    # regression fails the benchmark's own evaluation (match radius, recall over whole marks, precision over every
-    # detection)
-    from benchmarks.bench_photoreal_features import evaluate
+    # scale the precision bar (0.8; measured 0.89 with the shipped mark scorer, 0.56 with the hand-set bars
+    # alone) and the recall measured (0.77; 0.79 with the bars; the 0.8 is not met there), so a regression
+    # fails the benchmark's own evaluation (match radius, recall over whole marks, precision over every detection)
+    from benchmarks.bench_photoreal_features import evaluate, pooled
 
     every = evaluate(Path(__file__).parent / "data" / "photoreal" / name)
-    pooled = {}
-    for front_end in ("contrast", "marks"):
-        rows = [r for r in every if r["front_end"] == front_end]
-        marks, detections = sum(r["marks"] for r in rows), sum(r["detections"] for r in rows)
-        pooled[front_end] = (sum(r["recall"] * r["marks"] for r in rows) / marks,
-                             sum(r["precision"] * r["detections"] for r in rows) / max(detections, 1))
-    assert pooled["contrast"][0] >= recall and pooled["contrast"][1] >= precision, pooled
-    if name == "paper":  # where the hue bands are blind (0.13 recall here)
-        assert pooled["contrast"][0] > 3 * pooled["marks"][0], pooled
+    found = {front_end: pooled(every, front_end) for front_end in ("contrast", "bars", "marks")}
+    assert found["contrast"]["recall"] >= recall and found["contrast"]["precision"] >= precision, found
+    if name == "paper":  # where the hue bands are blind (0.13 recall here) and the scorer drops the body's detail
+        assert found["contrast"]["recall"] > 3 * found["marks"]["recall"], found
+        assert found["contrast"]["precision"] > found["bars"]["precision"] + 0.2, found
+        assert found["contrast"]["recall"] > found["bars"]["recall"] - 0.05, found
 
 
 def test_on_the_committed_frames_without_the_target_no_body_paint_means_no_marks():

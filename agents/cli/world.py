@@ -147,9 +147,10 @@ def train_scorer_command(
     if as_json:
         print(json_line(summary))
         return
-    Console().print(f"{summary['out']}: {summary['candidates']} candidates, {summary['marks']} marks; threshold "
-                    f"{summary['threshold']:.2f} keeps {summary['marks_kept']:.1%} of the marks at precision "
-                    f"{summary['precision']:.1%} (on the fitting data)")
+    Console().print(f"{summary['out']}: {summary['candidates']} candidates, {summary['marks']} marks (the hand-set "
+                    f"bars find {summary['bars_keep']:.1%}); threshold {summary['threshold']:.2f} keeps "
+                    f"{summary['marks_kept']:.1%} of the marks at precision {summary['precision']:.1%} (on the "
+                    f"fitting data)")
 
 
 def register(app: typer.Typer) -> None:
