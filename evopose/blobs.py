@@ -45,6 +45,7 @@ import numpy as np
 
 from .body_paint import body_paint, body_region, paint_around
 from .features import MarkDetections, _coverage, _to_bgr
+from .mark_prior import MarkPrior, mark_prior
 from .mark_scorer import MarkScorer, candidate_features, feature_names, shipped
 from .spot_colour import label_small_spots, labels_of, ring_colours, spot_misfits
 
@@ -90,24 +91,6 @@ MAX_LABEL_MISFIT_ON_BODY, SMALL_SPOT_PX = 1.0, 3.0
 #: 0.857 (0.808 with the bars), 2629 candidates against 1479 detections.
 CANDIDATE_K_SIGMA, CANDIDATE_PAINT_AROUND, CANDIDATE_EXPLAINED = 4.0, 0.05, 0.05
 CHANNEL_PEAKS = True
-
-
-@dataclass(frozen=True)
-class MarkPrior:
-    """What the camera's geometry says about the marks in its image.
-
-    ``radius_px``: the smallest and the largest radius a mark can have, pixels (mark radius times focal length
-    over the farthest and the nearest distance of the operating area; an oblique disc is narrower). ``extent_px``:
-    the target's largest extent in pixels at the nearest distance, or None (no context filter).
-    """
-
-    radius_px: tuple[float, float] = (0.7, 12.0)
-    extent_px: float | None = None
-
-    def __post_init__(self) -> None:
-        lo, hi = self.radius_px
-        if not (0 < lo <= hi and np.isfinite(hi)):
-            raise ValueError(f"radius_px must be 0 < lo <= hi, got {self.radius_px}")
 
 
 def _srgb_to_linear(x: np.ndarray) -> np.ndarray:
@@ -309,27 +292,11 @@ def _detect(bgr: np.ndarray, lin: np.ndarray, names: tuple[str, ...], palette: M
     if len(lvl) > 4 * max_marks:   # strongest first
         top = np.argsort(-mag[lvl, ys, xs])[:4 * max_marks]
         lvl, ys, xs, radius = lvl[top], ys[top], xs[top], radius[top]
-    # the contrast direction at each peak, and the response projected on it (one signed channel)
-    d = dog[lvl, ys, xs]                                                # (K, 3)
-    d_unit = d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-9)
-    pts, ok = np.zeros((len(lvl), 2)), np.ones(len(lvl), bool)
-    for i, (l, y, x) in enumerate(zip(lvl.tolist(), ys.tolist(), xs.tolist())):
-        patch = np.einsum("ijc,c->ij", dog[l, y - 1:y + 2, x - 1:x + 2], d_unit[i])   # (3, 3), peak positive
-        dxx = patch[1, 2] - 2 * patch[1, 1] + patch[1, 0]
-        dyy = patch[2, 1] - 2 * patch[1, 1] + patch[0, 1]
-        dxy = (patch[2, 2] - patch[2, 0] - patch[0, 2] + patch[0, 0]) / 4
-        tr, det = dxx + dyy, dxx * dyy - dxy * dxy
-        r = max_edge_ratio
-        if det <= 0 or tr * tr / det >= (r + 1) ** 2 / r:
-            ok[i] = False
-            continue
-        gx, gy = (patch[1, 2] - patch[1, 0]) / 2, (patch[2, 1] - patch[0, 1]) / 2
-        off = -np.linalg.solve(np.array([[dxx, dxy], [dxy, dyy]]), np.array([gx, gy]))
-        pts[i] = (x + np.clip(off[0], -0.5, 0.5), y + np.clip(off[1], -0.5, 0.5))
-    lvl, ys, xs, radius, pts = lvl[ok], ys[ok], xs[ok], radius[ok], pts[ok]
     if region is not None:  # context: on or beside the body's paint, and (a mark on a face) ringed by it
         on = region[ys, xs]
-        lvl, ys, xs, radius, pts = lvl[on], ys[on], xs[on], radius[on], pts[on]
+        lvl, ys, xs, radius = lvl[on], ys[on], xs[on], radius[on]
+    ok, pts = _round_peaks(dog, lvl, ys, xs, max_edge_ratio)
+    lvl, ys, xs, radius, pts = lvl[ok], ys[ok], xs[ok], radius[ok], pts[ok]
     # colours: the spot (finest blur at the centre) and its ring (median around, outside the mark), linear light
     spot = np.array([lin[y, x] if r < 1.5 else cv2.GaussianBlur(lin[max(y - 2, 0):y + 3, max(x - 2, 0):x + 3],
                                                                 (0, 0), 0.5 * r)[min(y, 2), min(x, 2)]
@@ -349,9 +316,10 @@ def _detect(bgr: np.ndarray, lin: np.ndarray, names: tuple[str, ...], palette: M
     pts = _coverage_centroids(lin, pts, radius, spot[good], ring[good])
     # one detection per place: a stronger peak within its radius (another scale of the same spot) wins
     order = np.argsort(-contrast)
+    same = _same_spots(pts, radius)
     taken: list[int] = []
     for i in order.tolist():
-        if all(not _same_spot(pts[i], radius[i], pts[j], radius[j]) for j in taken):
+        if not same[i, taken].any():
             taken.append(i)
         if len(taken) >= max_marks:
             break
@@ -388,6 +356,35 @@ def _detect(bgr: np.ndarray, lin: np.ndarray, names: tuple[str, ...], palette: M
                          None if features is None else features[order])
 
 
+def _round_peaks(dog: np.ndarray, lvl: np.ndarray, ys: np.ndarray, xs: np.ndarray, max_edge_ratio: float
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """Which peaks of the difference-of-Gaussian stack ``dog`` (S - 1, H, W, 3) at (``lvl``, ``ys``, ``xs``) (K,)
+    are spots, not edges (the Hessian of the response projected on the peak's contrast direction: positive definite,
+    its eigenvalues' ratio under ``max_edge_ratio``), and their sub-pixel positions (K, 2) (a quadratic through the
+    3 x 3 neighbourhood, at most half a pixel from the peak)."""
+    k = len(lvl)
+    if k == 0:
+        return np.zeros(0, bool), np.zeros((0, 2))
+    d = dog[lvl, ys, xs]                                                # (K, 3) the contrast direction
+    d_unit = d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-9)
+    dy, dx = np.mgrid[-1:2, -1:2]
+    patch = np.einsum("kijc,kc->kij", dog[lvl[:, None, None], ys[:, None, None] + dy, xs[:, None, None] + dx],
+                      d_unit)                                           # (K, 3, 3), peak positive
+    dxx = patch[:, 1, 2] - 2 * patch[:, 1, 1] + patch[:, 1, 0]
+    dyy = patch[:, 2, 1] - 2 * patch[:, 1, 1] + patch[:, 0, 1]
+    dxy = (patch[:, 2, 2] - patch[:, 2, 0] - patch[:, 0, 2] + patch[:, 0, 0]) / 4
+    tr, det = dxx + dyy, dxx * dyy - dxy * dxy
+    r = max_edge_ratio
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ok = (det > 0) & (tr * tr / np.where(det > 0, det, 1.0) < (r + 1) ** 2 / r)
+    gx, gy = (patch[:, 1, 2] - patch[:, 1, 0]) / 2, (patch[:, 2, 1] - patch[:, 0, 1]) / 2
+    safe = np.where(ok, det, 1.0)
+    off_x = -(dyy * gx - dxy * gy) / safe                               # the 2 x 2 system solved in closed form
+    off_y = -(dxx * gy - dxy * gx) / safe
+    pts = np.stack([xs + np.clip(off_x, -0.5, 0.5), ys + np.clip(off_y, -0.5, 0.5)], axis=1)
+    return ok, np.where(ok[:, None], pts, 0.0)
+
+
 def _coverage_centroids(lin: np.ndarray, pts: np.ndarray, radius: np.ndarray, spot: np.ndarray,
                         ring: np.ndarray) -> np.ndarray:
     """Each spot's position as the centroid of its coverage (:func:`evopose.features._coverage`: a pixel's share
@@ -400,7 +397,26 @@ def _coverage_centroids(lin: np.ndarray, pts: np.ndarray, radius: np.ndarray, sp
     Shapes: lin (H, W, 3), pts (K, 2), radius (K,), spot and ring (K, 3)."""
     h, w = lin.shape[:2]
     out = pts.copy()
+    small = radius < SMALL_SPOT_PX
+    for r in np.unique(radius[small]):  # one step, spots of one radius together
+        at = np.nonzero(small & (radius == r))[0]
+        reach = r + 1.5
+        span = int(np.ceil(2 * reach)) + 2
+        u, v = pts[at, 0], pts[at, 1]
+        xs = np.maximum(np.floor(u - reach).astype(int), 0)[:, None] + np.arange(span)[None, :]
+        ys = np.maximum(np.floor(v - reach).astype(int), 0)[:, None] + np.arange(span)[None, :]
+        inside = ((xs < w)[:, None, :] & (ys < h)[:, :, None]
+                  & (np.hypot(xs[:, None, :] - u[:, None, None], ys[:, :, None] - v[:, None, None]) <= reach))
+        window = lin[np.minimum(ys, h - 1)[:, :, None], np.minimum(xs, w - 1)[:, None, :]]   # (N, span, span, 3)
+        a = _coverage(window - ring[at, None, None, :], (spot[at] - ring[at])[:, None, None, :]) * inside
+        total = a.sum(axis=(1, 2))
+        some = total > 1e-6
+        cx = (a * xs[:, None, :]).sum(axis=(1, 2)) / np.where(some, total, 1.0)
+        cy = (a * ys[:, :, None]).sum(axis=(1, 2)) / np.where(some, total, 1.0)
+        out[at[some]] = np.stack([cx, cy], axis=1)[some]
     for i, (peak, r) in enumerate(zip(pts, radius)):
+        if r < SMALL_SPOT_PX:
+            continue
         reach = r + 1.5
         centre = peak
         steps = CENTROID_STEPS if r >= SMALL_SPOT_PX else 1
@@ -424,12 +440,13 @@ def _coverage_centroids(lin: np.ndarray, pts: np.ndarray, radius: np.ndarray, sp
     return out
 
 
-def _same_spot(p: np.ndarray, r: float, q: np.ndarray, s: float) -> bool:
-    """Whether two peaks are one spot: within the larger radius (two scales of one disc), or a small peak on the
-    rim of a much larger one (an oblique disc's ends, its anti-aliased outline)."""
-    d = float(np.hypot(*(p - q)))
-    big, small = max(r, s), min(r, s)
-    return d <= max(big, 1.0) or (big >= 1.8 * small and d < 1.3 * (big + small))
+def _same_spots(pts: np.ndarray, radius: np.ndarray) -> np.ndarray:
+    """Whether each two peaks ``pts`` (K, 2) of ``radius`` (K,) are one spot, bool (K, K): within the larger radius
+    (two scales of one disc), or a small peak on the rim of a much larger one (an oblique disc's ends, its
+    anti-aliased outline)."""
+    d = np.hypot(pts[:, None, 0] - pts[None, :, 0], pts[:, None, 1] - pts[None, :, 1])
+    big, small = np.maximum(radius[:, None], radius[None, :]), np.minimum(radius[:, None], radius[None, :])
+    return (d <= np.maximum(big, 1.0)) | ((big >= 1.8 * small) & (d < 1.3 * (big + small)))
 
 
 def _densest_cluster(pts: np.ndarray, weight: np.ndarray, radius: float) -> np.ndarray:
@@ -444,23 +461,5 @@ def _densest_cluster(pts: np.ndarray, weight: np.ndarray, radius: float) -> np.n
     return np.nonzero(np.linalg.norm(pts - mean, axis=1) <= radius)[0]
 
 
-__all__ = ["ContrastMarks", "MarkPrior", "contrast_responses", "detect_contrast_marks", "label_colours", "scales"]
-
-
-def mark_prior(camera, mark_radius: float, target_extent: float, lo: np.ndarray, hi: np.ndarray,
-               min_facing: float = 0.3) -> MarkPrior:
-    """The :class:`MarkPrior` of ``camera`` (a :class:`evopose.Camera` with its ``world_from_camera``) for a target
-    whose marks have radius ``mark_radius`` and whose largest extent is ``target_extent`` (metres), somewhere in
-    the box ``lo``..``hi`` (world x, y, z, shape (3,) each: the operating area). A disc seen at ``min_facing``
-    (cosine) is that much narrower."""
-    corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])], float)
-    p_cam = corners @ camera.world_from_camera[:3, :3] - camera.world_from_camera[:3, 3] @ camera.world_from_camera[
-        :3, :3]
-    dist = np.linalg.norm(p_cam, axis=1)
-    centre = camera.world_from_camera[:3, :3].T @ ((lo + hi) / 2 - camera.world_from_camera[:3, 3])
-    near = max(float(dist.min()) if np.all(p_cam[:, 2] > 0) else float(np.linalg.norm(centre)) * 0.5, 1e-3)
-    near = max(near - target_extent, 1e-3)
-    far = float(dist.max()) + target_extent
-    f = max(camera.fx, camera.fy)
-    return MarkPrior((max(0.5, min_facing * f * mark_radius / far), f * mark_radius / near),
-                     f * target_extent / near)
+__all__ = ["ContrastMarks", "MarkPrior", "contrast_responses", "detect_contrast_marks", "label_colours", "mark_prior",
+           "scales"]

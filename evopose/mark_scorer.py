@@ -100,14 +100,16 @@ def candidate_features(bgr: np.ndarray, lab: np.ndarray, points: np.ndarray, rad
         dog[at, :3] = fine[px[at, 1], px[at, 0]]
         dog[at, 3:6] = blurred[px[at, 1], px[at, 0]] - cv2.GaussianBlur(lab, (0, 0), float(s) * 3.0)[px[at, 1],
                                                                                                       px[at, 0]]
-        for i in at:
-            x, y = inner[i]
-            d = fine[y, x] / max(float(np.linalg.norm(fine[y, x])), 1e-9)
-            patch = fine[y - 1:y + 2, x - 1:x + 2] @ d
-            dxx, dyy = patch[1, 2] - 2 * patch[1, 1] + patch[1, 0], patch[2, 1] - 2 * patch[1, 1] + patch[0, 1]
-            dxy = (patch[2, 2] - patch[2, 0] - patch[0, 2] + patch[0, 0]) / 4
-            det = dxx * dyy - dxy * dxy
-            dog[i, 6] = np.log(min((dxx + dyy) ** 2 / det, MAX_EDGE_RATIO) if det > 1e-12 else MAX_EDGE_RATIO)
+        x, y = inner[at, 0], inner[at, 1]
+        d = fine[y, x] / np.maximum(np.linalg.norm(fine[y, x], axis=1, keepdims=True), 1e-9)       # (N, 3)
+        oy, ox = np.mgrid[-1:2, -1:2]
+        patch = np.einsum("nijc,nc->nij", fine[y[:, None, None] + oy, x[:, None, None] + ox], d)   # (N, 3, 3)
+        dxx = patch[:, 1, 2] - 2 * patch[:, 1, 1] + patch[:, 1, 0]
+        dyy = patch[:, 2, 1] - 2 * patch[:, 1, 1] + patch[:, 0, 1]
+        dxy = (patch[:, 2, 2] - patch[:, 2, 0] - patch[:, 0, 2] + patch[:, 0, 0]) / 4
+        det = dxx * dyy - dxy * dxy
+        ratio = (dxx + dyy) ** 2 / np.where(det > 1e-12, det, 1.0)
+        dog[at, 6] = np.log(np.where(det > 1e-12, np.minimum(ratio, MAX_EDGE_RATIO), MAX_EDGE_RATIO))
     out[:, :len(FEATURES)] = np.column_stack([
         np.log(np.maximum(contrast, 1e-6)), confidence, radius, explained[rows, labels],
         np.sort(explained, axis=1)[:, -2] if c > 1 else 0.0, order[:, 0], np.minimum(second / np.maximum(

@@ -71,17 +71,29 @@ def chroma_420(field: np.ndarray, x0: int, y0: int) -> np.ndarray:
 def ring_colours(image: np.ndarray, points: np.ndarray, radius: np.ndarray) -> np.ndarray:
     """The median colour (K, C) of each spot's ring in ``image`` (H, W, C), ``radius + 1.5`` to ``radius + 3`` px
     from ``points`` (K, 2): the surroundings a spot is blended with (here in Y Cr Cb; :mod:`evopose.blobs` in
-    linear light)."""
+    linear light). Spots of one radius are taken together (a window of pixels around each, outside the ring or the
+    image left out of the median)."""
     h, w = image.shape[:2]
+    points, radius = np.asarray(points, float).reshape(-1, 2), np.asarray(radius, float).reshape(-1)
     out = np.zeros((len(points), image.shape[2]))
-    for i, ((u, v), r) in enumerate(zip(points, radius)):
+    for r in np.unique(radius):
+        at = np.nonzero(radius == r)[0]
         reach = r + 3.0
-        x0, x1 = max(int(np.floor(u - reach)), 0), min(int(np.ceil(u + reach)) + 1, w)
-        y0, y1 = max(int(np.floor(v - reach)), 0), min(int(np.ceil(v + reach)) + 1, h)
-        yy, xx = np.mgrid[y0:y1, x0:x1]
-        dist = np.hypot(xx - u, yy - v)
-        sel = (dist >= r + 1.5) & (dist <= reach)
-        out[i] = np.median(image[y0:y1, x0:x1][sel], axis=0) if sel.any() else image[int(round(v)), int(round(u))]
+        span = int(np.ceil(2 * reach)) + 2
+        u, v = points[at, 0], points[at, 1]
+        xs = np.floor(u - reach).astype(int)[:, None] + np.arange(span)[None, :]          # (N, span)
+        ys = np.floor(v - reach).astype(int)[:, None] + np.arange(span)[None, :]
+        dist = np.hypot(xs[:, None, :] - u[:, None, None], ys[:, :, None] - v[:, None, None])  # (N, span, span)
+        inside = ((xs >= 0) & (xs < w))[:, None, :] & ((ys >= 0) & (ys < h))[:, :, None]
+        sel = (dist >= r + 1.5) & (dist <= reach) & inside
+        values = image[np.clip(ys, 0, h - 1)[:, :, None], np.clip(xs, 0, w - 1)[:, None, :]].astype(float)
+        values[~sel] = np.nan                                                              # (N, span, span, C)
+        flat = values.reshape(len(at), -1, image.shape[2])
+        some = sel.reshape(len(at), -1).any(axis=1)
+        if some.any():
+            out[at[some]] = np.nanmedian(flat[some], axis=1)
+        for i in at[~some]:
+            out[i] = image[int(round(points[i, 1])), int(round(points[i, 0]))]
     return out
 
 
