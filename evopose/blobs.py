@@ -44,10 +44,11 @@ import cv2
 import numpy as np
 
 from .body_paint import body_paint, body_region, paint_around
-from .features import MarkDetections, _coverage, _to_bgr
+from .features import MarkDetections, _to_bgr
 from .mark_prior import MarkPrior, mark_prior
 from .mark_scorer import MarkScorer, candidate_features, feature_names, shipped
 from .spot_colour import label_small_spots, labels_of, ring_colours, spot_misfits
+from .spot_position import SMALL_SPOT_PX, coverage_centroids, round_peaks
 
 #: Scale steps per octave of the scale space.
 STEPS_PER_OCTAVE = 3
@@ -79,12 +80,10 @@ MIN_PAINT_AROUND = 0.2
 #: Least pixels beside the body for the response's spread to be taken there (else over the whole crop), and the
 #: least margin of ground kept around the body (the spread is the ground's texture, not the body's outline).
 MIN_BACKGROUND_PX, MIN_MARGIN_PX = 200, 48
-#: Most re-centrings of a spot's coverage window (:func:`_coverage_centroids`).
-CENTROID_STEPS = 6
 #: With the body context, where the prior's largest mark radius is under :data:`SMALL_SPOT_PX`, a spot may misfit
 #: its label this much: the encoder's 4:2:0 chroma (2 x 2 px blocks) leaves such a mark's colour far off its
 #: paint's line, and the body, not the label, rejects the clutter.
-MAX_LABEL_MISFIT_ON_BODY, SMALL_SPOT_PX = 1.0, 3.0
+MAX_LABEL_MISFIT_ON_BODY = 1.0
 #: With a :class:`evopose.mark_scorer.MarkScorer` (spots under :data:`SMALL_SPOT_PX` on a body) the candidates'
 #: bars: response, paint around, share explained by the colour (instead of K_SIGMA, MIN_PAINT_AROUND and
 #: evopose.spot_colour.MIN_EXPLAINED); the scorer then decides. Cycles paper-scale sweep: recall of the candidates
@@ -295,7 +294,7 @@ def _detect(bgr: np.ndarray, lin: np.ndarray, names: tuple[str, ...], palette: M
     if region is not None:  # context: on or beside the body's paint, and (a mark on a face) ringed by it
         on = region[ys, xs]
         lvl, ys, xs, radius = lvl[on], ys[on], xs[on], radius[on]
-    ok, pts = _round_peaks(dog, lvl, ys, xs, max_edge_ratio)
+    ok, pts = round_peaks(dog, lvl, ys, xs, max_edge_ratio)
     lvl, ys, xs, radius, pts = lvl[ok], ys[ok], xs[ok], radius[ok], pts[ok]
     # colours: the spot (finest blur at the centre) and its ring (median around, outside the mark), linear light
     spot = np.array([lin[y, x] if r < 1.5 else cv2.GaussianBlur(lin[max(y - 2, 0):y + 3, max(x - 2, 0):x + 3],
@@ -313,7 +312,7 @@ def _detect(bgr: np.ndarray, lin: np.ndarray, names: tuple[str, ...], palette: M
     lvl, ys, xs, radius, pts, labels, conf = lvl[good], ys[good], xs[good], radius[good], pts[good], labels[good], \
         conf[good]
     contrast = mag[lvl, ys, xs] / thresh[lvl]
-    pts = _coverage_centroids(lin, pts, radius, spot[good], ring[good])
+    pts = coverage_centroids(lin, pts, radius, spot[good], ring[good])
     # one detection per place: a stronger peak within its radius (another scale of the same spot) wins
     order = np.argsort(-contrast)
     same = _same_spots(pts, radius)
@@ -354,90 +353,6 @@ def _detect(bgr: np.ndarray, lin: np.ndarray, names: tuple[str, ...], palette: M
     return ContrastMarks(pts[order].reshape(-1, 2), labels[order].astype(int), areas[order], names,
                          np.zeros(len(order), bool), conf[order], radius[order], contrast[order],
                          None if features is None else features[order])
-
-
-def _round_peaks(dog: np.ndarray, lvl: np.ndarray, ys: np.ndarray, xs: np.ndarray, max_edge_ratio: float
-                 ) -> tuple[np.ndarray, np.ndarray]:
-    """Which peaks of the difference-of-Gaussian stack ``dog`` (S - 1, H, W, 3) at (``lvl``, ``ys``, ``xs``) (K,)
-    are spots, not edges (the Hessian of the response projected on the peak's contrast direction: positive definite,
-    its eigenvalues' ratio under ``max_edge_ratio``), and their sub-pixel positions (K, 2) (a quadratic through the
-    3 x 3 neighbourhood, at most half a pixel from the peak)."""
-    k = len(lvl)
-    if k == 0:
-        return np.zeros(0, bool), np.zeros((0, 2))
-    d = dog[lvl, ys, xs]                                                # (K, 3) the contrast direction
-    d_unit = d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-9)
-    dy, dx = np.mgrid[-1:2, -1:2]
-    patch = np.einsum("kijc,kc->kij", dog[lvl[:, None, None], ys[:, None, None] + dy, xs[:, None, None] + dx],
-                      d_unit)                                           # (K, 3, 3), peak positive
-    dxx = patch[:, 1, 2] - 2 * patch[:, 1, 1] + patch[:, 1, 0]
-    dyy = patch[:, 2, 1] - 2 * patch[:, 1, 1] + patch[:, 0, 1]
-    dxy = (patch[:, 2, 2] - patch[:, 2, 0] - patch[:, 0, 2] + patch[:, 0, 0]) / 4
-    tr, det = dxx + dyy, dxx * dyy - dxy * dxy
-    r = max_edge_ratio
-    with np.errstate(divide="ignore", invalid="ignore"):
-        ok = (det > 0) & (tr * tr / np.where(det > 0, det, 1.0) < (r + 1) ** 2 / r)
-    gx, gy = (patch[:, 1, 2] - patch[:, 1, 0]) / 2, (patch[:, 2, 1] - patch[:, 0, 1]) / 2
-    safe = np.where(ok, det, 1.0)
-    off_x = -(dyy * gx - dxy * gy) / safe                               # the 2 x 2 system solved in closed form
-    off_y = -(dxx * gy - dxy * gx) / safe
-    pts = np.stack([xs + np.clip(off_x, -0.5, 0.5), ys + np.clip(off_y, -0.5, 0.5)], axis=1)
-    return ok, np.where(ok[:, None], pts, 0.0)
-
-
-def _coverage_centroids(lin: np.ndarray, pts: np.ndarray, radius: np.ndarray, spot: np.ndarray,
-                        ring: np.ndarray) -> np.ndarray:
-    """Each spot's position as the centroid of its coverage (:func:`evopose.features._coverage`: a pixel's share
-    of the spot's colour on the line ring -> spot, in linear light) within its radius + 1.5 px: the covered
-    area's centre, to a tenth of a pixel for 2-4 px marks where a peak's quadratic is coarser. The window is
-    re-centred on the centroid (mean shift, :data:`CENTROID_STEPS` at most, within the radius of the peak): a
-    disc seen obliquely is an ellipse whose response peaks off its centre along the long axis, and a window
-    around the peak cuts it (3 px off on a telephoto top face). Not under :data:`SMALL_SPOT_PX`, where marks 3-5
-    px apart would draw the window onto a neighbour (recall 0.73 -> 0.72 on the Cycles paper-scale sweep).
-    Shapes: lin (H, W, 3), pts (K, 2), radius (K,), spot and ring (K, 3)."""
-    h, w = lin.shape[:2]
-    out = pts.copy()
-    small = radius < SMALL_SPOT_PX
-    for r in np.unique(radius[small]):  # one step, spots of one radius together
-        at = np.nonzero(small & (radius == r))[0]
-        reach = r + 1.5
-        span = int(np.ceil(2 * reach)) + 2
-        u, v = pts[at, 0], pts[at, 1]
-        xs = np.maximum(np.floor(u - reach).astype(int), 0)[:, None] + np.arange(span)[None, :]
-        ys = np.maximum(np.floor(v - reach).astype(int), 0)[:, None] + np.arange(span)[None, :]
-        inside = ((xs < w)[:, None, :] & (ys < h)[:, :, None]
-                  & (np.hypot(xs[:, None, :] - u[:, None, None], ys[:, :, None] - v[:, None, None]) <= reach))
-        window = lin[np.minimum(ys, h - 1)[:, :, None], np.minimum(xs, w - 1)[:, None, :]]   # (N, span, span, 3)
-        a = _coverage(window - ring[at, None, None, :], (spot[at] - ring[at])[:, None, None, :]) * inside
-        total = a.sum(axis=(1, 2))
-        some = total > 1e-6
-        cx = (a * xs[:, None, :]).sum(axis=(1, 2)) / np.where(some, total, 1.0)
-        cy = (a * ys[:, :, None]).sum(axis=(1, 2)) / np.where(some, total, 1.0)
-        out[at[some]] = np.stack([cx, cy], axis=1)[some]
-    for i, (peak, r) in enumerate(zip(pts, radius)):
-        if r < SMALL_SPOT_PX:
-            continue
-        reach = r + 1.5
-        centre = peak
-        steps = CENTROID_STEPS if r >= SMALL_SPOT_PX else 1
-        for _ in range(steps):
-            u, v = centre
-            x0, x1 = max(int(np.floor(u - reach)), 0), min(int(np.ceil(u + reach)) + 1, w)
-            y0, y1 = max(int(np.floor(v - reach)), 0), min(int(np.ceil(v + reach)) + 1, h)
-            yy, xx = np.mgrid[y0:y1, x0:x1]
-            inside = np.hypot(xx - u, yy - v) <= reach
-            a = _coverage(lin[y0:y1, x0:x1] - ring[i], (spot[i] - ring[i])[None, None, :]) * inside
-            if a.sum() <= 1e-6:
-                break
-            moved = np.array([(a * xx).sum() / a.sum(), (a * yy).sum() / a.sum()])
-            if steps > 1:  # re-centring: never farther than the spot's radius from its peak (its own spot)
-                offset = moved - peak
-                moved = peak + offset * min(1.0, r / max(float(np.hypot(*offset)), 1e-9))
-            step, centre = float(np.hypot(*(moved - centre))), moved
-            if step < 0.05:
-                break
-        out[i] = centre
-    return out
 
 
 def _same_spots(pts: np.ndarray, radius: np.ndarray) -> np.ndarray:

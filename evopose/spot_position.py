@@ -1,0 +1,101 @@
+"""Where a 2-12 px spot lies, to a fraction of a pixel (the contrast front-end's positions, :mod:`evopose.blobs`):
+the sub-pixel peak of its scale-space response, a spot and not an edge by the response's Hessian, and the centroid
+of its coverage (the share of each pixel the spot's colour covers, on the line from its ring through it)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .features import _coverage
+
+#: Spots under this radius (px) are the paper's scale: one centroid step, spots of one radius together.
+SMALL_SPOT_PX = 3.0
+#: Most re-centrings of a spot's coverage window (:func:`coverage_centroids`).
+CENTROID_STEPS = 6
+
+
+def round_peaks(dog: np.ndarray, lvl: np.ndarray, ys: np.ndarray, xs: np.ndarray, max_edge_ratio: float
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """Which peaks of the difference-of-Gaussian stack ``dog`` (S - 1, H, W, 3) at (``lvl``, ``ys``, ``xs``) (K,)
+    are spots, not edges (the Hessian of the response projected on the peak's contrast direction: positive definite,
+    its eigenvalues' ratio under ``max_edge_ratio``), and their sub-pixel positions (K, 2) (a quadratic through the
+    3 x 3 neighbourhood, at most half a pixel from the peak)."""
+    k = len(lvl)
+    if k == 0:
+        return np.zeros(0, bool), np.zeros((0, 2))
+    d = dog[lvl, ys, xs]                                                # (K, 3) the contrast direction
+    d_unit = d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-9)
+    dy, dx = np.mgrid[-1:2, -1:2]
+    patch = np.einsum("kijc,kc->kij", dog[lvl[:, None, None], ys[:, None, None] + dy, xs[:, None, None] + dx],
+                      d_unit)                                           # (K, 3, 3), peak positive
+    dxx = patch[:, 1, 2] - 2 * patch[:, 1, 1] + patch[:, 1, 0]
+    dyy = patch[:, 2, 1] - 2 * patch[:, 1, 1] + patch[:, 0, 1]
+    dxy = (patch[:, 2, 2] - patch[:, 2, 0] - patch[:, 0, 2] + patch[:, 0, 0]) / 4
+    tr, det = dxx + dyy, dxx * dyy - dxy * dxy
+    r = max_edge_ratio
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ok = (det > 0) & (tr * tr / np.where(det > 0, det, 1.0) < (r + 1) ** 2 / r)
+    gx, gy = (patch[:, 1, 2] - patch[:, 1, 0]) / 2, (patch[:, 2, 1] - patch[:, 0, 1]) / 2
+    safe = np.where(ok, det, 1.0)
+    off_x = -(dyy * gx - dxy * gy) / safe                               # the 2 x 2 system solved in closed form
+    off_y = -(dxx * gy - dxy * gx) / safe
+    pts = np.stack([xs + np.clip(off_x, -0.5, 0.5), ys + np.clip(off_y, -0.5, 0.5)], axis=1)
+    return ok, np.where(ok[:, None], pts, 0.0)
+
+
+def coverage_centroids(lin: np.ndarray, pts: np.ndarray, radius: np.ndarray, spot: np.ndarray,
+                        ring: np.ndarray) -> np.ndarray:
+    """Each spot's position as the centroid of its coverage (:func:`evopose.features._coverage`: a pixel's share
+    of the spot's colour on the line ring -> spot, in linear light) within its radius + 1.5 px: the covered
+    area's centre, to a tenth of a pixel for 2-4 px marks where a peak's quadratic is coarser. The window is
+    re-centred on the centroid (mean shift, :data:`CENTROID_STEPS` at most, within the radius of the peak): a
+    disc seen obliquely is an ellipse whose response peaks off its centre along the long axis, and a window
+    around the peak cuts it (3 px off on a telephoto top face). Not under :data:`SMALL_SPOT_PX`, where marks 3-5
+    px apart would draw the window onto a neighbour (recall 0.73 -> 0.72 on the Cycles paper-scale sweep).
+    Shapes: lin (H, W, 3), pts (K, 2), radius (K,), spot and ring (K, 3)."""
+    h, w = lin.shape[:2]
+    out = pts.copy()
+    small = radius < SMALL_SPOT_PX
+    for r in np.unique(radius[small]):  # one step, spots of one radius together
+        at = np.nonzero(small & (radius == r))[0]
+        reach = r + 1.5
+        span = int(np.ceil(2 * reach)) + 2
+        u, v = pts[at, 0], pts[at, 1]
+        xs = np.maximum(np.floor(u - reach).astype(int), 0)[:, None] + np.arange(span)[None, :]
+        ys = np.maximum(np.floor(v - reach).astype(int), 0)[:, None] + np.arange(span)[None, :]
+        inside = ((xs < w)[:, None, :] & (ys < h)[:, :, None]
+                  & (np.hypot(xs[:, None, :] - u[:, None, None], ys[:, :, None] - v[:, None, None]) <= reach))
+        window = lin[np.minimum(ys, h - 1)[:, :, None], np.minimum(xs, w - 1)[:, None, :]]   # (N, span, span, 3)
+        a = _coverage(window - ring[at, None, None, :], (spot[at] - ring[at])[:, None, None, :]) * inside
+        total = a.sum(axis=(1, 2))
+        some = total > 1e-6
+        cx = (a * xs[:, None, :]).sum(axis=(1, 2)) / np.where(some, total, 1.0)
+        cy = (a * ys[:, :, None]).sum(axis=(1, 2)) / np.where(some, total, 1.0)
+        out[at[some]] = np.stack([cx, cy], axis=1)[some]
+    for i, (peak, r) in enumerate(zip(pts, radius)):
+        if r < SMALL_SPOT_PX:
+            continue
+        reach = r + 1.5
+        centre = peak
+        steps = CENTROID_STEPS if r >= SMALL_SPOT_PX else 1
+        for _ in range(steps):
+            u, v = centre
+            x0, x1 = max(int(np.floor(u - reach)), 0), min(int(np.ceil(u + reach)) + 1, w)
+            y0, y1 = max(int(np.floor(v - reach)), 0), min(int(np.ceil(v + reach)) + 1, h)
+            yy, xx = np.mgrid[y0:y1, x0:x1]
+            inside = np.hypot(xx - u, yy - v) <= reach
+            a = _coverage(lin[y0:y1, x0:x1] - ring[i], (spot[i] - ring[i])[None, None, :]) * inside
+            if a.sum() <= 1e-6:
+                break
+            moved = np.array([(a * xx).sum() / a.sum(), (a * yy).sum() / a.sum()])
+            if steps > 1:  # re-centring: never farther than the spot's radius from its peak (its own spot)
+                offset = moved - peak
+                moved = peak + offset * min(1.0, r / max(float(np.hypot(*offset)), 1e-9))
+            step, centre = float(np.hypot(*(moved - centre))), moved
+            if step < 0.05:
+                break
+        out[i] = centre
+    return out
+
+
+__all__ = ["CENTROID_STEPS", "SMALL_SPOT_PX", "coverage_centroids", "round_peaks"]
