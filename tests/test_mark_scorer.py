@@ -149,3 +149,18 @@ def test_with_groups_the_threshold_is_the_break_even_of_each_group_scored_by_a_m
                                     threshold=0.5).probability(x[groups == g])
     scorer = fit(x, y, ("a", "b", "c"), l2=0.1, groups=groups)
     assert scorer.threshold == mark_scorer.break_even(held_out, y)
+
+
+def test_the_extractor_takes_the_scorer_it_is_given():
+    import cv2
+
+    from agents.problem.extract import feature_extractor
+    from scenarios.dataset import open_dataset
+
+    data = open_dataset(PAPER)
+    world = data.world()
+    image, camera = cv2.imread(str(data.image_path(data.cameras[0], 0))), data.camera(data.cameras[0], 0)
+    strict = MarkScorer.from_dict({**shipped().to_dict(), "threshold": 0.999})
+    found = feature_extractor("contrast", world.model, world.bounds())(image, camera)[0]
+    fewer = feature_extractor("contrast", world.model, world.bounds(), strict)(image, camera)[0]
+    assert len(found) >= 5 and len(fewer) < len(found) / 2, (len(found), len(fewer))

@@ -289,3 +289,24 @@ def test_bad_camera_files_and_wrong_sizes_are_one_line_and_exit_2(capfd, h1_medi
     pose = tmp_path / "pose.yaml"
     pose.write_text("{x: 1, y: 2, z: 3, roll: 0, pitch: 0, yaw: north}\n", encoding="utf-8")
     assert "yaw: expected a number" in agent_error(capfd, "--source", seq, "--camera-pose", str(pose))
+
+
+def test_a_bad_mark_scorer_is_one_line_and_exit_2(capfd, h1_media, tmp_path):
+    import json
+
+    from evopose.mark_scorer import shipped
+
+    folder, _, _, _ = h1_media
+    seq = str(folder / "seq")
+    line = agent_error(capfd, "--source", seq, "--mark-scorer", str(tmp_path / "s.json"))
+    assert "--mark-scorer is for --features contrast, got --features marks" in line
+    contrast = ("--source", seq, "--features", "contrast", "--mark-scorer")
+    assert "cannot read it" in agent_error(capfd, *contrast, str(tmp_path / "none.json"))
+    broken = tmp_path / "broken.json"
+    broken.write_text(json.dumps({**shipped().to_dict(), "threshold": "high"}), encoding="utf-8")
+    assert "field threshold: expected a number" in agent_error(capfd, *contrast, str(broken))
+    other = tmp_path / "other.json"  # fitted on another palette: its label columns are not this model's
+    doc = shipped().to_dict()
+    doc["names"] = [n.replace("label_yellow", "label_orange") for n in doc["names"]]
+    other.write_text(json.dumps(doc), encoding="utf-8")
+    assert "the mark scorer was fitted on the features" in agent_error(capfd, *contrast, str(other))

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 from typing import Annotated
 
 import typer
@@ -105,6 +106,9 @@ def register(app: typer.Typer) -> None:
                  "/tf_static (e.g. H1/camera_optical).")] = None,
         features: Annotated[str, typer.Option(help=f"Feature points: {', '.join(FEATURES)} (colour marks, or a "
                                                    "chessboard's inner corners).")] = "marks",
+        mark_scorer: Annotated[Path | None, typer.Option(
+            help="With --features contrast: the mark scorer for 2-4 px marks, a JSON file of `evopose train-scorer` "
+                 "(default: the shipped one, fitted on rendered worlds).")] = None,
         as_json: Annotated[bool, typer.Option("--json", help="One JSON object per event on stdout.")] = False,
         connect: Connect = None, listen: Listen = None, mode: Mode = None, config: ConfigFile = None,
         multicast: Multicast = False,
@@ -119,7 +123,7 @@ def register(app: typer.Typer) -> None:
             wait_for=tuple(v.strip() for v in wait_for.split(",") if v.strip()), wait_timeout_s=wait_timeout,
             time_budget_s=time_budget, operating_radius_m=operating_radius, max_clock_offset_s=max_clock_offset,
             source=source, camera_info=camera_info, camera_pose=camera_pose, ros_domain=ros_domain, features=features,
-            view_weights=view_weights, source_max_age_s=source_max_age, camera_frame=camera_frame)
+            mark_scorer=mark_scorer, view_weights=view_weights, source_max_age_s=source_max_age, camera_frame=camera_frame)
         console = Console(stderr=True)
 
         def emit(record: dict) -> None:

@@ -22,6 +22,7 @@ import numpy as np
 from evopose import Bounds, Camera
 from evopose.blobs import MarkPrior, detect_contrast_marks, mark_prior
 from evopose.features import colour_ranges, detect_colour_marks, detect_corners, x_junctions
+from evopose.mark_scorer import MarkScorer, feature_names
 from scenarios.fleet import FEATURE_KINDS
 from scenarios.target import TargetModel
 
@@ -48,11 +49,14 @@ def chessboard_corners(image: np.ndarray) -> np.ndarray:
     return found[x_junctions(image, found)]
 
 
-def feature_extractor(kind: str, target: TargetModel, area: Bounds | None = None) -> FeatureExtractor:
+def feature_extractor(kind: str, target: TargetModel, area: Bounds | None = None,
+                      scorer: MarkScorer | None = None) -> FeatureExtractor:
     """The :class:`FeatureExtractor` of ``kind`` (one of :data:`FEATURE_KINDS`) for ``target``: ``marks`` and
     ``contrast`` label each mark with its colour's index in the model's palette (the order of
     :meth:`scenarios.target.TargetModel.colour_labels`); ``area`` is the operating area (world x, y, z bounds of
-    the target) from which ``contrast`` derives the marks' size in each camera's image."""
+    the target) from which ``contrast`` derives the marks' size in each camera's image. ``scorer``: the mark scorer
+    ``contrast`` takes for 2-4 px marks (default: the shipped one, :mod:`evopose.mark_scorer`); ValueError when it
+    was fitted on another palette's features."""
     if kind == "corners":
         return lambda image, camera=None: (chessboard_corners(image), None)
     if kind == "marks":
@@ -66,11 +70,14 @@ def feature_extractor(kind: str, target: TargetModel, area: Bounds | None = None
     if kind != "contrast":
         raise ValueError(f"features must be one of {', '.join(FEATURE_KINDS)}, got {kind!r}")
     palette, size, body = dict(target.palette), target.size, target.body_colour
+    if scorer is not None and scorer.names != feature_names(tuple(palette)):
+        raise ValueError(f"the mark scorer was fitted on the features {', '.join(scorer.names)}; this model's are "
+                         f"{', '.join(feature_names(tuple(palette)))}")
 
     def contrast_marks(image: np.ndarray, camera: Camera | None = None) -> tuple[np.ndarray, np.ndarray]:
         prior = MarkPrior() if camera is None or area is None else mark_prior(
             camera, target.mark_radius, size, area.lo[:3], area.hi[:3])
-        found = detect_contrast_marks(image, palette, prior, body=body)
+        found = detect_contrast_marks(image, palette, prior, body=body, scorer=scorer or "shipped")
         return found.points, found.labels
 
     return contrast_marks

@@ -63,6 +63,8 @@ class AgentConfig:
     #: with ``camera_pose`` a ros2: TFMessage topic (``/tf``): the camera's optical frame, composed from ``map``
     camera_frame: str | None = None
     features: str = "marks"
+    #: with ``features`` contrast: a mark scorer's JSON (``evopose train-scorer``) instead of the shipped one
+    mark_scorer: str | Path | None = None
     view_weights: str = "step"
 
     def check(self) -> None:
@@ -80,6 +82,8 @@ class AgentConfig:
             raise FleetError(f"--view-weights must be one of {', '.join(VIEW_WEIGHTS)}, got {self.view_weights!r}")
         if self.features not in FEATURES:
             raise FleetError(f"--features must be one of {', '.join(FEATURES)}, got {self.features!r}")
+        if self.mark_scorer is not None and self.features != "contrast":
+            raise FleetError(f"--mark-scorer is for --features contrast, got --features {self.features}")
         if self.source is None and (self.camera_info is not None or self.camera_pose is not None):
             raise FleetError("--camera-info and --camera-pose describe a real camera: they need --source")
         if self.source is not None and not str(self.source).strip():

@@ -305,6 +305,20 @@ def is_ros(spec: object) -> bool:
     return spec is not None and str(spec).startswith(ROS_SCHEME)
 
 
+def _mark_scorer(config: AgentConfig):
+    """``--mark-scorer``'s scorer, read now (None: the shipped one); a bad file is one :class:`FleetError`."""
+    if config.mark_scorer is None:
+        return None
+    from evopose.mark_scorer import load
+
+    try:
+        return load(Path(config.mark_scorer))
+    except OSError as error:
+        raise FleetError(f"--mark-scorer {config.mark_scorer}: cannot read it ({error.strerror or error})") from None
+    except ValueError as error:
+        raise FleetError(f"--mark-scorer {config.mark_scorer}: {error}") from None
+
+
 def open_camera(config: AgentConfig, scenario: Scenario, bus: FleetBus | None = None) -> SimulatedCamera | SourceCamera:
     """The vehicle's camera: the renderer, or ``config.source`` with its camera files and topics (files read now, so
     that a bad one is an error before the vehicle joins its fleet).
@@ -313,7 +327,12 @@ def open_camera(config: AgentConfig, scenario: Scenario, bus: FleetBus | None = 
     camera with a ROS input is checked (topic names, files) and is then the renderer: its first frame compiles the
     same kernels, and no ROS message can arrive before the session is open.
     """
-    extract = feature_extractor(config.features, scenario.model, scenario.bounds() if scenario.spec.search else None)
+    scorer = _mark_scorer(config)
+    try:
+        extract = feature_extractor(config.features, scenario.model,
+                                    scenario.bounds() if scenario.spec.search else None, scorer)
+    except ValueError as error:  # a scorer fitted on another palette
+        raise FleetError(f"--mark-scorer {config.mark_scorer}: {error}") from None
     if config.source is None:
         return SimulatedCamera(scenario, config.vehicle, extract)
     ros_inputs = any(is_ros(spec) for spec in (config.source, config.camera_info, config.camera_pose))
