@@ -286,4 +286,5 @@ def _fit(x: np.ndarray, y: np.ndarray, names: tuple[str, ...], l2: float, fitted
     return MarkScorer(tuple(names), mean, scale, w[:-1], float(w[-1]), 0.5, fitted_on)
 
 
-__all__ = ["FEATURES", "MarkScorer", "break_even", "keeping", "candidate_features", "feature_names", "fit", "load", "quadratic", "shipped"]
+__all__ = ["FEATURES", "MarkScorer", "break_even", "candidate_features", "feature_names", "fit", "keeping", "load",
+           "quadratic", "shipped"]

@@ -3,11 +3,11 @@
 Eq. (1)'s distance, truncated at tau (:mod:`evopose.fitness`), keeps the search robust to points far from every
 mark. It does not stop a false point *within* tau of a projected mark from pulling the pose with the full weight
 of a true one. On camera frames at the paper's scale that was most of the error: tau is 4 px there, a mark 2-4
-px wide, and about half the image points were not marks (the contrast front-end's precision was 0.49, 0.60 now,
-``benchmarks/bench_photoreal_features.py``), many of them the body's own structure a few px from a mark. Good
-frames were tilted 5-11 deg by them while their position stayed right to a few cm (9 of 72 good frames on nine
-paper-scale Cycles datasets, ``benchmarks/bench_photoreal_tracking.py``; 1 with this fit). At the pose this fit
-publishes, a tenth of the pairs are false (119 of 1149 on those good frames), 2.2 px from their marks (median)
+px wide, and about half the image points were not marks (the contrast front-end's precision was 0.49; 0.78 now,
+with the mark scorer: ``benchmarks/bench_photoreal_features.py``), many of them the body's own structure a few px
+from a mark. Good frames were tilted 5-11 deg by them while their position stayed right to a few cm (9 of 72 good
+frames on nine paper-scale Cycles datasets, ``benchmarks/bench_photoreal_tracking.py``; 1 with this fit).
+At the pose this fit publishes, a tenth of the pairs are false (119 of 1149 on those good frames), 2.2 px from their marks (median)
 against the true pairs' 0.3 px (the same benchmark's pooled line).
 
 So the estimate ends with iteratively re-weighted least squares (IRLS) on the mutual pairs of eq. (1)'s
