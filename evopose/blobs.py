@@ -189,7 +189,8 @@ def detect_contrast_marks(image_bgr: np.ndarray, palette: Mapping[str, tuple[int
     when every mark is under :data:`SMALL_SPOT_PX`. Returns the marks sorted by label then row.
 
     ``scorer``, for marks under :data:`SMALL_SPOT_PX` on a body: which candidates are marks
-    (:mod:`evopose.mark_scorer`): ``"shipped"`` the shipped model, or a :class:`MarkScorer`; the candidates are
+    (:mod:`evopose.mark_scorer`): ``"shipped"`` the shipped model (for a palette of other colours than the one it
+    was fitted on: the hand-set bars), or a :class:`MarkScorer`; the candidates are
     then taken with the lenient :data:`CANDIDATE_K_SIGMA` bars (``k_sigma`` is not used). ``"all"``: every
     such candidate, with its features (to fit a scorer); None: the hand-set bars alone.
 
@@ -201,7 +202,8 @@ def detect_contrast_marks(image_bgr: np.ndarray, palette: Mapping[str, tuple[int
         raise ValueError("the palette names no colour")
     if isinstance(scorer, str) and scorer not in ("shipped", "all"):
         raise ValueError(f"scorer must be a MarkScorer, 'shipped', 'all' or None, got {scorer!r}")
-    scorer = shipped() if scorer == "shipped" else scorer
+    if scorer == "shipped":  # fitted on the shipped model's colours; another palette gets the hand-set bars
+        scorer = shipped() if shipped().names == feature_names(names) else None
     if isinstance(scorer, MarkScorer) and scorer.names != feature_names(names):
         raise ValueError(f"the mark scorer was fitted on the features {', '.join(scorer.names)}; the front-end "
                          f"computes {', '.join(feature_names(names))}")

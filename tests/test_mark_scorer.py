@@ -164,3 +164,22 @@ def test_the_extractor_takes_the_scorer_it_is_given():
     found = feature_extractor("contrast", world.model, world.bounds())(image, camera)[0]
     fewer = feature_extractor("contrast", world.model, world.bounds(), strict)(image, camera)[0]
     assert len(found) >= 5 and len(fewer) < len(found) / 2, (len(found), len(fewer))
+
+
+def test_a_palette_the_shipped_scorer_was_not_fitted_on_gets_the_hand_set_bars():
+    import cv2
+
+    from evopose.blobs import detect_contrast_marks, mark_prior
+    from scenarios.dataset import open_dataset
+
+    data = open_dataset(PAPER)
+    world = data.world()
+    area = world.bounds()
+    cam = data.cameras[0]
+    image = cv2.imread(str(data.image_path(cam, 0)))
+    prior = mark_prior(data.camera(cam, 0), world.model.mark_radius, world.model.size, area.lo[:3], area.hi[:3])
+    renamed = {f"paint{i}": bgr for i, bgr in enumerate(world.model.palette.values())}  # same paints, other names
+    found = detect_contrast_marks(image, renamed, prior, body=world.model.body_colour)
+    bars = detect_contrast_marks(image, world.model.palette, prior, body=world.model.body_colour, scorer=None)
+    assert found.features is None and len(found) == len(bars) > 5
+    np.testing.assert_array_equal(found.points, bars.points)
