@@ -203,7 +203,8 @@ def detect_contrast_marks(image_bgr: np.ndarray, palette: Mapping[str, tuple[int
     if isinstance(scorer, str) and scorer not in ("shipped", "all"):
         raise ValueError(f"scorer must be a MarkScorer, 'shipped', 'all' or None, got {scorer!r}")
     if scorer == "shipped":  # fitted on the shipped model's colours; another palette gets the hand-set bars
-        scorer = shipped() if shipped().names == feature_names(names) else None
+        fitted = shipped()
+        scorer = fitted if fitted is not None and fitted.names == feature_names(names) else None
     if isinstance(scorer, MarkScorer) and scorer.names != feature_names(names):
         raise ValueError(f"the mark scorer was fitted on the features {', '.join(scorer.names)}; the front-end "
                          f"computes {', '.join(feature_names(names))}")
