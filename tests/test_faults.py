@@ -84,7 +84,11 @@ def test_agents_reconnect_to_a_router_killed_and_started_again(procs):
         back[vehicle] = (again["_rx_ns"] - up_ns) / 1e9
         assert h.popen.poll() is None  # the same process throughout
     print(f"router down {(up_ns - killed_ns) / 1e9:.2f} s; both views again {back} s after it listened")
-    assert alone["stamp_ns"] > killed_ns - int(PERIOD_S * 1e9)
+    # H1 goes on alone with the frame after its last one with both views: that frame's view from H2 was lost with
+    # the router (its stamp may lie before the kill by H2's own delay, longer than a period on a loaded machine)
+    joint = [r for r in h1.records if both_views(r) and r["frame"] < alone["frame"]]
+    assert joint and alone["frame"] == joint[-1]["frame"] + 1, (joint[-1:], alone)
+    assert joint[-1]["stamp_ns"] < killed_ns
     assert max(back.values()) <= RECONNECT_S, back
 
 
