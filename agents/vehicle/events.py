@@ -20,7 +20,8 @@ class FrameEvent:
     pose : tuple of 6 floats
         The published pose (canonical roll-pitch-yaw), ``world_from_target``.
     verdict : Verdict
-        ``converged``, ``confident`` and ``good`` (both), the one verdict (docs/design.md §2).
+        ``converged``, ``confident``, ``precise``, ``on_track`` and ``good`` (all four), the one verdict
+        (docs/design.md §2).
     error : dict or None
         Against the simulator's truth (:func:`geometry.pose_error`), when there is one.
     scene_frame, skipped : set by the runtime: the source's frame shown; why the own view was not taken.
@@ -74,7 +75,8 @@ class FrameEvent:
                    "views_of_this_instant": self.views_of_this_instant, "knowledge": list(self.knowledge),
                    "pose": pose_dict(self.pose), "fitness": self.fitness, "mismatch": self.mismatch,
                    "good": self.verdict.good, "converged": self.verdict.converged,
-                   "confident": self.verdict.confident, "precise": self.verdict.precise, "solved": self.solved,
+                   "confident": self.verdict.confident, "precise": self.verdict.precise,
+                   "on_track": self.verdict.on_track, "solved": self.solved,
                    "searching": self.searching, "from_hint": self.from_hint, "seconds": self.seconds}
             if self.error is not None:
                 out["error"] = self.error

@@ -17,6 +17,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from evopose.cooperative import Cooperation, Estimate, EstimatorState, Knowledge, verdict
+from evopose.pose_filter import PoseFilter
 from geometry import canonical_pose, pose_error
 from protocol import FeatureSet, ImageFrame, Message, PoseEstimate, Topic
 from protocol.hint import Hint
@@ -105,6 +106,8 @@ class VehicleState:
     target: str
     image_encoding: str = "raw"
     estimator: EstimatorState = field(default_factory=EstimatorState)
+    #: the published track (None until the first frame: made from the cooperation's tracking rules)
+    published: PoseFilter | None = None
 
     @property
     def best(self) -> np.ndarray | None:
@@ -169,9 +172,9 @@ def share(state: VehicleState, frame: Frame, own: MateView) -> Message | None:
     return None
 
 
-def _covariance(solution) -> tuple[float, ...] | None:
-    """The solution's 6x6 covariance as 36 floats (row-major, ROS order), or None when it is not finite."""
-    cov = np.asarray(getattr(solution, "covariance", np.full((6, 6), np.inf)), float)
+def _covariance(cov: np.ndarray) -> tuple[float, ...] | None:
+    """A 6x6 covariance as 36 floats (row-major, ROS order), or None when it is not finite."""
+    cov = np.asarray(cov, float)
     return tuple(float(v) for v in cov.ravel()) if cov.shape == (6, 6) and np.all(np.isfinite(cov)) else None
 
 
@@ -198,15 +201,19 @@ def step(state: VehicleState, inputs: FrameInputs) -> tuple[VehicleState, list[M
         budget_s=inputs.budget_s, candidates=np.array(candidates) if candidates else None, candidate_margin=margin,
         generations=policy.generations_per_frame(sum(len(view.points) for view in views)))
     seconds = time.perf_counter() - t0
-    state = replace(state, estimator=estimator)
-    sol, judged = estimate.solution, verdict(estimate)
-    pose = canonical_pose(np.asarray(sol.pose, float))  # pitch within +-90 deg
+    sol, alone = estimate.solution, verdict(estimate)
+    # what goes out is the track's fused pose (evopose/pose_filter.py): a good frame that jumped off it is set aside
+    published = state.published or PoseFilter.of_rules(state.cooperation.options.confidence)
+    published, out = published.step(inputs.index, sol.pose, sol.covariance, alone.good)
+    state = replace(state, estimator=estimator, published=published)
+    judged = replace(alone, on_track=out.on_track or not alone.good)
+    pose = canonical_pose(out.pose)  # pitch within +-90 deg
     mates = tuple(v for v in used if v != state.vehicle)
     messages: list[Message | Hint] = [PoseEstimate(
         **_header(state, own.stamp_ns), target=state.target, pose=tuple(float(v) for v in pose),
         fitness=float(sol.fitness), mismatch=estimate.mismatch, converged=judged.converged,
         generations=int(sol.generations), seconds=seconds, from_hint=bool(sol.from_hint), inputs=mates,
-        confident=judged.good, covariance=_covariance(sol))]
+        confident=judged.good, covariance=_covariance(out.covariance))]
     if policy.sends_hints and judged.in_right_basin:  # a hint need not be precise: the mate's selection judges it
         messages.append(Hint(tuple(float(v) for v in pose)))
     event = FrameEvent(
