@@ -7,6 +7,7 @@ from .fitness import Match, PoseObjective, step_weights
 from .local import LocalSearch, LocalState
 from .loop import Evaluator, evolve
 from .options import SearchOptions
+from .pose_filter import FilteredPose, PoseFilter
 from .problem import Bounds, Model, PoseProblem, View
 from .refine import refine
 from .search import Ask, EvoPose, EvoPoseState, Told
@@ -14,8 +15,9 @@ from .solver import Solution, pose_mismatch, solve, track
 from .uncertainty import Confidence, ConfidenceRules, assess
 
 __all__ = [
-    "Ask", "Bounds", "Camera", "Confidence", "ConfidenceRules", "Evaluator", "EvoPose", "EvoPoseState", "LocalSearch",
-    "LocalState", "Match", "Model", "PARAM_NAMES", "PoseObjective", "PoseProblem", "SearchOptions", "Solution", "Told",
+    "Ask", "Bounds", "Camera", "Confidence", "ConfidenceRules", "Evaluator", "EvoPose", "EvoPoseState", "FilteredPose",
+    "LocalSearch", "LocalState", "Match", "Model", "PARAM_NAMES", "PoseFilter", "PoseObjective", "PoseProblem",
+    "SearchOptions", "Solution", "Told",
     "View", "assess", "evolve", "matrix_from_pose", "pose_from_matrix", "pose_mismatch", "quaternion_from_euler",
     "refine", "rotation_from_euler", "solve", "step_weights", "track",
 ]

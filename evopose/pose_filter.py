@@ -73,36 +73,39 @@ class PoseFilter:
         Frames set aside in a row before the track restarts from the next one (``ConfidenceRules.track_set_aside``).
     track : TrackReference or None
         The fused estimate, as of frame ``frame``.
-    frame : int
-        The frame the track was last predicted to.
+    frame : float
+        The instant the track was last predicted to, in frames (of the period ``motion`` is per): the instant an
+        image was taken, so that team-mates who took their views of one instant at different ticks age their
+        tracks alike.
     """
 
     motion: np.ndarray
     sigmas: float = 4.0
     most_set_aside: int = 3
     track: TrackReference | None = None
-    frame: int = 0
+    frame: float = 0.0
 
     @classmethod
     def of_rules(cls, rules) -> "PoseFilter":
         """A filter with the tracking gate's rules (:class:`evopose.uncertainty.ConfidenceRules`)."""
         return cls(np.asarray(rules.track_motion, float), float(rules.track_sigmas), int(rules.track_set_aside))
 
-    def _aged(self, frame: int) -> TrackReference | None:
+    def _aged(self, frame: float) -> TrackReference | None:
         """The track predicted to ``frame``: its covariance grown by the motion of each elapsed frame."""
         if self.track is None:
             return None
-        elapsed = max(int(frame) - self.frame, 0)
-        return self.track.predicted(self.motion * np.sqrt(elapsed)) if elapsed else self.track
+        elapsed = max(float(frame) - self.frame, 0.0)
+        return self.track.predicted(self.motion * np.sqrt(elapsed)) if elapsed > 0 else self.track
 
-    def step(self, frame: int, pose: np.ndarray, covariance: np.ndarray, good: bool
+    def step(self, frame: float, pose: np.ndarray, covariance: np.ndarray, good: bool
              ) -> tuple["PoseFilter", FilteredPose]:
-        """The next filter and what to publish for ``frame``'s estimate ``pose`` (6,) with ``covariance`` (6, 6),
-        judged ``good`` on its own (converged, confident and precise)."""
+        """The next filter and what to publish for the estimate ``pose`` (6,) with ``covariance`` (6, 6) of the
+        image taken at ``frame`` (in frames; need not be whole), judged ``good`` on its own (converged, confident
+        and precise)."""
         pose = np.asarray(pose, float).reshape(6)
         covariance = np.asarray(covariance, float).reshape(6, 6)
         track = self._aged(frame)
-        aged = replace(self, track=track, frame=int(frame))
+        aged = replace(self, track=track, frame=max(float(frame), self.frame))
         own = FilteredPose(pose, covariance, False, 0 if track is None else track.frames)
         if not good or not np.all(np.isfinite(covariance)):
             return aged, own

@@ -3,6 +3,8 @@ and candidate exchange at the paper's image scale (exp2-paper-scale: the Pioneer
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -160,6 +162,38 @@ def test_feature_sets_carry_the_best_and_team_mates_agree(paper_scale):
             agreed += bool(np.array_equal(events["H1"].estimate.pose, events["H2"].estimate.pose))
     assert agreed == 3
 
+
+
+def _pair_published(scenario, frames, frame_period_s):
+    """H1 and H2 sharing feature sets over four frames, H2 processing the last at a later tick (it ran late) than
+    the instant both images were taken: each frame's estimate and published pose (the track) per vehicle."""
+    states = {v: replace(_state(scenario, v, "features", seed=s), frame_period_s=frame_period_s)
+              for v, s in (("H1", 1), ("H2", 2))}
+    estimates, published, good = [], [], 0
+    for n in range(4):
+        own = {"H1": _own(frames, "H1", n), "H2": _own(frames, "H2", n)}
+        sent = {v: decode("features", encode(share(states[v], frames[v][n], own[v]))) for v in own}
+        events = {}
+        for v, mate in (("H1", "H2"), ("H2", "H1")):
+            tick = n + 1 if (v == "H2" and n == 3) else n
+            states[v], _, events[v] = step(states[v], FrameInputs(tick, own[v], (mate_view(mate, sent[mate], None),)))
+        estimates.append([events[v].estimate.pose for v in ("H1", "H2")])
+        published.append([np.array(events[v].pose) for v in ("H1", "H2")])
+        good += events["H1"].good and events["H2"].good
+    return estimates, published, good
+
+
+def test_team_mates_publish_the_same_track_when_one_takes_a_frame_at_a_later_tick(paper_scale):
+    """The published pose is the track (evopose/pose_filter.py), which ages by the frames between the instants its
+    images were taken: a team-mate that processed the same instant a tick later publishes the same pose."""
+    scenario, frames = paper_scale
+    estimates, published, good = _pair_published(scenario, frames, 0.1)
+    assert good >= 2  # the track fused frames
+    assert all(np.array_equal(a, b) for a, b in estimates[1:])  # the same estimate of each instant...
+    assert all(np.array_equal(a, b) for a, b in published[1:])  # ...and the same track
+    # aged by the tick a frame was processed at instead, the late team-mate's track would differ
+    _, by_tick, _ = _pair_published(scenario, frames, None)
+    assert not np.array_equal(*by_tick[3])
 
 # -- the between-frame slots (agents.vehicle.roles.SlotSchedule) ----------------------------------------------
 

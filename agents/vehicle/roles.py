@@ -160,7 +160,8 @@ class CameraVehicle(Vehicle):
                         SearchOptions(time_budget=config.time_budget_s, view_weights=config.view_weights,
                                       confidence=scenario.model.confidence_rules(self.period_s)),
                         config.seed),
-            self.policy, config.vehicle, scenario.spec.target.name, config.image_encoding)
+            self.policy, config.vehicle, scenario.spec.target.name, config.image_encoding,
+            frame_period_s=self.period_s)
         self.hints = HintInbox()
         # slots missed during a frame are made up after it (at most a frame period's worth)
         burst = max(int(config.hint_rate_hz * self.period_s), 1)

@@ -108,6 +108,9 @@ class VehicleState:
     estimator: EstimatorState = field(default_factory=EstimatorState)
     #: the published track (None until the first frame: made from the cooperation's tracking rules)
     published: PoseFilter | None = None
+    #: the fleet clock's period: the track ages by the frames between the instants its images were taken (None: by
+    #: the frame numbers, for a state without a clock)
+    frame_period_s: float | None = None
 
     @property
     def best(self) -> np.ndarray | None:
@@ -204,7 +207,8 @@ def step(state: VehicleState, inputs: FrameInputs) -> tuple[VehicleState, list[M
     sol, alone = estimate.solution, verdict(estimate)
     # what goes out is the track's fused pose (evopose/pose_filter.py): a good frame that jumped off it is set aside
     published = state.published or PoseFilter.of_rules(state.cooperation.options.confidence)
-    published, out = published.step(inputs.index, sol.pose, sol.covariance, alone.good)
+    taken = inputs.index if state.frame_period_s is None else own.stamp_ns / (state.frame_period_s * 1e9)
+    published, out = published.step(taken, sol.pose, sol.covariance, alone.good)
     state = replace(state, estimator=estimator, published=published)
     judged = replace(alone, on_track=out.on_track or not alone.good)
     pose = canonical_pose(out.pose)  # pitch within +-90 deg
