@@ -75,6 +75,11 @@ class Verdict:
     def good(self) -> bool:
         return self.converged and self.confident and self.precise and self.on_track
 
+    @property
+    def set_aside(self) -> bool:
+        """Good on its own, but it jumped off the published track (:class:`evopose.pose_filter.PoseFilter`)."""
+        return self.converged and self.confident and self.precise and not self.on_track
+
 
 def verdict(estimate: "Estimate | None") -> Verdict:
     """The verdict on an estimate (none: neither)."""

@@ -89,3 +89,21 @@ def test_a_frame_without_a_finite_covariance_is_not_fused():
     filt, _ = _run(_pioneer(), [LEVEL] * 2)
     filt, out = filt.step(2, _tilted(1.0), np.full((6, 6), np.inf), True)
     assert not out.on_track and filt.track.frames == 2
+
+
+def test_an_agent_counts_a_frame_set_aside_and_does_not_count_it_good():
+    from agents.vehicle.events import FrameEvent
+    from agents.vehicle.records import RunRecord
+    from evopose import Solution
+    from evopose.estimator_state import Estimate, Verdict
+
+    solution = Solution(LEVEL, 0.1, np.zeros(2), np.ones(2), 0, 0, 0.0, True, "tracked", [])
+    record = RunRecord()
+    for verdict in (Verdict(True, True, True, on_track=False), Verdict(True, True, True),
+                    Verdict(True, True, False, on_track=False)):  # the last is not good alone: not set aside
+        record.add_frame(FrameEvent("H1", 0, 12, views=("H1", "H2"), pose=tuple(LEVEL), verdict=verdict,
+                                    estimate=Estimate(solution, 0.2, False)), 0.0)
+    summary = record.summary()
+    assert summary["good"] == 1 and summary["set_aside"] == 1
+    assert FrameEvent("H1", 0, 12, pose=tuple(LEVEL), verdict=Verdict(True, True, True, on_track=False),
+                      estimate=Estimate(solution, 0.2, False)).to_json()["on_track"] is False

@@ -23,6 +23,8 @@ def summary_table(summary: dict) -> Table:
     table.add_column(justify="right")
     table.add_row("frames", f"{summary['frames']} ({summary['late_frames']} skipped late)")
     table.add_row("estimates (good)", f"{summary['estimates']} ({summary['good']})")
+    if summary.get("set_aside"):
+        table.add_row("set aside (jumped off the track)", f"{summary['set_aside']}")
     if summary.get("first_good_s") is not None:
         table.add_row("first good pose after", f"{summary['first_good_s']:.3f} s")
     if "error_position" in summary:

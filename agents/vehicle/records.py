@@ -53,6 +53,7 @@ class RunRecord:
     frames: int = 0
     estimates: int = 0
     good: int = 0
+    set_aside: int = 0  #: frames good on their own that jumped off the published track (docs/design.md §2)
     solves: int = 0
     late_frames: int = 0
     stale_events: int = 0  #: times a live team-mate's data went stale (frozen or cut off)
@@ -90,6 +91,7 @@ class RunRecord:
             self.first_good_s = (estimate.good_at or time.perf_counter()) - image_ready_s
         if event.verdict.in_right_basin and event.error is not None:
             self.errors.add(event.error)
+        self.set_aside += int(event.verdict.set_aside)
         if good:
             self.good += 1
             if self.first_confirmed_s is None:
