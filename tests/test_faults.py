@@ -89,6 +89,9 @@ def test_agents_reconnect_to_a_router_killed_and_started_again(procs):
     joint = [r for r in h1.records if both_views(r) and r["frame"] < alone["frame"]]
     assert joint and alone["frame"] == joint[-1]["frame"] + 1, (joint[-1:], alone)
     assert joint[-1]["stamp_ns"] < killed_ns
+    # and H1 had both views on every frame from its first joint one up to the kill: it did not go alone before it
+    before = [r for r in h1.records if r.get("event") == "frame" and joint[0]["frame"] <= r["frame"] < alone["frame"]]
+    assert all(both_views(r) for r in before), [r["frame"] for r in before if not both_views(r)]
     assert max(back.values()) <= RECONNECT_S, back
 
 
