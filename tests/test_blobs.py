@@ -192,6 +192,43 @@ def test_on_the_committed_photoreal_frames_the_contrast_front_end_with_the_body_
         assert found["contrast"]["recall"] > found["bars"]["recall"] - 0.05, found
 
 
+def test_one_per_disc_keeps_the_likeliest_of_a_mark_seen_twice_and_both_of_two_marks_apart():
+    from evopose.blobs import one_per_disc
+
+    # a mark peaking twice 1.2 px apart (its yellow at one pixel, its luminance at the next), a second mark 3.1 px
+    # away (the closest two visible marks lie at the paper's scale), and a third candidate within its disc
+    pts = np.array([[10.0, 10.0], [11.2, 10.0], [10.0, 13.1], [10.5, 13.6]])
+    score = np.array([0.4, 0.7, 0.5, 0.3])
+    assert one_per_disc(pts, score, 1.7).tolist() == [1, 2]
+    assert one_per_disc(pts, score, 0.5).tolist() == [0, 1, 2, 3]   # discs of 0.5 px: all four are apart
+    assert one_per_disc(np.zeros((0, 2)), np.zeros(0), 1.7).tolist() == []
+
+
+def test_on_the_committed_paper_sequence_no_mark_is_found_twice():
+    # a 2-4 px mark peaks in several channels a pixel apart; the scorer alone keeps both copies (50 on these 32
+    # frames), which count twice in eq. 1's sum. Visible marks' projections lie >= 3.0 px apart at this scale
+    from evopose.mark_scorer import shipped
+    from scenarios.dataset import open_dataset
+
+    data = open_dataset(Path(__file__).parent / "data" / "photoreal" / "paper-sequence")
+    world, area = data.world(), data.world().bounds()
+    copies_kept_by_the_scorer_alone = 0
+    for cam in data.cameras:
+        for k in range(data.frames):
+            image = cv2.imread(str(data.image_path(cam, k)), cv2.IMREAD_COLOR)
+            prior = mark_prior(data.camera(cam, k), world.model.mark_radius, world.model.size, area.lo[:3],
+                               area.hi[:3])
+            found = detect_contrast_marks(image, world.model.palette, prior, body=world.model.body_colour)
+            apart = np.linalg.norm(found.points[:, None] - found.points[None], axis=2) + np.eye(len(found)) * 1e9
+            assert apart.min(initial=np.inf) >= prior.radius_px[1], (cam, k)
+            every = detect_contrast_marks(image, world.model.palette, prior, body=world.model.body_colour,
+                                          scorer="all")
+            kept = every.points[shipped().marks(every.features)]
+            apart = np.linalg.norm(kept[:, None] - kept[None], axis=2) + np.eye(len(kept)) * 1e9
+            copies_kept_by_the_scorer_alone += int((apart.min(axis=1, initial=np.inf) < prior.radius_px[1]).sum())
+    assert copies_kept_by_the_scorer_alone > 10
+
+
 def test_on_the_committed_frames_without_the_target_no_body_paint_means_no_marks():
     from scenarios.dataset import open_dataset
 
