@@ -94,7 +94,7 @@ def run(directory: Path) -> list[dict]:
         published, out = published.step(k, solution.pose, solution.covariance,
                                          solution.converged and solution.confident and solution.precise)
         track_error = pose_error(out.pose, truth)
-        rows.append({"frame": k, "on_track": out.on_track, "track_position_m": track_error["position"],
+        rows.append({"frame": k, "on_track": out.on_track, "settled": out.settled, "track_position_m": track_error["position"],
                      "track_rotation_deg": max(track_error[a] for a in ("roll", "pitch", "yaw")),
                      "track_sigma_rotation_deg": _sigma_rotation_deg(out.covariance),
                      "converged": solution.converged, "confident": solution.confident,
@@ -125,7 +125,7 @@ def summary(name: str, rows: list[dict]) -> list[str]:
     def span(values: list[float], digits: int = 1) -> str:
         return f"{min(values):.{digits}f}-{max(values):.{digits}f}" if values else "-"
 
-    published = [r for r in good if r["on_track"]]
+    published = [r for r in good if r["on_track"] and r["settled"]]
     published_wrong = [r for r in published if r["track_position_m"] > WRONG_M or r["track_rotation_deg"] > WRONG_DEG]
     published_z = [r["track_rotation_deg"] / r["track_sigma_rotation_deg"] for r in published
                    if r["track_sigma_rotation_deg"] > 0]

@@ -58,14 +58,16 @@ class Verdict:
     """The one verdict on a pose (docs/design.md §2): ``converged`` (the search judged its best good), ``confident``
     (no distinct pose fits nearly as well: the right basin), ``precise`` (its covariance places it within the
     target's own size, :attr:`evopose.solver.Solution.precise`), ``on_track`` (the published track took it:
-    :class:`evopose.pose_filter.PoseFilter`; a frame judged alone leaves it True); ``good`` = all four, what a
-    vehicle publishes and counts. ``in_right_basin`` = converged and confident, what a vehicle may offer its
+    :class:`evopose.pose_filter.PoseFilter`; a frame judged alone leaves it True), ``settled`` (the track it
+    joined knows its rotation well enough to publish: ``ConfidenceRules.max_published_rotation_sigma``; True for a
+    frame judged alone); ``good`` = all five, what a vehicle publishes and counts. ``in_right_basin`` = converged and confident, what a vehicle may offer its
     team-mates as a hint."""
 
     converged: bool
     confident: bool
     precise: bool = False
     on_track: bool = True
+    settled: bool = True
 
     @property
     def in_right_basin(self) -> bool:
@@ -73,7 +75,7 @@ class Verdict:
 
     @property
     def good(self) -> bool:
-        return self.converged and self.confident and self.precise and self.on_track
+        return self.converged and self.confident and self.precise and self.on_track and self.settled
 
     @property
     def set_aside(self) -> bool:

@@ -13,7 +13,10 @@ So what a vehicle publishes is the track's estimate: every good frame is fused i
 per frame, ``ConfidenceRules.track_motion``), and the fused pose and covariance go out. A good frame that lies more
 than ``sigmas`` from the track (under the sum of both covariances) is set aside: published as it is, not good, and
 the track stands; after ``most_set_aside`` such frames in a row the track restarts from the frame (the target is
-not where the track said). Frames that are not good only age the track: its covariance grows by the motion per
+not where the track said). The track is *settled*, and what it publishes good, once its fused rotation sigma is
+within ``ConfidenceRules.max_published_rotation_sigma`` (2.5 deg: within 5 deg at two sigmas); a single frame at
+the paper's scale knows it to 3-4 deg, enough to be fused, not to be published alone. Frames that are not good
+only age the track: its covariance grows by the motion per
 elapsed frame, so after a loss the track constrains what the target cannot have changed (a ground robot's tilt)
 and leaves the rest to the new frames. Pure numpy: the state is a frozen value, replaced by :meth:`PoseFilter.step`.
 """
@@ -48,6 +51,9 @@ class FilteredPose:
         Frames fused into the track so far (0 without a track).
     jump_sigmas : float
         The frame's Mahalanobis distance from the track (nan when there was no track or the frame was not good).
+    settled : bool
+        On the track, and the track knows its rotation to ``PoseFilter.most_rotation_sigma``: what is published is
+        good. False whenever ``on_track`` is.
     """
 
     pose: np.ndarray
@@ -55,6 +61,7 @@ class FilteredPose:
     on_track: bool
     track_frames: int = 0
     jump_sigmas: float = float("nan")
+    settled: bool = False
 
 
 @dataclass(frozen=True, eq=False)
@@ -71,6 +78,9 @@ class PoseFilter:
         (``ConfidenceRules.track_sigmas``).
     most_set_aside : int
         Frames set aside in a row before the track restarts from the next one (``ConfidenceRules.track_set_aside``).
+    most_rotation_sigma : float
+        The track is settled (its pose good) once its worst rotation 1-sigma is within this (radians,
+        ``ConfidenceRules.max_published_rotation_sigma``).
     track : TrackReference or None
         The fused estimate, as of frame ``frame``.
     frame : float
@@ -82,13 +92,19 @@ class PoseFilter:
     motion: np.ndarray
     sigmas: float = 4.0
     most_set_aside: int = 3
+    most_rotation_sigma: float = float("inf")
     track: TrackReference | None = None
     frame: float = 0.0
 
     @classmethod
     def of_rules(cls, rules) -> "PoseFilter":
         """A filter with the tracking gate's rules (:class:`evopose.uncertainty.ConfidenceRules`)."""
-        return cls(np.asarray(rules.track_motion, float), float(rules.track_sigmas), int(rules.track_set_aside))
+        return cls(np.asarray(rules.track_motion, float), float(rules.track_sigmas), int(rules.track_set_aside),
+                   float(rules.max_published_rotation_sigma))
+
+    def _settled(self, covariance: np.ndarray) -> bool:
+        """Whether a track of ``covariance`` (6, 6) knows its rotation well enough to be published good."""
+        return bool(np.sqrt(max(np.linalg.eigvalsh(covariance[3:, 3:]).max(), 0.0)) <= self.most_rotation_sigma)
 
     def _aged(self, frame: float) -> TrackReference | None:
         """The track predicted to ``frame``: its covariance grown by the motion of each elapsed frame."""
@@ -111,11 +127,13 @@ class PoseFilter:
             return aged, own
         if track is None:
             started = TrackReference.of(pose, covariance)
-            return replace(aged, track=started), FilteredPose(pose, covariance, True, 1)
+            return replace(aged, track=started), FilteredPose(pose, covariance, True, 1,
+                                                              settled=self._settled(covariance))
         jump = float(mahalanobis(deviation(pose, track.pose), track.covariance + covariance)[0])
         if jump <= self.sigmas:
             fused = track.fused(pose, covariance)
-            return replace(aged, track=fused), FilteredPose(fused.pose, fused.covariance, True, fused.frames, jump)
+            return replace(aged, track=fused), FilteredPose(fused.pose, fused.covariance, True, fused.frames, jump,
+                                                            self._settled(fused.covariance))
         kept = track.passed_over(self.most_set_aside)
         if kept is None:  # the track no longer stands for the target: it restarts here, this frame not yet good
             kept = TrackReference.of(pose, covariance)

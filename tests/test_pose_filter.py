@@ -107,3 +107,28 @@ def test_an_agent_counts_a_frame_set_aside_and_does_not_count_it_good():
     assert summary["good"] == 1 and summary["set_aside"] == 1
     assert FrameEvent("H1", 0, 12, pose=tuple(LEVEL), verdict=Verdict(True, True, True, on_track=False),
                       estimate=Estimate(solution, 0.2, False)).to_json()["on_track"] is False
+
+
+def test_a_track_is_published_good_only_once_it_knows_its_rotation_to_two_and_a_half_degrees():
+    # one frame at the paper's scale (3 deg, 1 sigma) is fused but not yet publishable: a good pose must lie
+    # within 5 deg at two sigmas; the second frame brings the fused sigma to ~2.1 deg
+    filt, first = _pioneer().step(0, _tilted(5.2), FRAME_COV, True)
+    assert first.on_track and not first.settled and first.track_frames == 1
+    filt, second = filt.step(1, _tilted(0.5), FRAME_COV, True)
+    assert second.on_track and second.settled
+    assert np.degrees(np.sqrt(np.linalg.eigvalsh(second.covariance[3:, 3:]).max())) <= 2.5
+    # a frame that is not good, and a frame set aside, are never settled
+    _, lost = filt.step(2, _tilted(0.5), FRAME_COV, False)
+    _, jumped = filt.step(2, _tilted(40.0), FRAME_COV, True)
+    assert not lost.settled and not jumped.settled
+    # without the rule (its rules' default sigma cap infinite) the first frame alone would have been good
+    _, alone = PoseFilter(filt.motion).step(0, _tilted(5.2), FRAME_COV, True)
+    assert alone.settled
+
+
+def test_an_unsettled_track_makes_the_verdict_not_good_and_is_not_set_aside():
+    from evopose.estimator_state import Verdict
+
+    unsettled = Verdict(True, True, True, on_track=True, settled=False)
+    assert not unsettled.good and not unsettled.set_aside and unsettled.in_right_basin
+    assert Verdict(True, True, True).good

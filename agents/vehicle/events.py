@@ -20,7 +20,7 @@ class FrameEvent:
     pose : tuple of 6 floats
         The published pose (canonical roll-pitch-yaw), ``world_from_target``.
     verdict : Verdict
-        ``converged``, ``confident``, ``precise``, ``on_track`` and ``good`` (all four), the one verdict
+        ``converged``, ``confident``, ``precise``, ``on_track``, ``settled`` and ``good`` (all five), the one verdict
         (docs/design.md §2).
     error : dict or None
         Against the simulator's truth (:func:`geometry.pose_error`), when there is one.
@@ -76,7 +76,8 @@ class FrameEvent:
                    "pose": pose_dict(self.pose), "fitness": self.fitness, "mismatch": self.mismatch,
                    "good": self.verdict.good, "converged": self.verdict.converged,
                    "confident": self.verdict.confident, "precise": self.verdict.precise,
-                   "on_track": self.verdict.on_track, "solved": self.solved,
+                   "on_track": self.verdict.on_track,
+                   "settled": self.verdict.settled, "solved": self.solved,
                    "searching": self.searching, "from_hint": self.from_hint, "seconds": self.seconds}
             if self.error is not None:
                 out["error"] = self.error

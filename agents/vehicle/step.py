@@ -210,7 +210,7 @@ def step(state: VehicleState, inputs: FrameInputs) -> tuple[VehicleState, list[M
     taken = inputs.index if state.frame_period_s is None else own.stamp_ns / (state.frame_period_s * 1e9)
     published, out = published.step(taken, sol.pose, sol.covariance, alone.good)
     state = replace(state, estimator=estimator, published=published)
-    judged = replace(alone, on_track=out.on_track or not alone.good)
+    judged = replace(alone, on_track=out.on_track or not alone.good, settled=out.settled or not out.on_track)
     pose = canonical_pose(out.pose)  # pitch within +-90 deg
     mates = tuple(v for v in used if v != state.vehicle)
     messages: list[Message | Hint] = [PoseEstimate(
