@@ -79,6 +79,9 @@ class FrameEvent:
                    "on_track": self.verdict.on_track,
                    "settled": self.verdict.settled, "solved": self.solved,
                    "searching": self.searching, "from_hint": self.from_hint, "seconds": self.seconds}
+            unsure = getattr(getattr(self.estimate.solution, "confidence", None), "reason", "")
+            if unsure:  # why the estimate is not confident (evopose.uncertainty.Confidence.reason)
+                out["unsure"] = unsure
             if self.error is not None:
                 out["error"] = self.error
         out["scene_frame"] = self.scene_frame
