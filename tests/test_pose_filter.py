@@ -132,3 +132,20 @@ def test_an_unsettled_track_makes_the_verdict_not_good_and_is_not_set_aside():
     unsettled = Verdict(True, True, True, on_track=True, settled=False)
     assert not unsettled.good and not unsettled.set_aside and unsettled.in_right_basin
     assert Verdict(True, True, True).good
+
+
+def test_a_frame_record_says_whether_its_track_settled_and_why_it_is_unsure():
+    from agents.vehicle.events import FrameEvent
+    from evopose import Solution
+    from evopose.estimator_state import Estimate, Verdict
+    from evopose.uncertainty import Confidence
+
+    unsure = Solution(LEVEL, 0.1, np.zeros(2), np.ones(2), 0, 0, 0.0, True, "tracked", [])
+    unsure = unsure.with_(confidence=Confidence(False, None, 9, 0.1, reason="ambiguous"))
+    line = FrameEvent("H1", 0, 12, pose=tuple(LEVEL), verdict=Verdict(True, False, True),
+                      estimate=Estimate(unsure, 0.2, False)).to_json()
+    assert line["unsure"] == "ambiguous" and line["good"] is False
+    sure = unsure.with_(confidence=Confidence(True, None, 12, 0.0))
+    line = FrameEvent("H1", 0, 12, pose=tuple(LEVEL), verdict=Verdict(True, True, True, settled=False),
+                      estimate=Estimate(sure, 0.2, False)).to_json()
+    assert "unsure" not in line and line["settled"] is False and line["good"] is False
