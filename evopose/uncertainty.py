@@ -92,10 +92,11 @@ class ConfidenceRules:
         leave 2-3 deg: marks 3-5 px apart.) What a frame must know to be fused into the published track.
     max_published_rotation_sigma : float
         (:class:`evopose.pose_filter.PoseFilter`) The published track is good only once its fused rotation is
-        known to this (1 sigma, radians, the worst axis): 2.5 deg, so that a good pose lies within 5 deg at two
-        sigmas. A frame that knows its rotation only to 3-4 deg (one frame at the paper's scale, two cameras) is
-        precise enough to fuse, not to publish alone: on the low-sun Cycles frames the first of a track was 5.2 deg
-        off at 1.5 of its sigmas (benchmarks/bench_photoreal_tracking.py).
+        known to this (1 sigma, radians, the worst axis); inf (the default): any track a precise frame joined. A
+        target model file's ``good_within`` sets it to half its rotation, so that a good pose lies within it at two
+        sigmas: the Pioneer's 5 deg gives 2.5 deg. One frame at the paper's scale knows its rotation only to 3-4
+        deg, precise enough to fuse, not to publish alone: on the low-sun Cycles frames the first of a track was
+        5.2 deg off at 1.5 of its sigmas (benchmarks/bench_photoreal_tracking.py).
     """
 
     min_pairs: int = 7
@@ -110,7 +111,7 @@ class ConfidenceRules:
     converged_margin: float = 4.0
     max_position_sigma: float = 1.0 / 3.0
     max_rotation_sigma: float = float(np.deg2rad(5.0))
-    max_published_rotation_sigma: float = float(np.deg2rad(2.5))
+    max_published_rotation_sigma: float = float("inf")
 
 
 def sum_of_squares(objective: PoseObjective, pose: np.ndarray, matches: Matches | None = None) -> float:

@@ -14,6 +14,7 @@ parts:                              # the body, for drawing and self-occlusion
 marks:                              # the features EvoPose matches
   - {position: [0.1, 0.0, 0.22], normal: [0, 0, 1], colour: yellow}
 motion: {speed: 0.5, climb: 0.05, tilt: 0.05, turn: 0.5}   # optional: 1-sigma rates, m/s and rad/s
+good_within: {rotation_deg: 5.0}    # optional: a good published pose lies within this at two sigmas
 ```
 
 ``motion`` is what the target can do between two frames, for the tracking gate
@@ -21,12 +22,17 @@ motion: {speed: 0.5, climb: 0.05, tilt: 0.05, turn: 0.5}   # optional: 1-sigma r
 about a horizontal axis) and turn (about the vertical). Without it the gate allows 0.1 m and 0.1 rad per frame on
 every axis (:class:`evopose.uncertainty.ConfidenceRules`).
 
+``good_within`` is what the target's user calls right: a vehicle publishes its track (:mod:`evopose.pose_filter`)
+as good only once the track knows its rotation to half of ``rotation_deg`` (1 sigma), so that a good pose lies
+within it at two sigmas (``ConfidenceRules.max_published_rotation_sigma``). Without it any track a precise frame
+joined is good.
+
 :func:`load_model` validates the file (one-line errors naming the field) and returns a :class:`TargetModel`.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Annotated
 
@@ -114,6 +120,12 @@ class MotionSpec(Strict):
         return (self.speed * s, self.speed * s, self.climb * s, self.tilt * s, self.tilt * s, self.turn * s)
 
 
+class GoodWithinSpec(Strict):
+    """How close to the truth a good published pose must lie, at two sigmas: its worst rotation axis, degrees."""
+
+    rotation_deg: Annotated[float, Field(gt=0, le=180)]
+
+
 class ModelFileSpec(Strict):
     name: str
     description: str = ""
@@ -124,6 +136,7 @@ class ModelFileSpec(Strict):
     parts: list[PartSpec] = []
     marks: Annotated[list[MarkSpec], Field(min_length=1)]
     motion: MotionSpec | None = None
+    good_within: GoodWithinSpec | None = None
 
     @model_validator(mode="after")
     def _known_colours(self) -> "ModelFileSpec":
@@ -153,6 +166,8 @@ class TargetModel:
     body : Mesh
     motion : MotionSpec or None
         What the target can do between frames (1-sigma rates), for the tracking gate; None: the gate's default.
+    good_within : GoodWithinSpec or None
+        How close a good published pose lies at two sigmas; None: any track a precise frame joined is good.
     """
 
     name: str
@@ -167,12 +182,18 @@ class TargetModel:
     parts: tuple[PartSpec, ...] = ()
     mark_roughness: float = 0.35
     motion: MotionSpec | None = None
+    good_within: GoodWithinSpec | None = None
 
     def confidence_rules(self, period_s: float) -> ConfidenceRules:
         """The confidence rules for this target filmed every ``period_s`` s: the tracking gate's motion allowance
-        from ``motion`` (:meth:`MotionSpec.per_frame`), the defaults without it."""
-        return ConfidenceRules() if self.motion is None else ConfidenceRules(
-            track_motion=self.motion.per_frame(period_s))
+        from ``motion`` (:meth:`MotionSpec.per_frame`) and the published track's rotation sigma from
+        ``good_within`` (half its rotation: two sigmas), the defaults without them."""
+        rules = ConfidenceRules()
+        if self.motion is not None:
+            rules = replace(rules, track_motion=self.motion.per_frame(period_s))
+        if self.good_within is not None:
+            rules = replace(rules, max_published_rotation_sigma=float(np.deg2rad(self.good_within.rotation_deg)) / 2)
+        return rules
 
     @property
     def size(self) -> float:
@@ -215,7 +236,7 @@ def model_from_spec(spec: ModelFileSpec) -> TargetModel:
     return TargetModel(spec.name, np.array([m.position for m in spec.marks], float), normals,
                        tuple(m.colour for m in spec.marks), {k: tuple(v) for k, v in spec.colours.items()},
                        spec.mark_radius, body, spec.description, tuple(spec.parts), spec.mark_roughness,
-                       spec.motion)
+                       spec.motion, spec.good_within)
 
 
 def resolve_model_path(name_or_path: str | Path, base: Path | None = None) -> Path:

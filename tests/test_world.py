@@ -159,6 +159,12 @@ def test_malformed_model_file(tmp_path):
     with pytest.raises(ModelFileError) as info:
         load_model(path)
     assert "motion.tilt" in str(info.value) and "\n" not in str(info.value)
+    path.write_text("name: x\nmark_radius: 0.02\ncolours: {red: [0, 0, 255]}\n"
+                    "marks: [{position: [0, 0, 0], normal: [0, 0, 1], colour: red}]\n"
+                    "good_within: {rotation_deg: 0}\n", encoding="utf-8")
+    with pytest.raises(ModelFileError) as info:
+        load_model(path)
+    assert "good_within.rotation_deg" in str(info.value) and "\n" not in str(info.value)
 
 
 def test_the_pioneers_motion_sets_the_tracking_gate_per_frame():
@@ -167,6 +173,13 @@ def test_the_pioneers_motion_sets_the_tracking_gate_per_frame():
     np.testing.assert_allclose(rules.track_motion, [0.05, 0.05, 0.005, 0.005, 0.005, 0.05])
     np.testing.assert_allclose(load_model("pioneer").confidence_rules(0.5).track_motion[5], 0.25)
     assert load_model("airship").confidence_rules(0.1) == ConfidenceRules()  # no motion in its file: the defaults
+
+
+def test_the_pioneers_file_says_a_good_pose_lies_within_five_degrees_at_two_sigmas():
+    # its published track is good once it knows its rotation to 2.5 deg; the airship's file says nothing, so any
+    # track a precise frame joined is good (its single frames know their pitch to ~4.5 deg, their error 0.1 deg)
+    assert np.degrees(load_model("pioneer").confidence_rules(0.1).max_published_rotation_sigma) == pytest.approx(2.5)
+    assert load_model("airship").confidence_rules(0.1).max_published_rotation_sigma == float("inf")
 
 
 def test_frame_and_vehicle_out_of_range():
