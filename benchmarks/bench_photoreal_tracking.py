@@ -37,6 +37,7 @@ from evopose import PoseObjective, PoseProblem, SearchOptions, View, pose_mismat
 from evopose.blobs import SMALL_SPOT_PX, mark_prior
 from evopose.covariance import mutual_matches
 from evopose.pose_filter import PoseFilter
+from evopose.uncertainty import rotation_sigma
 from geometry import pose_error
 from scenarios.dataset import open_dataset
 
@@ -108,9 +109,7 @@ def run(directory: Path) -> list[dict]:
 
 def _sigma_rotation_deg(cov: np.ndarray) -> float:
     """The worst rotation axis's 1-sigma (deg) of a covariance (6, 6); nan when it is not finite."""
-    if not np.all(np.isfinite(cov)):
-        return float("nan")
-    return float(np.degrees(np.sqrt(np.max(np.linalg.eigvalsh(cov[3:, 3:])))))
+    return float(np.degrees(rotation_sigma(cov)))
 
 
 def summary(name: str, rows: list[dict]) -> list[str]:

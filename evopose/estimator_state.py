@@ -60,8 +60,8 @@ class Verdict:
     target's own size, :attr:`evopose.solver.Solution.precise`), ``on_track`` (the published track took it:
     :class:`evopose.pose_filter.PoseFilter`; a frame judged alone leaves it True), ``settled`` (the track it
     joined knows its rotation well enough to publish: ``ConfidenceRules.max_published_rotation_sigma``; True for a
-    frame judged alone); ``good`` = all five, what a vehicle publishes and counts. ``in_right_basin`` = converged and confident, what a vehicle may offer its
-    team-mates as a hint."""
+    frame judged alone); ``good`` = all five, what a vehicle publishes and counts. ``in_right_basin`` = converged
+    and confident, what a vehicle may offer its team-mates as a hint."""
 
     converged: bool
     confident: bool

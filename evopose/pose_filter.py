@@ -14,8 +14,9 @@ per frame, ``ConfidenceRules.track_motion``), and the fused pose and covariance 
 than ``sigmas`` from the track (under the sum of both covariances) is set aside: published as it is, not good, and
 the track stands; after ``most_set_aside`` such frames in a row the track restarts from the frame (the target is
 not where the track said). The track is *settled*, and what it publishes good, once its fused rotation sigma is
-within ``ConfidenceRules.max_published_rotation_sigma`` (2.5 deg: within 5 deg at two sigmas); a single frame at
-the paper's scale knows it to 3-4 deg, enough to be fused, not to be published alone. Frames that are not good
+within ``ConfidenceRules.max_published_rotation_sigma`` (from the target model file's ``good_within``: 2.5 deg for
+the Pioneer, within 5 deg at two sigmas); a single frame at the paper's scale knows it to 3-4 deg, enough to be
+fused, not to be published alone. Frames that are not good
 only age the track: its covariance grows by the motion per
 elapsed frame, so after a loss the track constrains what the target cannot have changed (a ground robot's tilt)
 and leaves the rest to the new frames. Pure numpy: the state is a frozen value, replaced by :meth:`PoseFilter.step`.
@@ -28,7 +29,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from .covariance import deviation
-from .uncertainty import TrackReference, mahalanobis
+from .uncertainty import TrackReference, mahalanobis, rotation_sigma
 
 __all__ = ["FilteredPose", "PoseFilter"]
 
@@ -53,7 +54,7 @@ class FilteredPose:
         The frame's Mahalanobis distance from the track (nan when there was no track or the frame was not good).
     settled : bool
         On the track, and the track knows its rotation to ``PoseFilter.most_rotation_sigma``: what is published is
-        good. False whenever ``on_track`` is.
+        good. False whenever ``on_track`` is False.
     """
 
     pose: np.ndarray
@@ -104,7 +105,7 @@ class PoseFilter:
 
     def _settled(self, covariance: np.ndarray) -> bool:
         """Whether a track of ``covariance`` (6, 6) knows its rotation well enough to be published good."""
-        return bool(np.sqrt(max(np.linalg.eigvalsh(covariance[3:, 3:]).max(), 0.0)) <= self.most_rotation_sigma)
+        return rotation_sigma(covariance) <= self.most_rotation_sigma
 
     def _aged(self, frame: float) -> TrackReference | None:
         """The track predicted to ``frame``: its covariance grown by the motion of each elapsed frame."""

@@ -36,7 +36,7 @@ from .fitness import POINT_NOISE_PX, PoseObjective
 
 __all__ = ["Confidence", "ConfidenceRules", "CovarianceEstimate", "Matches", "assess", "covariance", "deviation",
            "imprecise", "in_box_second_moment", "mahalanobis", "mutual_matches", "projection_jacobian",
-           "same_image", "shared_pairs", "sum_of_squares", "track_confidence", "TrackReference",
+           "rotation_sigma", "same_image", "shared_pairs", "sum_of_squares", "track_confidence", "TrackReference",
            "untruncated_variance"]
 
 
@@ -233,8 +233,15 @@ def imprecise(marks: np.ndarray, cov: np.ndarray, rules: ConfidenceRules = Confi
         return True
     extent = float(np.linalg.norm(np.ptp(marks, axis=0))) if len(marks) else 0.0
     position = float(np.sqrt(max(np.linalg.eigvalsh(cov[:3, :3]).max(), 0.0)))
-    rotation = float(np.sqrt(max(np.linalg.eigvalsh(cov[3:, 3:]).max(), 0.0)))
-    return position > rules.max_position_sigma * extent or rotation > rules.max_rotation_sigma
+    return position > rules.max_position_sigma * extent or rotation_sigma(cov) > rules.max_rotation_sigma
+
+
+def rotation_sigma(cov: np.ndarray) -> float:
+    """The worst rotation axis's 1-sigma (radians) of a covariance (6, 6) (nan when it is not finite)."""
+    cov = np.asarray(cov, float)
+    if not np.all(np.isfinite(cov)):
+        return float("nan")
+    return float(np.sqrt(max(np.linalg.eigvalsh(cov[3:, 3:]).max(), 0.0)))
 
 
 def shared_pairs(a: Matches, b: Matches) -> float:

@@ -153,18 +153,13 @@ def test_malformed_model_file(tmp_path):
     path.write_text("name: x\nname: y\n", encoding="utf-8")
     with pytest.raises(ModelFileError, match="duplicate key"):
         load_model(path)
-    path.write_text("name: x\nmark_radius: 0.02\ncolours: {red: [0, 0, 255]}\n"
-                    "marks: [{position: [0, 0, 0], normal: [0, 0, 1], colour: red}]\n"
-                    "motion: {speed: 0.5, climb: 0.05, tilt: -1, turn: 0.5}\n", encoding="utf-8")
-    with pytest.raises(ModelFileError) as info:
-        load_model(path)
-    assert "motion.tilt" in str(info.value) and "\n" not in str(info.value)
-    path.write_text("name: x\nmark_radius: 0.02\ncolours: {red: [0, 0, 255]}\n"
-                    "marks: [{position: [0, 0, 0], normal: [0, 0, 1], colour: red}]\n"
-                    "good_within: {rotation_deg: 0}\n", encoding="utf-8")
-    with pytest.raises(ModelFileError) as info:
-        load_model(path)
-    assert "good_within.rotation_deg" in str(info.value) and "\n" not in str(info.value)
+    for line, field in (("motion: {speed: 0.5, climb: 0.05, tilt: -1, turn: 0.5}", "motion.tilt"),
+                        ("good_within: {rotation_deg: 0}", "good_within.rotation_deg")):
+        path.write_text("name: x\nmark_radius: 0.02\ncolours: {red: [0, 0, 255]}\n"
+                        f"marks: [{{position: [0, 0, 0], normal: [0, 0, 1], colour: red}}]\n{line}\n", encoding="utf-8")
+        with pytest.raises(ModelFileError) as info:
+            load_model(path)
+        assert field in str(info.value) and "\n" not in str(info.value)
 
 
 def test_the_pioneers_motion_sets_the_tracking_gate_per_frame():
