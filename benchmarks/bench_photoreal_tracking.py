@@ -91,7 +91,6 @@ def run(directory: Path) -> list[dict]:
         previous = solution if solution.converged and solution.confident else None
         truth = data.truth(k).target_pose
         error = pose_error(solution.pose, truth)
-        rotation = np.linalg.eigvalsh(solution.covariance[3:, 3:]) if np.all(np.isfinite(solution.covariance)) else [np.nan]
         published, out = published.step(k, solution.pose, solution.covariance,
                                          solution.converged and solution.confident and solution.precise)
         track_error = pose_error(out.pose, truth)
@@ -101,7 +100,7 @@ def run(directory: Path) -> list[dict]:
                      "converged": solution.converged, "confident": solution.confident,
                      "precise": solution.precise, "position_m": error["position"],
                      "rotation_deg": max(error[a] for a in ("roll", "pitch", "yaw")),
-                     "sigma_rotation_deg": float(np.degrees(np.sqrt(np.max(rotation)))),
+                     "sigma_rotation_deg": _sigma_rotation_deg(solution.covariance),
                      "mismatch": pose_mismatch(problem, solution.pose, solution.options),
                      "pairs": pair_distances(solution, truths, match_px), "match_px": min(match_px)})
     return rows
