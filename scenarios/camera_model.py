@@ -9,14 +9,22 @@ small pure function of this module (docs/camera-model.md says why each is there 
    ``ae_highlight_percentile`` above ``ae_highlight_level``; ``exposure_bias_ev`` on top. After this stage
    1.0 is the sensor's saturation (the full well).
 2. **white balance** (:func:`white_balance`): per-channel gains (BGR), an AWB error.
-3. **motion blur** (:func:`motion_blur`): a line kernel of ``motion_blur_px`` at ``motion_blur_angle_deg``.
-4. **colour filter mosaic** (:func:`mosaic`): one colour per photosite, ``bayer`` naming the top-left 2x2.
-5. **sensor** (:func:`sensor`): shot noise (Poisson in electrons, ``full_well`` electrons at saturation),
+3. **lens blur** (:func:`lens_blur`): a Gaussian of ``lens_blur_px`` (sigma, pixels) on the light: a soft lens.
+4. **motion blur** (:func:`motion_blur`): a line kernel of ``motion_blur_px`` at ``motion_blur_angle_deg``.
+5. **colour filter mosaic** (:func:`mosaic`): one colour per photosite, ``bayer`` naming the top-left 2x2.
+6. **sensor** (:func:`sensor`): shot noise (Poisson in electrons, ``full_well`` electrons at saturation),
    read noise (Gaussian, ``read_noise`` electrons), an ADC of ``bit_depth`` bits that clips.
-6. **demosaicing** (:func:`demosaic`): OpenCV's bilinear, VNG or edge-aware Bayer conversions.
-7. **tone curve** (:func:`tone_lut`): sRGB, a gamma or a filmic curve, to 8 bits.
-8. **encoding** (:func:`encode`): JPEG at ``jpeg_quality`` with 4:2:0 or 4:4:4 chroma, or lossless PNG;
-   the image is the decoded stream.
+7. **demosaicing** (:func:`demosaic`): OpenCV's bilinear, VNG or edge-aware Bayer conversions.
+8. **tone curve** (:func:`tone_lut`, :func:`view_transform`): sRGB, a gamma or a filmic curve, to 8 bits; or one
+   of Blender's view transforms (``blender-agx``, ``blender-filmic``, ...), a 3D LUT baked from Blender
+   (``scenarios/view_luts.npz``, :func:`view_lut`) applied to the sensor level as Blender's scene-linear value.
+9. **colour** (:func:`colour_adjust`): ``saturation`` scales the chroma about the luma, ``hue_rotation_deg``
+   rotates it (the YCbCr plane of the 8-bit values), as a camera's saturation setting and hue error.
+10. **encoding** (:func:`encode`): JPEG at ``jpeg_quality`` with 4:2:0 or 4:4:4 chroma, or lossless PNG;
+    the image is the decoded stream.
+
+The defaults of the stages added for other looks (3, the Blender tones of 8, 9) leave an image bit for bit what it
+was before them; :func:`spec_record` writes a spec without those fields while they are at their defaults.
 
 Every random draw comes from the ``rng`` passed in: the same seed captures the same image.
 """
@@ -26,6 +34,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from functools import lru_cache
+from pathlib import Path
 from typing import Annotated, Any, Literal
 
 import cv2
@@ -50,6 +59,20 @@ _PATTERN_CHANNELS = {"RGGB": (2, 1, 1, 0), "BGGR": (0, 1, 1, 2), "GRBG": (1, 2, 
 #: John Hable's filmic curve constants (shoulder, linear, toe), and the linear white it is normalised at.
 _HABLE = (0.15, 0.50, 0.10, 0.20, 0.02, 0.30)
 FILMIC_WHITE = 4.0
+#: Blender's view transforms (Blender 4.5, display sRGB) baked as 3D LUTs by scenarios/photoreal/bake_view_luts.py.
+VIEW_LUTS_FILE = Path(__file__).with_name("view_luts.npz")
+#: ``tone`` values that are Blender view transforms (transform / look, as the bake script names them).
+VIEW_TONES = ("blender-standard", "blender-agx", "blender-agx-punchy", "blender-filmic",
+              "blender-filmic-high-contrast", "blender-khronos-pbr-neutral")
+Tone = Literal["srgb", "gamma", "filmic", "blender-standard", "blender-agx", "blender-agx-punchy", "blender-filmic",
+               "blender-filmic-high-contrast", "blender-khronos-pbr-neutral"]
+#: Fields added for looks (docs/camera-model.md, "Looks") and their defaults, which change nothing:
+#: :func:`spec_record` leaves them out at these values so that a dataset's manifest stays what it was.
+LOOK_FIELD_DEFAULTS = {"lens_blur_px": 0.0, "saturation": 1.0, "hue_rotation_deg": 0.0}
+#: BGR -> (Y, Cb, Cr) of the 8-bit values (BT.601, JPEG's YCbCr, without the 128 offset): the colour stage's plane.
+_YCBCR_FROM_BGR = np.array([[0.114, 0.587, 0.299],
+                            [0.5, -0.331264, -0.168736],
+                            [-0.081312, -0.418688, 0.5]], np.float64)
 
 
 class CameraModelSpec(Strict):
@@ -68,6 +91,8 @@ class CameraModelSpec(Strict):
     #: White balance gains, B, G, R (like every colour of the project): an AWB error is e.g. [0.95, 1, 1.05].
     white_balance: Annotated[list[Annotated[float, Field(gt=0, le=10)]], Field(min_length=3, max_length=3)] = \
         [1.0, 1.0, 1.0]
+    #: Lens blur: a Gaussian's sigma (pixels) on the light before the mosaic (a soft or defocused lens).
+    lens_blur_px: Annotated[float, Field(ge=0, le=50)] = 0.0
     #: Motion blur during the exposure: the streak's length (pixels) and direction (degrees from the image's +u).
     motion_blur_px: Annotated[float, Field(ge=0, le=200)] = 0.0
     motion_blur_angle_deg: Annotated[float, Field(ge=-360, le=360)] = 0.0
@@ -80,9 +105,14 @@ class CameraModelSpec(Strict):
     #: ADC bits (the raw values are 0 .. 2**bit_depth - 1).
     bit_depth: Annotated[int, Field(ge=8, le=16)] = 12
     demosaic: Literal["bilinear", "vng", "edge-aware"] = "bilinear"
-    tone: Literal["srgb", "gamma", "filmic"] = "srgb"
+    #: Tone curve: ``srgb``, ``gamma``, ``filmic`` (Hable), or a Blender view transform (:data:`VIEW_TONES`).
+    tone: Tone = "srgb"
     #: Display gamma of ``tone: gamma`` (out = in ** (1 / gamma)).
     gamma: Annotated[float, Field(ge=1, le=4)] = 2.2
+    #: Saturation: the chroma (Cb, Cr of the 8-bit image) times this after the tone curve; 1 = unchanged.
+    saturation: Annotated[float, Field(ge=0.2, le=3)] = 1.0
+    #: Hue error: the chroma rotated by this angle (degrees; + turns red towards yellow, as HSV's hue).
+    hue_rotation_deg: Annotated[float, Field(ge=-180, le=180)] = 0.0
     #: JPEG quality 1-100, or null for lossless PNG.
     jpeg_quality: Annotated[int, Field(ge=1, le=100)] | None = 85
     #: JPEG chroma subsampling: ``420`` (half resolution colour, what cameras stream) or ``444``.
@@ -173,6 +203,13 @@ def white_balance(image: np.ndarray, gains_bgr) -> np.ndarray:
     return image if np.all(gains == 1) else image * gains
 
 
+def lens_blur(image: np.ndarray, sigma_px: float) -> np.ndarray:
+    """A Gaussian blur of ``sigma_px`` pixels (the image unchanged at 0)."""
+    if sigma_px <= 0:
+        return image
+    return cv2.GaussianBlur(image, (0, 0), sigma_px, borderType=cv2.BORDER_REFLECT)
+
+
 def motion_kernel(length_px: float, angle_deg: float) -> np.ndarray:
     """A normalised line kernel ``length_px`` long at ``angle_deg`` (anti-aliased by bilinear splatting)."""
     half = int(math.ceil(length_px / 2)) + 1
@@ -258,6 +295,128 @@ def tone_lut(tone: str, gamma: float, bit_depth: int) -> np.ndarray:
     return lut
 
 
+@lru_cache(maxsize=8)
+def view_lut(tone: str) -> np.ndarray:
+    """The 3D LUT of a Blender view transform: float32 (N, N, N, 3), indexed [b, g, r] by the grid's nodes
+    (:func:`view_grid`), holding the display-referred (sRGB-encoded) B, G, R in 0-1."""
+    if tone not in VIEW_TONES:
+        raise ValueError(f"not a Blender view transform: {tone!r} (expected one of {', '.join(VIEW_TONES)})")
+    with np.load(VIEW_LUTS_FILE) as luts:
+        lut = luts[f"lut_{tone}"].astype(np.float32) / np.float32(65535)
+    lut.setflags(write=False)
+    return lut
+
+
+@lru_cache(maxsize=1)
+def view_grid() -> tuple[np.ndarray, float]:
+    """The LUTs' grid per channel (0, then log2-spaced levels; float64) and its spacing in stops."""
+    with np.load(VIEW_LUTS_FILE) as luts:
+        ev, mid = luts["ev"].astype(np.float64), float(luts["mid_grey"])
+    nodes = np.concatenate([[0.0], mid * 2.0 ** ev])
+    nodes.setflags(write=False)
+    return nodes, float(ev[1] - ev[0])
+
+
+def _lut_coordinate(level: np.ndarray) -> np.ndarray:
+    """Scene-linear levels -> the grid's fractional index: log2-spaced nodes from node 1 on, linear between
+    0 (node 0) and node 1; clamped to the grid."""
+    nodes, step = view_grid()
+    first = np.float32(nodes[1])
+    x = np.maximum(np.asarray(level, np.float32), 0)
+    with np.errstate(divide="ignore"):
+        log = np.log2(np.maximum(x, first) / first) / np.float32(step) + 1
+    coord = np.where(x < first, x / first, log)
+    return np.clip(coord, 0, len(nodes) - 1).astype(np.float32)
+
+
+def _split(coord: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Fractional grid indices -> the lower node (at most n - 2) and the fraction towards the next (0-1)."""
+    i0 = np.minimum(coord.astype(np.int32), n - 2)
+    return i0, (coord - i0).astype(np.float32)
+
+
+def _trilinear(lut: np.ndarray, i0: np.ndarray, f: np.ndarray) -> np.ndarray:
+    """``lut`` (N, N, N, 3) interpolated at lower nodes ``i0`` and fractions ``f`` ((P, 3) each, [b, g, r])."""
+    n = lut.shape[0]
+    flat = lut.reshape(-1, 3)
+    base = (i0[:, 0] * n + i0[:, 1]) * n + i0[:, 2]
+    fb, fg, fr = f[:, 0:1], f[:, 1:2], f[:, 2:3]
+
+    def lerp_r(offset: int) -> np.ndarray:
+        a = np.take(flat, base + offset, axis=0)
+        a += fr * (np.take(flat, base + (offset + 1), axis=0) - a)
+        return a
+
+    g0 = lerp_r(0)
+    g0 += fg * (lerp_r(n) - g0)
+    g1 = lerp_r(n * n)
+    g1 += fg * (lerp_r(n * n + n) - g1)
+    g0 += fb * (g1 - g0)
+    return g0
+
+
+def apply_view_lut(level: np.ndarray, lut: np.ndarray) -> np.ndarray:
+    """Trilinear interpolation of ``lut`` (N, N, N, 3, [b, g, r]) at scene-linear BGR ``level`` (..., 3) in
+    the grid's log2 domain (linear between the nodes 0 and the first level): the display-referred values (..., 3),
+    float32 0-1."""
+    level = np.asarray(level, np.float32)
+    i0, f = _split(_lut_coordinate(level.reshape(-1, 3)), lut.shape[0])
+    return _trilinear(lut, i0, f).reshape(level.shape)
+
+
+@lru_cache(maxsize=4)
+def _code_coordinates(bit_depth: int) -> tuple[np.ndarray, np.ndarray]:
+    """Per raw code (level = code / top), the grid's lower node and fraction: a table lookup instead of a log."""
+    codes = np.arange(1 << bit_depth, dtype=np.float64) / ((1 << bit_depth) - 1)
+    return _split(_lut_coordinate(codes), len(view_grid()[0]))
+
+
+def _to_uint8(display: np.ndarray) -> np.ndarray:
+    return np.clip(display * np.float32(255) + np.float32(0.5), 0, 255).astype(np.uint8)
+
+
+def view_transform(level: np.ndarray, tone: str) -> np.ndarray:
+    """Sensor levels (BGR, 1.0 = saturation) through a Blender view transform -> uint8 BGR. The level is
+    Blender's scene-linear value as it is (auto exposure's 0.18 median is Blender's mid grey)."""
+    return _to_uint8(apply_view_lut(level, view_lut(tone)))
+
+
+def view_transform_codes(raw: np.ndarray, tone: str, bit_depth: int) -> np.ndarray:
+    """Raw BGR codes (H, W, 3; level = code / (2**bit_depth - 1)) through a Blender view transform -> uint8
+    BGR: :func:`view_transform` of the levels, its coordinates looked up per code (fast)."""
+    index, fraction = _code_coordinates(bit_depth)
+    flat = raw.reshape(-1, 3)
+    out = _trilinear(view_lut(tone), np.take(index, flat), np.take(fraction, flat))
+    return _to_uint8(out).reshape(raw.shape)
+
+
+def colour_matrix(saturation: float, hue_rotation_deg: float) -> np.ndarray:
+    """The 3x3 matrix on 8-bit BGR values that scales the chroma (Cb, Cr) by ``saturation`` and rotates it by
+    ``hue_rotation_deg`` (from Cb towards Cr), keeping the luma (BT.601)."""
+    a = math.radians(hue_rotation_deg)
+    c, s = saturation * math.cos(a), saturation * math.sin(a)
+    chroma = np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
+    return np.linalg.inv(_YCBCR_FROM_BGR) @ chroma @ _YCBCR_FROM_BGR
+
+
+def colour_adjust(image: np.ndarray, saturation: float, hue_rotation_deg: float) -> np.ndarray:
+    """A camera's saturation and hue settings on the 8-bit BGR image (rounded and clipped to 0-255; the image
+    itself at 1 and 0)."""
+    if saturation == 1 and hue_rotation_deg == 0:
+        return image
+    return cv2.transform(image, colour_matrix(saturation, hue_rotation_deg))
+
+
+def spec_record(spec: CameraModelSpec) -> dict[str, Any]:
+    """The spec as a mapping for a manifest: every field, except the look fields at their (neutral) defaults
+    (:data:`LOOK_FIELD_DEFAULTS`), so that a camera model without them is recorded as before they existed."""
+    record = spec.model_dump(mode="json")
+    for key, default in LOOK_FIELD_DEFAULTS.items():
+        if record.get(key) == default:
+            del record[key]
+    return record
+
+
 def encode(image: np.ndarray, jpeg_quality: int | None, chroma: str) -> tuple[bytes, str]:
     """JPEG (quality, chroma subsampling) or lossless PNG bytes, and the file suffix."""
     if jpeg_quality is None:
@@ -279,15 +438,25 @@ def decode(encoded: bytes) -> np.ndarray:
 
 
 def develop(raw: np.ndarray, spec: CameraModelSpec) -> np.ndarray:
-    """Raw ADC values (mosaic, or (H, W, 3) without one) -> 8-bit BGR: demosaicing and the tone curve.
+    """Raw ADC values (mosaic, or (H, W, 3) without one) -> 8-bit BGR: demosaicing, the tone curve and the
+    colour stage (saturation, hue).
 
     Bilinear and edge-aware demosaicing run on the linear raw values (as an ISP does); OpenCV's VNG takes 8-bit
-    data only, so with it the tone curve maps the mosaic first and VNG interpolates the 8-bit values.
+    data only, so with it the tone curve maps the mosaic first and VNG interpolates the 8-bit values. A Blender
+    view transform (a 3D LUT, not per photosite) takes the demosaiced levels; with VNG, the mosaic is sRGB-encoded
+    to 8 bits, interpolated and decoded to linear levels first.
     """
-    lut = tone_lut(spec.tone, spec.gamma, spec.bit_depth)
-    if spec.bayer != "none" and spec.demosaic == "vng":
-        return demosaic(lut[raw], spec.bayer, "vng")
-    return lut[demosaic(raw, spec.bayer, spec.demosaic)]
+    vng = spec.bayer != "none" and spec.demosaic == "vng"
+    if spec.tone in VIEW_TONES:
+        if vng:
+            srgb = tone_lut("srgb", spec.gamma, spec.bit_depth)
+            image = view_transform(linear_from_srgb(demosaic(srgb[raw], spec.bayer, "vng")), spec.tone)
+        else:
+            image = view_transform_codes(demosaic(raw, spec.bayer, spec.demosaic), spec.tone, spec.bit_depth)
+    else:
+        lut = tone_lut(spec.tone, spec.gamma, spec.bit_depth)
+        image = demosaic(lut[raw], spec.bayer, "vng") if vng else lut[demosaic(raw, spec.bayer, spec.demosaic)]
+    return colour_adjust(image, spec.saturation, spec.hue_rotation_deg)
 
 
 def capture(radiance: np.ndarray, spec: CameraModelSpec, rng: np.random.Generator) -> Captured:
@@ -305,6 +474,7 @@ def capture(radiance: np.ndarray, spec: CameraModelSpec, rng: np.random.Generato
         raise ValueError("radiance has non-finite values")
     level = expose(radiance, exposure_of(radiance, spec))
     level = white_balance(level, spec.white_balance)
+    level = lens_blur(level, spec.lens_blur_px)
     level = motion_blur(level, spec.motion_blur_px, spec.motion_blur_angle_deg)
     raw = sensor(mosaic(level, spec.bayer), spec, rng)
     encoded, suffix = encode(develop(raw, spec), spec.jpeg_quality, spec.chroma)
