@@ -4,6 +4,7 @@ Run from the repository root::
 
     .venv/bin/python -m benchmarks.photoreal_worlds                     # (re)write the 18 world files
     .venv/bin/python -m benchmarks.photoreal_worlds --render --frames 5 --out datasets/photoreal
+    .venv/bin/python -m benchmarks.photoreal_worlds --set husky --render --frames 4 --out datasets/photoreal-husky
 
 The worlds (``benchmarks/worlds/photoreal/<name>.yaml``, committed) extend ``exp2-photoreal`` (the paper's scale:
 robot ~25 px) and ``exp2-photoreal-telephoto`` (robot ~180 px); each keeps H1 ~30 m and H2 ~20 m from the
@@ -16,8 +17,14 @@ robot, their gimbals on it (``look_at``), the crate and the clutter:
 - lighting **high**: the sun 60 deg high in a clear sky; **low**: the sun 12 deg high (long shadows, a warmer
   sky), 3 W/m^2; **overcast**: no direct sun, a bright grey sky, soft shadows.
 
+``--set husky`` writes 12 worlds of the second marked target, the Husky-like UGV of ``scenarios/models/husky.yaml``
+(``benchmarks/worlds/photoreal-husky/photoreal-husky-<scale>-<geometry>-<lighting>.yaml``): the same geometries g1-g3
+and the lightings high and low at both scales, extending ``exp2-photoreal-husky`` and
+``exp2-photoreal-telephoto-husky`` (the Pioneer's worlds with only the target's model changed).
+
 ``--render`` renders every world (``<out>/<world name>/``, the Cycles engine) and, per scale, the g1-high world
-without its target (``<out>/<scale>-absent/``, absent-target frames). Each dataset resumes where it stopped, so an
+without its target (``<out>/<scale>-absent/``, absent-target frames; for ``--set husky`` too: the same scene, its
+``model.yaml`` the Husky's, so a front-end looks there for the Husky's palette). Each dataset resumes where it stopped, so an
 interrupted run is continued by running the command again. A line per dataset reports its wall time.
 """
 
@@ -62,9 +69,17 @@ TRAIN_LIGHTINGS = {
     "dawn": {"sun": (15.0, 110.0), "sun_strength": 3.0, "sky": "clear"},
     "overcast": {"sun": (60.0, 53.0), "sun_strength": 4.0, "sky": "overcast"},
 }
+#: The second marked target's shipped worlds per scale (``--set husky``): the Pioneer's with the Husky-like UGV.
+HUSKY_SCALES = {"paper": "exp2-photoreal-husky", "telephoto": "exp2-photoreal-telephoto-husky"}
 #: World sets: folder, geometries, lightings (the training set only at the paper's scale).
 SETS = {"benchmark": (WORLDS, GEOMETRIES, LIGHTINGS, tuple(SCALES)),
-        "train": (ROOT / "benchmarks" / "worlds" / "photoreal-train", TRAIN_GEOMETRIES, TRAIN_LIGHTINGS, ("paper",))}
+        "train": (ROOT / "benchmarks" / "worlds" / "photoreal-train", TRAIN_GEOMETRIES, TRAIN_LIGHTINGS, ("paper",)),
+        "husky": (ROOT / "benchmarks" / "worlds" / "photoreal-husky", GEOMETRIES,
+                  {k: LIGHTINGS[k] for k in ("high", "low")}, tuple(SCALES))}
+#: Per set: the shipped world each scale extends and the worlds' name prefix (default: SCALES, "photoreal").
+SET_BASES = {"husky": (HUSKY_SCALES, "photoreal-husky")}
+#: The sets whose ``--render`` adds, per scale, the g1-high world without its target.
+ABSENT_SETS = ("benchmark", "husky")
 #: The gimbals' aim (the robot's centre).
 LOOK_AT = [0.0, 0.0, 0.12]
 
@@ -84,10 +99,11 @@ def _vehicle(name: str, rng_m: float, elevation_deg: float, azimuth_deg: float) 
 def world_document(scale: str, geometry: str, lighting: str, world_set: str = "benchmark") -> dict:
     """The world file of one combination (a mapping that ``extends`` the scale's shipped world)."""
     _, geometries, lightings, _ = SETS[world_set]
-    name = f"photoreal-{scale}-{geometry}-{lighting}"
+    bases, prefix = SET_BASES.get(world_set, (SCALES, "photoreal"))
+    name = f"{prefix}-{scale}-{geometry}-{lighting}"
     light = lightings[lighting]
-    doc: dict = {"extends": SCALES[scale], "name": name,
-                 "description": f"{SCALES[scale]}: geometry {geometry}, lighting {lighting} (benchmarks/photoreal_worlds.py)",
+    doc: dict = {"extends": bases[scale], "name": name,
+                 "description": f"{bases[scale]}: geometry {geometry}, lighting {lighting} (benchmarks/photoreal_worlds.py)",
                  "render": {"lighting": {"sun": _direction(*light["sun"]), "sun_strength": light["sun_strength"],
                                          "sky": light["sky"], "sky_strength": 1.0}}}
     g = geometries[geometry]
@@ -98,7 +114,8 @@ def world_document(scale: str, geometry: str, lighting: str, world_set: str = "b
 
 
 def write_worlds(world_set: str = "benchmark") -> list[Path]:
-    """Write the world files of ``world_set`` (the benchmark's 18, the training set's 9); their paths."""
+    """Write the world files of ``world_set`` (the benchmark's 18, the training set's 18, the Husky's 12); their
+    paths."""
     folder, geometries, lightings, scales = SETS[world_set]
     folder.mkdir(parents=True, exist_ok=True)
     paths = []
@@ -121,7 +138,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--out", type=Path, default=ROOT / "datasets" / "photoreal", help="datasets' folder")
     parser.add_argument("--only", default="", help="render only the worlds whose name contains this")
     parser.add_argument("--set", dest="world_set", choices=tuple(SETS), default="benchmark",
-                        help="the benchmark's worlds, or the training worlds (other geometries and suns)")
+                        help="the benchmark's worlds, the training worlds (other geometries and suns), or the second "
+                             "marked target's (husky: the Husky-like UGV, high and low sun)")
     args = parser.parse_args(argv)
     paths = write_worlds(args.world_set)
     folder, _, _, scales = SETS[args.world_set]
@@ -131,8 +149,9 @@ def main(argv: list[str] | None = None) -> int:
     from agents.tools.render_dataset import render_dataset
 
     jobs = [(p.stem, p, True) for p in paths]
-    if args.world_set == "benchmark":
-        jobs += [(f"{scale}-absent", WORLDS / f"photoreal-{scale}-g1-high.yaml", False) for scale in scales]
+    if args.world_set in ABSENT_SETS:
+        prefix = SET_BASES.get(args.world_set, (SCALES, "photoreal"))[1]
+        jobs += [(f"{scale}-absent", folder / f"{prefix}-{scale}-g1-high.yaml", False) for scale in scales]
     total = time.perf_counter()
     for name, world, target in jobs:
         if args.only not in name:
