@@ -74,6 +74,10 @@ class ManifestSpec(Strict):
     cameras: Annotated[list[CameraName], Field(min_length=1, max_length=MAX_CAMERAS)]
     camera_model: dict[str, Any] | None = None
     target_visible: bool = True
+    #: The named look the images were developed with (scenarios/looks.py; ``custom`` for a mapping of fields).
+    look: Annotated[str, Field(min_length=1, max_length=200)] | None = None
+    #: A dataset developed again from another's raw EXRs (``evopose develop``): that dataset's directory.
+    developed_from: Annotated[str, Field(min_length=1, max_length=4096)] | None = None
 
     @field_validator("cameras")
     @classmethod

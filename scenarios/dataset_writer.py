@@ -29,6 +29,15 @@ from .world import ScenarioSpec, build_scenario, load_scenario, read_world_docum
 T = TypeVar("T", bound=BaseModel)
 
 
+def manifest_document(manifest: ManifestSpec) -> dict[str, Any]:
+    """The manifest as written: the optional records of a look (``look``, ``developed_from``) only when set."""
+    document = manifest.model_dump(mode="json")
+    for key in ("look", "developed_from"):
+        if document.get(key) is None:
+            document.pop(key, None)
+    return document
+
+
 class DatasetWriter:
     """Writes a dataset directory (docs/datasets.md) for a world: the fixed files at once, then frame by frame.
 
@@ -46,6 +55,9 @@ class DatasetWriter:
     camera_model : the camera model as applied (the world's ``render.camera_model``), recorded in the manifest.
     target_visible : False for a dataset rendered without the target.
     intrinsics : per camera, a camera whose intrinsics replace the world's in its camera_info.yaml.
+    look : the named look the images are developed with (recorded in the manifest).
+    world_camera_model : replaces the world document's ``render.camera_model`` in world.yaml (a look's camera model:
+        the dataset's world then carries the camera its images were taken with).
     resume : continue an existing dataset of the same manifest and world: the frames after the last complete one
         are cut from the JSON-lines files (:attr:`next_frame` is where to go on).
 
@@ -64,7 +76,8 @@ class DatasetWriter:
     def __init__(self, root: str | Path, world: str | Path, *, engine: Mapping[str, Any],
                  frames: int | None = None, fps: float | None = None, cameras: Sequence[str] | None = None,
                  camera_model: Mapping[str, Any] | None = None, target_visible: bool = True,
-                 intrinsics: Mapping[str, Camera] | None = None, resume: bool = False) -> None:
+                 intrinsics: Mapping[str, Camera] | None = None, resume: bool = False, look: str | None = None,
+                 world_camera_model: Mapping[str, Any] | None = None) -> None:
         self.root = Path(root)
         world_path = resolve_scenario_path(world)
         document = read_world_document(world_path)
@@ -79,10 +92,12 @@ class DatasetWriter:
             "format": FORMAT, "world": spec.name, "engine": dict(engine),
             "frames": spec.frames if frames is None else frames, "fps": spec.fps if fps is None else fps,
             "cameras": cameras, "camera_model": None if camera_model is None else dict(camera_model),
-            "target_visible": target_visible}, self.root / MANIFEST, DatasetError)
+            "target_visible": target_visible, "look": look}, self.root / MANIFEST, DatasetError)
         model_path = resolve_model_path(spec.target.model, world_path.parent)
         world_doc = {**document, "frames": self.manifest.frames, "fps": self.manifest.fps,
                      "target": {**document["target"], "model": MODEL}}
+        if world_camera_model is not None:
+            world_doc["render"] = {**(document.get("render") or {}), "camera_model": dict(world_camera_model)}
         camera_infos = {}
         for camera in cameras:
             k = (intrinsics or {}).get(camera) or scenario.vehicle(camera).camera_at(0.0)
@@ -98,7 +113,7 @@ class DatasetWriter:
             for camera in cameras:
                 (self.root / camera).mkdir(exist_ok=True)
                 _write_text(self.root / camera / CAMERA_INFO, _dump_yaml(camera_infos[camera]))
-            _write_text(self.root / MANIFEST, _dump_yaml(self.manifest.model_dump(mode="json")))
+            _write_text(self.root / MANIFEST, _dump_yaml(manifest_document(self.manifest)))
         self.scenario = load_scenario(self.root / WORLD)
         self.next_frame = self._cut_to_complete()
         self._poses_next = {c: self.next_frame for c in cameras}

@@ -1,5 +1,6 @@
-"""World commands of the ``evopose`` CLI: ``render`` (what a vehicle sees, or a whole dataset), ``features``
-(image -> points) and ``train-scorer`` (the front-end's mark scorer from datasets).
+"""World commands of the ``evopose`` CLI: ``render`` (what a vehicle sees, or a whole dataset), ``develop`` (a dataset
+developed again through another look), ``features`` (image -> points) and ``train-scorer`` (the front-end's mark
+scorer from datasets).
 
 Registered on :data:`agents.cli.main.app`; thin commands that call one service function each
 (:mod:`agents.tools.world`). Input problems raise :class:`scenarios.errors.WorldError`, which
@@ -45,6 +46,8 @@ def render_command(
                                                                 "(absent-target frames).")] = False,
     force: Annotated[bool, typer.Option("--force", help="Dataset: render anew over an existing dataset of other "
                                                         "settings.")] = False,
+    look: Annotated[str | None, typer.Option(help="Dataset: a named look over the world's camera model "
+                                                  "(docs/camera-model.md: camera, agx, filmic, vivid-warm, ...).")] = None,
 ) -> None:
     """Render what a vehicle's camera sees at a frame with its ground truth (--out X.png), or a dataset of every
     camera's images, poses and truth (--out DIR)."""
@@ -53,11 +56,12 @@ def render_command(
             raise typer.BadParameter("--frame, --vehicle, --truth and --clean are for one image (--out X.png); "
                                      "a dataset takes --frames, --cameras", param_hint="--out")
         _render_dataset(scenario, out, engine=engine or "cycles", frames=frames, samples=samples or 24,
-                        cameras=cameras, target=not no_target, force=force, as_json=as_json)
+                        cameras=cameras, target=not no_target, force=force, as_json=as_json, look=look)
         return
-    if engine is not None or frames is not None or samples is not None or cameras is not None or no_target or force:
-        raise typer.BadParameter(f"--engine, --frames, --samples, --cameras, --no-target and --force are for a "
-                                 f"dataset directory, not an image ({out.suffix})", param_hint="--out")
+    if (engine is not None or frames is not None or samples is not None or cameras is not None or no_target or force
+            or look is not None):
+        raise typer.BadParameter(f"--engine, --frames, --samples, --cameras, --no-target, --force and --look are for "
+                                 f"a dataset directory, not an image ({out.suffix})", param_hint="--out")
     from agents.tools.world import render_to_files
 
     result = render_to_files(scenario, frame or 0, out, vehicle=vehicle, truth_path=truth, clean=clean)
@@ -70,14 +74,18 @@ def render_command(
 
 
 def _render_dataset(world: str, out: Path, *, engine: str, frames: int | None, samples: int, cameras: str | None,
-                    target: bool, force: bool, as_json: bool) -> None:
+                    target: bool, force: bool, as_json: bool, look: str | None = None) -> None:
     """``--out DIR``: the dataset, with a progress bar per camera on stderr."""
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+    from scenarios.looks import LOOKS
 
     from agents.tools.render_dataset import ENGINES, render_dataset
 
     if engine not in ENGINES:
         raise typer.BadParameter(f"expected one of {', '.join(ENGINES)}, got {engine!r}", param_hint="--engine")
+    if look is not None and look not in LOOKS:
+        raise typer.BadParameter(f"unknown look {look!r} (looks: {', '.join(LOOKS)})", param_hint="--look")
     names = None
     if cameras is not None:
         names = [c.strip() for c in cameras.split(",")]
@@ -95,7 +103,7 @@ def _render_dataset(world: str, out: Path, *, engine: str, frames: int | None, s
             bar.update(tasks[camera], completed=event["frame"] + 1)
 
         summary = render_dataset(world, out, engine=engine, frames=frames, samples=samples, cameras=names,
-                                 target=target, force=force, progress=on_image)
+                                 target=target, force=force, progress=on_image, look=look)
     if as_json:
         print(json_line(summary))
     else:
@@ -104,6 +112,29 @@ def _render_dataset(world: str, out: Path, *, engine: str, frames: int | None, s
                         f"frames x {', '.join(summary['cameras'])} ({summary['engine']}); "
                         f"{summary['images_rendered']} images rendered"
                         + (f", {per:.1f} s each" if per else "") + f" in {summary['wall_seconds']:.0f} s")
+
+
+def develop_command(
+    source: Annotated[Path, typer.Argument(metavar="SRC", show_default=False,
+                                           help="A rendered dataset that kept its raw EXRs (<camera>/raw/).")],
+    look: Annotated[str, typer.Option("--look", show_default=False,
+                                      help="The look (docs/camera-model.md): camera, agx, agx-punchy, filmic, "
+                                           "vivid-warm, flat-cool, hable-faded, gamma-dark.")],
+    out: Annotated[Path, typer.Option("--out", "-o", show_default=False, help="The new dataset directory.")],
+    force: Annotated[bool, typer.Option("--force", help="Replace a dataset already at --out.")] = False,
+    as_json: Annotated[bool, typer.Option("--json", help="Print the summary as one JSON line.")] = False,
+) -> None:
+    """Develop a rendered dataset again through another camera look, from its raw EXRs (no rendering): same
+    truth, poses and sensor noise, new images."""
+    from agents.tools.develop_dataset import develop_dataset
+
+    summary = develop_dataset(source, out, look, force=force)
+    if as_json:
+        print(json_line(summary))
+    else:
+        Console().print(f"{summary['dataset']}: {summary['source']} through the look {summary['look']!r}, "
+                        f"{summary['frames']} frames x {', '.join(summary['cameras'])}; "
+                        f"{summary['images_developed']} images in {summary['wall_seconds']:.1f} s")
 
 
 def features_command(
@@ -156,5 +187,6 @@ def train_scorer_command(
 def register(app: typer.Typer) -> None:
     """Add the world commands to the CLI ``app``."""
     app.command("render")(render_command)
+    app.command("develop")(develop_command)
     app.command("features")(features_command)
     app.command("train-scorer")(train_scorer_command)

@@ -22,9 +22,10 @@ import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
-from scenarios.camera_model import CameraModelSpec, encode
+from scenarios.camera_model import CameraModelSpec, encode, spec_record
 from scenarios.dataset import IMAGE_SUFFIXES, DatasetError, DatasetWriter
 from scenarios.errors import WorldError
+from scenarios.looks import look_spec
 from scenarios.photoreal.develop import (camera_model_of, camera_rng, develop_radiance, radiance_of_srgb)
 from scenarios.photoreal.exr import read_exr
 from scenarios.photoreal.scene import ENGINE_DEFAULTS, describe_frame, describe_scene
@@ -77,14 +78,15 @@ def _write_bytes(path: Path, data: bytes) -> Path:
 
 
 def open_writer(world: str | Path, out_dir: Path, *, engine: dict, frames: int | None, cameras, target: bool,
-                camera_model: dict, force: bool) -> DatasetWriter:
+                camera_model: dict, force: bool, look: str | None = None) -> DatasetWriter:
     """The dataset's writer: a new directory, or an existing dataset resumed (``force``: removed first)."""
     manifest = out_dir / "manifest.yaml"
     if force and manifest.is_file():
         shutil.rmtree(out_dir)
     try:
         return DatasetWriter(out_dir, world, engine=engine, frames=frames, cameras=cameras, camera_model=camera_model,
-                             target_visible=target, resume=manifest.is_file())
+                             target_visible=target, resume=manifest.is_file(), look=look,
+                             world_camera_model=None if look is None else camera_model)
     except DatasetError as err:
         if manifest.is_file():
             raise DatasetError(f"{err}; --force renders it anew") from None
@@ -134,8 +136,11 @@ def develop_exr(scenario: Scenario, exr: Path, k: int, camera: str,
 def render_dataset(world: str | Path, out_dir: str | Path, *, engine: str = "cycles", frames: int | None = None,
                    samples: int = 24, cameras: Sequence[str] | None = None, target: bool = True,
                    force: bool = False, keep_raw: bool = True, threads: int | None = None,
-                   progress: Callable[[dict], None] | None = None) -> dict:
+                   progress: Callable[[dict], None] | None = None, look: str | None = None) -> dict:
     """Render ``world`` into the dataset directory ``out_dir`` (created, or resumed).
+
+    ``look`` names a look (:data:`scenarios.looks.LOOKS`) put over the world's camera model: the dataset's
+    world.yaml carries the resulting camera model (``render.camera_model``) and its manifest the look's name.
 
     ``progress(event)`` after each image: ``camera``, ``frame``, ``frames`` (per camera), ``done`` and ``total``
     (images of the dataset), ``rendered`` (False: it was there already), ``seconds`` (the engine's time for it).
@@ -156,9 +161,11 @@ def render_dataset(world: str | Path, out_dir: str | Path, *, engine: str = "cyc
 
         blender = blender_version()
     spec = camera_model_of(load_scenario(world))
+    if look is not None:
+        spec = look_spec(spec, look)
     writer = open_writer(world, out_dir, engine=engine_settings(engine, samples, blender), frames=frames,
                          cameras=list(cameras) if cameras else None, target=target,
-                         camera_model=spec.model_dump(mode="json"), force=force)
+                         camera_model=spec_record(spec), force=force, look=look)
     scenario = writer.scenario
     render_world = scenario if target else absent_target(scenario)
     total = writer.frames * len(writer.cameras)
