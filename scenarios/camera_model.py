@@ -311,10 +311,9 @@ def view_lut(tone: str) -> np.ndarray:
 def view_grid() -> tuple[np.ndarray, float]:
     """The LUTs' grid per channel (0, then log2-spaced levels; float64) and its spacing in stops."""
     with np.load(VIEW_LUTS_FILE) as luts:
-        ev, mid = luts["ev"].astype(np.float64), float(luts["mid_grey"])
-    nodes = np.concatenate([[0.0], mid * 2.0 ** ev])
+        nodes = luts["levels"].astype(np.float64)
     nodes.setflags(write=False)
-    return nodes, float(ev[1] - ev[0])
+    return nodes, float(np.log2(nodes[2] / nodes[1]))
 
 
 def _lut_coordinate(level: np.ndarray) -> np.ndarray:

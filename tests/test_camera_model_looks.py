@@ -128,7 +128,7 @@ def test_lens_blur_spreads_an_edge_and_is_off_at_zero():
 
 def test_lut_interpolation_reproduces_the_grid_nodes():
     nodes, step = view_grid()
-    assert step == pytest.approx(0.5) and nodes[0] == 0 and 0.18 in np.round(nodes, 12)
+    assert step == pytest.approx(0.5) and nodes[0] == 0 and nodes[-6] == 1.0  # saturation is a node
     rng = np.random.default_rng(1)
     idx = rng.integers(0, len(nodes), (500, 3))
     idx[:4] = [[0, 0, 0], [len(nodes) - 1] * 3, [0, len(nodes) - 1, 5], [25, 25, 25]]
@@ -151,7 +151,8 @@ def test_blender_standard_is_the_srgb_curve():
     x = np.linspace(0, 1, 2001, dtype=np.float32)
     grey = np.repeat(x[:, None], 3, axis=1)
     diff = np.abs(view_transform(grey, "blender-standard").astype(int) - srgb_from_linear(grey).astype(int))
-    assert diff.max() <= 2 and diff.mean() < 0.5
+    assert diff.max() <= 1 and diff.mean() < 0.5
+    assert view_transform(np.ones((1, 3), np.float32), "blender-standard").min() == 255
 
 
 @pytest.mark.parametrize("tone", VIEW_TONES)

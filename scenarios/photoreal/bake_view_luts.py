@@ -6,11 +6,11 @@ Run with Blender's interpreter (``bpy`` 4.5; standard library, numpy and ``bpy``
 
 For each view (transform, look) it makes one float image holding a grid of scene-linear values, Rec.709 primaries
 (Blender's scene-linear), ``STEPS`` per channel: 0, then ``STEPS - 1`` values log2-spaced from ``EV_MIN`` to
-``EV_MAX`` stops around mid grey 0.18. The image is saved through colour management
+``EV_MAX`` stops around 1.0 (the camera's saturation is a node; mid grey 0.18 is 2.47 stops below it). The image is saved through colour management
 (``Image.save_render(path, scene=scene)``: the scene's view transform, look and display, sRGB) to a 16-bit PNG,
 read back, and the display-referred values (sRGB-encoded, 0-65535) are stored as ``lut_<name>`` with shape
 (STEPS, STEPS, STEPS, 3), indexed ``[b, g, r]`` and holding B, G, R (the project's order), plus the grid's
-``ev`` nodes and the Blender version. ``--check`` saves a few grey levels through ``Standard`` and compares
+``levels`` (its nodes per channel) and the Blender version. ``--check`` saves a few grey levels through ``Standard`` and compares
 them with the sRGB formula: proof that ``save_render`` applies the view transform.
 
 ``--develop LEVELS.npy --view NAME --png OUT`` saves linear values (float32 (H, W, 3), RGB, e.g. a camera's sensor
@@ -29,11 +29,11 @@ import numpy as np
 
 import bpy
 
-#: Grid: 0, then STEPS - 1 nodes from EV_MIN to EV_MAX stops around 0.18 (log2-spaced: half a stop apart, mid grey
-#: a node).
+#: Grid: 0, then STEPS - 1 nodes from EV_MIN to EV_MAX stops around 1.0 (log2-spaced, half a stop apart): about -12
+#: to +5 stops around mid grey, with the sensor's saturation (1.0) a node, where a clipping view (Standard) has its
+#: kink.
 STEPS = 36
-EV_MIN, EV_MAX = -12.0, 5.0
-MID_GREY = 0.18
+EV_MIN, EV_MAX = -14.5, 2.5
 #: name -> (view transform, look) as Blender 4.5 names them.
 VIEWS = {
     "blender-standard": ("Standard", "None"),
@@ -46,8 +46,8 @@ VIEWS = {
 
 
 def grid_values(steps: int = STEPS) -> np.ndarray:
-    """The grid's nodes per channel: 0, then log2-spaced from EV_MIN to EV_MAX around 0.18."""
-    return np.concatenate([[0.0], MID_GREY * 2.0 ** np.linspace(EV_MIN, EV_MAX, steps - 1)])
+    """The grid's nodes per channel: 0, then log2-spaced from EV_MIN to EV_MAX stops around 1.0."""
+    return np.concatenate([[0.0], 2.0 ** np.linspace(EV_MIN, EV_MAX, steps - 1)])
 
 
 def _scene(view: str, look: str, depth: int = 16):
@@ -102,7 +102,7 @@ def bake(steps: int) -> dict[str, np.ndarray]:
         for name, (view, look) in VIEWS.items():
             codes = save_through_view(rgb, view, look, os.path.join(tmp, f"{name}.png"))
             out[f"lut_{name}"] = codes.reshape(steps, steps, steps, 3)[..., ::-1].copy()  # RGB -> BGR
-            print(f"{name}: {view} / {look}: mid grey -> {codes.reshape(steps, steps, steps, 3)[-9, -9, -9]}",
+            print(f"{name}: {view} / {look}: saturation (1.0) -> {codes.reshape(steps, steps, steps, 3)[-6, -6, -6]}",
                   file=sys.stderr)
     return out
 
@@ -138,7 +138,7 @@ def main() -> None:
         develop(args.develop, args.view, args.png)
     if args.out:
         luts = bake(args.steps)
-        np.savez_compressed(args.out, ev=np.linspace(EV_MIN, EV_MAX, args.steps - 1), mid_grey=MID_GREY,
+        np.savez_compressed(args.out, levels=grid_values(args.steps),
                             blender=np.array(bpy.app.version_string), views=np.array(list(VIEWS)),
                             transforms=np.array([f"{v} / {lk}" for v, lk in VIEWS.values()]), **luts)
         print(f"{args.out}: {os.path.getsize(args.out)} bytes", file=sys.stderr)
