@@ -44,6 +44,7 @@ import cv2
 import numpy as np
 
 from .body_paint import body_paint, body_region, paint_around
+from .camera_look import Look, estimate_look, to_reference_look
 from .features import MarkDetections, _to_bgr
 from .mark_prior import MarkPrior, mark_prior
 from .mark_scorer import MarkScorer, candidate_features, feature_names, shipped
@@ -180,7 +181,8 @@ def detect_contrast_marks(image_bgr: np.ndarray, palette: Mapping[str, tuple[int
                           prior: MarkPrior = MarkPrior(), *, body: tuple[int, int, int] | None = None,
                           k_sigma: float = K_SIGMA, max_edge_ratio: float = MAX_EDGE_RATIO,
                           max_misfit: float | None = None, max_marks: int = 256,
-                          scorer: MarkScorer | str | None = "shipped") -> ContrastMarks:
+                          scorer: MarkScorer | str | None = "shipped",
+                          look: Look | str | None = "auto") -> ContrastMarks:
     """The model's marks in a camera image (uint8 (H, W, 3) BGR) by their contrast (see the module's docstring).
 
     ``palette``: the model's mark colours, name -> BGR (sRGB, 0-255); ``prior``: the marks' radius range and the
@@ -194,12 +196,22 @@ def detect_contrast_marks(image_bgr: np.ndarray, palette: Mapping[str, tuple[int
     then taken with the lenient :data:`CANDIDATE_K_SIGMA` bars (``k_sigma`` is not used). ``"all"``: every
     such candidate, with its features (to fit a scorer); None: the hand-set bars alone.
 
+    ``look``: what the camera's look did to the colours (:mod:`evopose.camera_look`), undone before anything is
+    compared with the paint colours: ``"auto"`` estimated from this image and the body's paint, a :class:`Look`
+    (e.g. a track's), or None (the image is taken as the reference look shows it).
+
     With a body the scale space is built only around it: the box of :func:`body_region` grown by three of the
     largest blur sigmas, at least :data:`MIN_MARGIN_PX` (no paint in the image: no marks)."""
     bgr = _to_bgr(image_bgr)
     names = tuple(palette)
     if not names:
         raise ValueError("the palette names no colour")
+    if isinstance(look, str) and look != "auto":
+        raise ValueError(f"look must be a Look, 'auto' or None, got {look!r}")
+    if look == "auto":
+        look = estimate_look(bgr, body, prior.extent_px)
+    if isinstance(look, Look):
+        bgr = to_reference_look(bgr, look)
     if isinstance(scorer, str) and scorer not in ("shipped", "all"):
         raise ValueError(f"scorer must be a MarkScorer, 'shipped', 'all' or None, got {scorer!r}")
     if scorer == "shipped":  # fitted on the shipped model's colours; another palette gets the hand-set bars

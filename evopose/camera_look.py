@@ -1,0 +1,183 @@
+"""What a camera's look did to the target's colours, estimated per frame from the target itself, and undone.
+
+The contrast front-end (:mod:`evopose.blobs`, :mod:`evopose.body_paint`, :mod:`evopose.spot_colour`) compares
+what it sees with the model's paint colours. Those comparisons hold in the look it was tuned on, the *reference
+look* (the project's camera model: sRGB tone, true white balance, default saturation). A lab's camera has its own:
+a white-balance error of tens of percent per channel, a saturation setting, a film-like tone curve that compresses
+chroma (Blender's Filmic and AgX), a small hue error. Measured on Cycles frames, those move the body's and the
+marks' chroma far more than the front-end's tolerances allow, while the *relations* between the colours stay.
+
+So the look is estimated from the scene (docs/design.md, "Seeing through any camera") in JPEG's own colour space,
+where a camera's colour processing is nearly linear per pixel: the chroma over luminance,
+``q = (Cr - 128, Cb - 128) / Y`` (BT.601 full range, gamma-encoded). There
+
+- a white-balance error (a gain per channel) moves every colour by nearly the same offset: the image's *neutral*,
+  the mode of its least chromatic pixels (:func:`neutral_chroma`), moves off the reference's;
+- a saturation setting or a chroma-compressing tone curve scales ``q - neutral``; a hue error turns it.
+
+The target's body, the largest patch of one paint the model names, gives the scale and the turn: its chroma
+relative to the neutral, against what the reference look makes of that paint (:data:`REFERENCE_BODY_GAIN`,
+:data:`REFERENCE_BODY_TURN_DEG`: Cycles' sunlit and shaded faces with their gloss keep ~0.6 of the paint file's
+chroma, turned ~9 deg, at both scales). :func:`to_reference_look` then maps every pixel back,
+``q' = R(-turn) (q - neutral) / saturation + neutral_ref``, a linear map of (Cr, Cb) per pixel given Y, so the
+encoder's 4:2:0 chroma blocks keep their shape (:mod:`evopose.spot_colour` models them). Within
+:data:`DEAD_BAND` of the reference look the image is left as it is: the reference look is not re-coloured.
+
+Images are OpenCV BGR ``uint8`` (H, W, 3).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+#: Pixels whose luma is outside this range carry no chroma worth measuring (black, or clipped).
+LUMA_RANGE = (24.0, 245.0)
+#: The neutral is the median chroma of this share of the pixels nearest it (iterated from the image's median).
+NEUTRAL_SHARE = 0.4
+#: What the reference look makes of a body's paint: the 90th percentile of its pixels' chroma relative to the
+#: neutral over the paint file's chroma (the sunlit faces, unmixed), and the turn (deg) of the upper half's median.
+#: Measured with :func:`body_chroma` on the reference look's Cycles frames of the Pioneer (tests/data/photoreal:
+#: paper 0.56-0.65, telephoto 0.68-0.74; turn +2 to +8 deg): within the dead band of both.
+REFERENCE_BODY_GAIN, REFERENCE_BODY_TURN_DEG = 0.64, 6.0
+#: The neutral of the reference look's frames (the ground's own slight blue: tests/data/photoreal, all frames
+#: within 0.01 of it).
+REFERENCE_NEUTRAL = (0.033, -0.064)
+#: A body pixel's chroma lies within this turn of the paint's (reference look) direction, and at least this many
+#: noise spreads (and this absolute chroma) from the neutral.
+BODY_TURN_DEG, BODY_NOISE_SPREADS, BODY_MIN_CHROMA = 35.0, 5.0, 0.05
+#: Least pixels of the body patch to measure a look from (the paper's scale: the Pioneer's ~25 px across keeps
+#: ~450-600 paint pixels), and the least chroma of its 90th percentile, absolute and in noise spreads: a target's
+#: paint stands out; the ground's faint tint in the paint's hue (frames without the target: 0.06-0.15) does not.
+MIN_BODY_PIXELS, MIN_BODY_CHROMA, MIN_BODY_SPREADS = 40, 0.16, 20.0
+#: A paint colour whose chroma (relative to the neutral) is under this carries no hue: only the neutral is measured.
+MIN_PAINT_CHROMA = 0.12
+#: Looks this close to the reference (neutral offset, log saturation, turn in deg) are left as they are.
+DEAD_BAND = (0.05, 0.15, 4.0)
+#: The correction is bounded: a saturation gain within this range, a turn within this many degrees.
+SATURATION_RANGE, MAX_TURN_DEG = (0.25, 2.5), 30.0
+
+
+@dataclass(frozen=True)
+class Look:
+    """A camera's look relative to the reference look: ``neutral`` (2,) the chroma (``q``) of the image's neutral,
+    ``saturation`` the chroma gain, ``turn_rad`` the hue turn, ``body_pixels`` how many body pixels measured the
+    gain and turn (0: none found; then they are 1 and 0)."""
+
+    neutral: tuple[float, float] = REFERENCE_NEUTRAL
+    saturation: float = 1.0
+    turn_rad: float = 0.0
+    body_pixels: int = 0
+
+    @property
+    def is_reference(self) -> bool:
+        """Whether the look lies within :data:`DEAD_BAND` of the reference look (nothing to undo)."""
+        shift = float(np.hypot(*(np.subtract(self.neutral, REFERENCE_NEUTRAL))))
+        return (shift <= DEAD_BAND[0] and abs(np.log(self.saturation)) <= DEAD_BAND[1]
+                and abs(np.degrees(self.turn_rad)) <= DEAD_BAND[2])
+
+
+def chroma_of(bgr: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Luma ``Y`` (H, W) float32 and chroma over luma ``q`` (H, W, 2) float32 ((Cr - 128, Cb - 128) / Y) of a BGR
+    uint8 image (or of palette colours, shape (..., 3))."""
+    a = np.asarray(bgr, np.uint8)
+    ycc = cv2.cvtColor(a.reshape(-1, 1, 3), cv2.COLOR_BGR2YCrCb).reshape(a.shape).astype(np.float32)
+    y = ycc[..., 0]
+    return y, (ycc[..., 1:] - 128.0) / np.maximum(y, 1.0)[..., None]
+
+
+def neutral_chroma(q: np.ndarray, usable: np.ndarray) -> tuple[np.ndarray, float]:
+    """The image's neutral (2,) and the spread of chroma about it (1.4826 MAD of the distance, float): the median
+    of the :data:`NEUTRAL_SHARE` of usable pixels nearest the estimate, three times from the median of all."""
+    pts = q[usable][::max(1, int(usable.sum()) // 40000)]
+    if not len(pts):
+        return np.array(REFERENCE_NEUTRAL, np.float32), 0.02
+    n = np.median(pts, axis=0)
+    for _ in range(3):
+        d = np.hypot(*(pts - n).T)
+        n = np.median(pts[d <= np.quantile(d, NEUTRAL_SHARE)], axis=0)
+    d = np.hypot(*(pts - n).T)
+    near = d[d <= np.quantile(d, NEUTRAL_SHARE)]
+    return n.astype(np.float32), float(max(1.4826 * np.median(np.abs(near - np.median(near))), 0.005))
+
+
+def body_chroma(q: np.ndarray, usable: np.ndarray, neutral: np.ndarray, spread: float, paint_q: np.ndarray,
+                extent_px: float | None = None) -> tuple[np.ndarray | None, int]:
+    """The body's chroma relative to the neutral (2,): the 90th percentile of its size, in the direction of the
+    upper half's median, over the largest patch of pixels that may show
+    its paint in any look within :data:`SATURATION_RANGE` and :data:`MAX_TURN_DEG` (a direction within
+    :data:`BODY_TURN_DEG` of the paint's under the reference look, chroma clear of the noise), no larger than the
+    target's extent ``extent_px`` allows; and the patch's pixel count (None, 0: no such patch)."""
+    rel = q - neutral
+    r = np.hypot(rel[..., 0], rel[..., 1])
+    turn = np.radians(REFERENCE_BODY_TURN_DEG)
+    expect = np.arctan2(paint_q[1], paint_q[0]) + turn
+    off = np.abs((np.arctan2(rel[..., 1], rel[..., 0]) - expect + np.pi) % (2 * np.pi) - np.pi)
+    mask = usable & (off <= np.radians(BODY_TURN_DEG)) & (r >= max(BODY_NOISE_SPREADS * spread, BODY_MIN_CHROMA))
+    if mask.sum() < MIN_BODY_PIXELS:
+        return None, 0
+    closed = cv2.morphologyEx(mask.astype(np.uint8), cv2.MORPH_CLOSE, np.ones((3, 3), np.uint8))
+    count, labels, stats, _ = cv2.connectedComponentsWithStats(closed, connectivity=8)
+    best, best_n = 0, 0
+    for j in range(1, count):
+        x, y, w, h, _ = stats[j]
+        if extent_px is not None and max(w, h) > 2.0 * extent_px + 8:
+            continue   # larger than the target can be: a wall, a floor in the body's hue
+        n = int(np.count_nonzero(mask & (labels == j)))
+        if n > best_n:
+            best, best_n = j, n
+    if best_n < MIN_BODY_PIXELS:
+        return None, 0
+    patch = mask & (labels == best)
+    r_patch = r[patch]
+    top = np.quantile(r_patch, 0.9)
+    if top < max(MIN_BODY_CHROMA, MIN_BODY_SPREADS * spread):
+        return None, 0
+    upper = rel[patch][r_patch >= np.median(r_patch)]
+    direction = np.median(upper, axis=0)
+    return direction / max(float(np.hypot(*direction)), 1e-9) * top, best_n
+
+
+def estimate_look(bgr: np.ndarray, body_bgr: tuple[int, int, int] | None, extent_px: float | None = None) -> Look:
+    """The :class:`Look` of a camera image (BGR uint8 (H, W, 3)) of a target whose body is painted ``body_bgr`` (the
+    model file's colour; None: the neutral only); ``extent_px``, the target's largest extent in pixels if known."""
+    y, q = chroma_of(bgr)
+    usable = (y >= LUMA_RANGE[0]) & (y <= LUMA_RANGE[1])
+    neutral, spread = neutral_chroma(q, usable)
+    look = Look(neutral=(float(neutral[0]), float(neutral[1])))
+    if body_bgr is None:
+        return look
+    _, paint_q = chroma_of(np.array(body_bgr, np.uint8))
+    if float(np.hypot(*paint_q)) < MIN_PAINT_CHROMA:
+        return look
+    seen, n = body_chroma(q, usable, neutral, spread, paint_q, extent_px)
+    if seen is None:
+        return look
+    gain = float(np.hypot(*seen)) / (REFERENCE_BODY_GAIN * float(np.hypot(*paint_q)))
+    turn = float(np.arctan2(seen[1], seen[0]) - np.arctan2(paint_q[1], paint_q[0])) \
+        - np.radians(REFERENCE_BODY_TURN_DEG)
+    turn = (turn + np.pi) % (2 * np.pi) - np.pi
+    gain = float(np.clip(gain, *SATURATION_RANGE))
+    turn = float(np.clip(turn, -np.radians(MAX_TURN_DEG), np.radians(MAX_TURN_DEG)))
+    return Look(neutral=look.neutral, saturation=gain, turn_rad=turn, body_pixels=n)
+
+
+def to_reference_look(bgr: np.ndarray, look: Look) -> np.ndarray:
+    """The image (BGR uint8 (H, W, 3)) as the reference look would show it: each pixel's chroma over luma
+    ``q`` mapped by ``R(-turn) (q - neutral) / saturation + reference neutral``, its luma kept. The image itself
+    when ``look`` is the reference's (:attr:`Look.is_reference`)."""
+    if look.is_reference:
+        return bgr
+    ycc = cv2.cvtColor(bgr, cv2.COLOR_BGR2YCrCb).astype(np.float32)
+    y = ycc[..., 0]
+    c, s = np.cos(-look.turn_rad), np.sin(-look.turn_rad)
+    m = np.array([[c, -s], [s, c]], np.float32) / np.float32(look.saturation)
+    q = (ycc[..., 1:] - 128.0) / np.maximum(y, 1.0)[..., None] - np.asarray(look.neutral, np.float32)
+    q = q @ m.T + np.asarray(REFERENCE_NEUTRAL, np.float32)
+    ycc[..., 1:] = 128.0 + q * y[..., None]
+    return cv2.cvtColor(np.clip(ycc + 0.5, 0, 255).astype(np.uint8), cv2.COLOR_YCrCb2BGR)
+
+
+__all__ = ["Look", "body_chroma", "chroma_of", "estimate_look", "neutral_chroma", "to_reference_look"]
