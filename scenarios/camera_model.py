@@ -35,7 +35,7 @@ import math
 from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
-from typing import Annotated, Any, Literal
+from typing import Annotated, Any, Literal, get_args
 
 import cv2
 import numpy as np
@@ -61,11 +61,11 @@ _HABLE = (0.15, 0.50, 0.10, 0.20, 0.02, 0.30)
 FILMIC_WHITE = 4.0
 #: Blender's view transforms (Blender 4.5, display sRGB) baked as 3D LUTs by scenarios/photoreal/bake_view_luts.py.
 VIEW_LUTS_FILE = Path(__file__).with_name("view_luts.npz")
-#: ``tone`` values that are Blender view transforms (transform / look, as the bake script names them).
-VIEW_TONES = ("blender-standard", "blender-agx", "blender-agx-punchy", "blender-filmic",
-              "blender-filmic-high-contrast", "blender-khronos-pbr-neutral")
+#: The tone curves: three 1-D curves, and Blender's view transforms (transform / look, as the bake script names them).
 Tone = Literal["srgb", "gamma", "filmic", "blender-standard", "blender-agx", "blender-agx-punchy", "blender-filmic",
                "blender-filmic-high-contrast", "blender-khronos-pbr-neutral"]
+#: ``tone`` values that are Blender view transforms (3D LUTs in :data:`VIEW_LUTS_FILE`).
+VIEW_TONES = tuple(t for t in get_args(Tone) if t.startswith("blender-"))
 #: Fields added for looks (docs/camera-model.md, "Looks") and their defaults, which change nothing:
 #: :func:`spec_record` leaves them out at these values so that a dataset's manifest stays what it was.
 LOOK_FIELD_DEFAULTS = {"lens_blur_px": 0.0, "saturation": 1.0, "hue_rotation_deg": 0.0}
