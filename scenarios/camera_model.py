@@ -15,9 +15,9 @@ small pure function of this module (docs/camera-model.md says why each is there 
 6. **sensor** (:func:`sensor`): shot noise (Poisson in electrons, ``full_well`` electrons at saturation),
    read noise (Gaussian, ``read_noise`` electrons), an ADC of ``bit_depth`` bits that clips.
 7. **demosaicing** (:func:`demosaic`): OpenCV's bilinear, VNG or edge-aware Bayer conversions.
-8. **tone curve** (:func:`tone_lut`, :func:`view_transform`): sRGB, a gamma or a filmic curve, to 8 bits; or one
-   of Blender's view transforms (``blender-agx``, ``blender-filmic``, ...), a 3D LUT baked from Blender
-   (``scenarios/view_luts.npz``, :func:`view_lut`) applied to the sensor level as Blender's scene-linear value.
+8. **tone curve** (:func:`tone_lut`): sRGB, a gamma or a filmic curve, to 8 bits; or one of Blender's view
+   transforms (``blender-agx``, ``blender-filmic``, ...), a 3D LUT baked from Blender (:mod:`scenarios.view_luts`)
+   applied to the sensor level as Blender's scene-linear value.
 9. **colour** (:func:`colour_adjust`): ``saturation`` scales the chroma about the luma, ``hue_rotation_deg``
    rotates it (the YCbCr plane of the 8-bit values), as a camera's saturation setting and hue error.
 10. **encoding** (:func:`encode`): JPEG at ``jpeg_quality`` with 4:2:0 or 4:4:4 chroma, or lossless PNG;
@@ -34,14 +34,14 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from functools import lru_cache
-from pathlib import Path
-from typing import Annotated, Any, Literal, get_args
+from typing import Annotated, Any, Literal
 
 import cv2
 import numpy as np
 from pydantic import Field, field_validator
 
 from .documents import Strict
+from .view_luts import VIEW_TONES, view_transform, view_transform_codes
 
 Bayer = Literal["RGGB", "BGGR", "GRBG", "GBRG", "none"]
 
@@ -59,13 +59,9 @@ _PATTERN_CHANNELS = {"RGGB": (2, 1, 1, 0), "BGGR": (0, 1, 1, 2), "GRBG": (1, 2, 
 #: John Hable's filmic curve constants (shoulder, linear, toe), and the linear white it is normalised at.
 _HABLE = (0.15, 0.50, 0.10, 0.20, 0.02, 0.30)
 FILMIC_WHITE = 4.0
-#: Blender's view transforms (Blender 4.5, display sRGB) baked as 3D LUTs by scenarios/photoreal/bake_view_luts.py.
-VIEW_LUTS_FILE = Path(__file__).with_name("view_luts.npz")
-#: The tone curves: three 1-D curves, and Blender's view transforms (transform / look, as the bake script names them).
+#: The tone curves: three 1-D curves, and Blender's view transforms (:data:`scenarios.view_luts.VIEW_TONES`).
 Tone = Literal["srgb", "gamma", "filmic", "blender-standard", "blender-agx", "blender-agx-punchy", "blender-filmic",
                "blender-filmic-high-contrast", "blender-khronos-pbr-neutral"]
-#: ``tone`` values that are Blender view transforms (3D LUTs in :data:`VIEW_LUTS_FILE`).
-VIEW_TONES = tuple(t for t in get_args(Tone) if t.startswith("blender-"))
 #: Fields added for looks (docs/camera-model.md, "Looks") and their defaults, which change nothing:
 #: :func:`spec_record` leaves them out at these values so that a dataset's manifest stays what it was.
 LOOK_FIELD_DEFAULTS = {"lens_blur_px": 0.0, "saturation": 1.0, "hue_rotation_deg": 0.0}
@@ -293,100 +289,6 @@ def tone_lut(tone: str, gamma: float, bit_depth: int) -> np.ndarray:
     lut = np.round(np.clip(y, 0, 1) * 255.0).astype(np.uint8)
     lut.setflags(write=False)
     return lut
-
-
-@lru_cache(maxsize=8)
-def view_lut(tone: str) -> np.ndarray:
-    """The 3D LUT of a Blender view transform: float32 (N, N, N, 3), indexed [b, g, r] by the grid's nodes
-    (:func:`view_grid`), holding the display-referred (sRGB-encoded) B, G, R in 0-1."""
-    if tone not in VIEW_TONES:
-        raise ValueError(f"not a Blender view transform: {tone!r} (expected one of {', '.join(VIEW_TONES)})")
-    with np.load(VIEW_LUTS_FILE) as luts:
-        lut = luts[f"lut_{tone}"].astype(np.float32) / np.float32(65535)
-    lut.setflags(write=False)
-    return lut
-
-
-@lru_cache(maxsize=1)
-def view_grid() -> tuple[np.ndarray, float]:
-    """The LUTs' grid per channel (0, then log2-spaced levels; float64) and its spacing in stops."""
-    with np.load(VIEW_LUTS_FILE) as luts:
-        nodes = luts["levels"].astype(np.float64)
-    nodes.setflags(write=False)
-    return nodes, float(np.log2(nodes[2] / nodes[1]))
-
-
-def _lut_coordinate(level: np.ndarray) -> np.ndarray:
-    """Scene-linear levels -> the grid's fractional index: log2-spaced nodes from node 1 on, linear between
-    0 (node 0) and node 1; clamped to the grid."""
-    nodes, step = view_grid()
-    first = np.float32(nodes[1])
-    x = np.maximum(np.asarray(level, np.float32), 0)
-    with np.errstate(divide="ignore"):
-        log = np.log2(np.maximum(x, first) / first) / np.float32(step) + 1
-    coord = np.where(x < first, x / first, log)
-    return np.clip(coord, 0, len(nodes) - 1).astype(np.float32)
-
-
-def _split(coord: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
-    """Fractional grid indices -> the lower node (at most n - 2) and the fraction towards the next (0-1)."""
-    i0 = np.minimum(coord.astype(np.int32), n - 2)
-    return i0, (coord - i0).astype(np.float32)
-
-
-def _trilinear(lut: np.ndarray, i0: np.ndarray, f: np.ndarray) -> np.ndarray:
-    """``lut`` (N, N, N, 3) interpolated at lower nodes ``i0`` and fractions ``f`` ((P, 3) each, [b, g, r])."""
-    n = lut.shape[0]
-    flat = lut.reshape(-1, 3)
-    base = (i0[:, 0] * n + i0[:, 1]) * n + i0[:, 2]
-    fb, fg, fr = f[:, 0:1], f[:, 1:2], f[:, 2:3]
-
-    def lerp_r(offset: int) -> np.ndarray:
-        a = np.take(flat, base + offset, axis=0)
-        a += fr * (np.take(flat, base + (offset + 1), axis=0) - a)
-        return a
-
-    g0 = lerp_r(0)
-    g0 += fg * (lerp_r(n) - g0)
-    g1 = lerp_r(n * n)
-    g1 += fg * (lerp_r(n * n + n) - g1)
-    g0 += fb * (g1 - g0)
-    return g0
-
-
-def apply_view_lut(level: np.ndarray, lut: np.ndarray) -> np.ndarray:
-    """Trilinear interpolation of ``lut`` (N, N, N, 3, [b, g, r]) at scene-linear BGR ``level`` (..., 3) in
-    the grid's log2 domain (linear between the nodes 0 and the first level): the display-referred values (..., 3),
-    float32 0-1."""
-    level = np.asarray(level, np.float32)
-    i0, f = _split(_lut_coordinate(level.reshape(-1, 3)), lut.shape[0])
-    return _trilinear(lut, i0, f).reshape(level.shape)
-
-
-@lru_cache(maxsize=4)
-def _code_coordinates(bit_depth: int) -> tuple[np.ndarray, np.ndarray]:
-    """Per raw code (level = code / top), the grid's lower node and fraction: a table lookup instead of a log."""
-    codes = np.arange(1 << bit_depth, dtype=np.float64) / ((1 << bit_depth) - 1)
-    return _split(_lut_coordinate(codes), len(view_grid()[0]))
-
-
-def _to_uint8(display: np.ndarray) -> np.ndarray:
-    return np.clip(display * np.float32(255) + np.float32(0.5), 0, 255).astype(np.uint8)
-
-
-def view_transform(level: np.ndarray, tone: str) -> np.ndarray:
-    """Sensor levels (BGR, 1.0 = saturation) through a Blender view transform -> uint8 BGR. The level is
-    Blender's scene-linear value as it is (auto exposure's 0.18 median is Blender's mid grey)."""
-    return _to_uint8(apply_view_lut(level, view_lut(tone)))
-
-
-def view_transform_codes(raw: np.ndarray, tone: str, bit_depth: int) -> np.ndarray:
-    """Raw BGR codes (H, W, 3; level = code / (2**bit_depth - 1)) through a Blender view transform -> uint8
-    BGR: :func:`view_transform` of the levels, its coordinates looked up per code (fast)."""
-    index, fraction = _code_coordinates(bit_depth)
-    flat = raw.reshape(-1, 3)
-    out = _trilinear(view_lut(tone), np.take(index, flat), np.take(fraction, flat))
-    return _to_uint8(out).reshape(raw.shape)
 
 
 def colour_matrix(saturation: float, hue_rotation_deg: float) -> np.ndarray:

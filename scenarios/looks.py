@@ -11,9 +11,10 @@ from typing import Any
 
 import numpy as np
 
-from .camera_model import VIEW_TONES, CameraModelSpec
+from .camera_model import CameraModelSpec
 from .documents import validate
 from .errors import WorldError
+from .view_luts import VIEW_TONES
 
 #: The named looks: overrides of CameraModelSpec fields (white balance B, G, R like every colour of the project).
 LOOKS: dict[str, dict[str, Any]] = {

@@ -7,16 +7,17 @@ from __future__ import annotations
 
 import hashlib
 import math
+from typing import get_args
 
 import numpy as np
 import pytest
 
-from scenarios.camera_model import (LOOK_FIELD_DEFAULTS, VIEW_TONES, CameraModelSpec, _YCBCR_FROM_BGR,
-                                    apply_view_lut, capture, colour_adjust, lens_blur, linear_from_srgb,
-                                    spec_record, srgb_from_linear, view_grid, view_lut, view_transform,
-                                    view_transform_codes)
+from scenarios.camera_model import (_YCBCR_FROM_BGR, LOOK_FIELD_DEFAULTS, CameraModelSpec, Tone, capture,
+                                    colour_adjust, lens_blur, linear_from_srgb, spec_record, srgb_from_linear)
 from scenarios.errors import WorldError
 from scenarios.looks import LOOKS, RANDOM_TONES, apply_look, look_spec, random_look
+from scenarios.view_luts import (VIEW_LUTS_FILE, VIEW_TONES, apply_view_lut, view_grid, view_lut, view_transform,
+                                 view_transform_codes)
 
 
 def _radiance() -> np.ndarray:
@@ -200,8 +201,7 @@ def test_a_red_patch_stays_red_through_a_blender_tone(tone, demosaic):
 
 
 def test_blender_tones_are_committed_and_small():
-    from scenarios.camera_model import VIEW_LUTS_FILE
-
+    assert set(get_args(Tone)) == {"srgb", "gamma", "filmic", *VIEW_TONES}
     assert VIEW_LUTS_FILE.stat().st_size < 1_500_000
     with np.load(VIEW_LUTS_FILE) as luts:
         assert str(luts["blender"]).startswith("4.5")

@@ -1,4 +1,4 @@
-"""How close the camera model's Blender tones (3D LUTs, :func:`scenarios.camera_model.view_transform`) come to
+"""How close the camera model's Blender tones (3D LUTs, :func:`scenarios.view_luts.view_transform`) come to
 Blender itself on a real render (docs/camera-model.md, "Looks")::
 
     .venv/bin/python -m scenarios.photoreal.view_fidelity datasets/photoreal/photoreal-paper-g1-high/H1/raw/000000.exr
@@ -19,7 +19,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from ..camera_model import VIEW_TONES, CameraModelSpec, expose, exposure_of, view_transform
+from ..camera_model import CameraModelSpec, expose, exposure_of
+from ..view_luts import VIEW_TONES, view_transform
 from .exr import read_exr
 from .runner import bpy_python
 
