@@ -143,6 +143,9 @@ def body_chroma(q: np.ndarray, usable: np.ndarray, neutral: np.ndarray, spread: 
 def estimate_look(bgr: np.ndarray, body_bgr: tuple[int, int, int] | None, extent_px: float | None = None) -> Look:
     """The :class:`Look` of a camera image (BGR uint8 (H, W, 3)) of a target whose body is painted ``body_bgr`` (the
     model file's colour; None: the neutral only); ``extent_px``, the target's largest extent in pixels if known."""
+    bgr = np.asarray(bgr)
+    if bgr.dtype != np.uint8 or bgr.ndim != 3 or bgr.shape[2] != 3 or min(bgr.shape[:2]) < 2:
+        return Look()   # not a colour image: nothing to measure (the front-end says what is wrong with it)
     y, q = chroma_of(bgr)
     usable = (y >= LUMA_RANGE[0]) & (y <= LUMA_RANGE[1])
     neutral, spread = neutral_chroma(q, usable)
@@ -180,4 +183,28 @@ def to_reference_look(bgr: np.ndarray, look: Look) -> np.ndarray:
     return cv2.cvtColor(np.clip(ycc + 0.5, 0, 255).astype(np.uint8), cv2.COLOR_YCrCb2BGR)
 
 
-__all__ = ["Look", "body_chroma", "chroma_of", "estimate_look", "neutral_chroma", "to_reference_look"]
+
+class LookTracker:
+    """A camera's look over a sequence: the median of the last ``window`` frames' estimates that found the body
+    (a camera keeps its look; one frame's body may show one face only). State: the recent estimates, one writer
+    (the vehicle's frame loop). :meth:`update` takes a frame's estimate and returns the tracked look."""
+
+    def __init__(self, window: int = 9) -> None:
+        if window < 1:
+            raise ValueError(f"window must be at least 1, got {window}")
+        self.window = window
+        self._recent: list[Look] = []
+
+    def update(self, look: Look) -> Look:
+        if look.body_pixels > 0:
+            self._recent = [*self._recent[-(self.window - 1):], look] if self.window > 1 else [look]
+        if not self._recent:
+            return look
+        neutral = np.median([lk.neutral for lk in self._recent], axis=0)
+        return Look(neutral=(float(neutral[0]), float(neutral[1])),
+                    saturation=float(np.median([lk.saturation for lk in self._recent])),
+                    turn_rad=float(np.median([lk.turn_rad for lk in self._recent])),
+                    body_pixels=int(np.median([lk.body_pixels for lk in self._recent])))
+
+
+__all__ = ["Look", "LookTracker", "body_chroma", "chroma_of", "estimate_look", "neutral_chroma", "to_reference_look"]

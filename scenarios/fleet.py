@@ -37,10 +37,10 @@ from .world import SCENARIOS_DIR, Scenario, load_scenario
 FLEET_DIR = SCENARIOS_DIR / "fleet"
 
 Share = Literal["none", "raw", "features", "hint"]
-#: The kinds of feature points (``--features``; agents.problem.extract): colour ``marks`` by preset hue bands (the
-#: default; the front-end for the project's flat-coloured drawings), marks by ``contrast`` (camera images: photoreal
-#: renders, JPEG 4:2:0), chessboard ``corners``.
-Features = Literal["marks", "contrast", "corners"]
+#: The kinds of feature points (``--features``; agents.problem.extract): ``auto`` (the default: ``contrast`` on
+#: camera images, ``marks`` on the project's flat-coloured drawings), colour ``marks`` by preset hue bands, marks by
+#: ``contrast`` (camera images: photoreal renders, real cameras, any look), chessboard ``corners``.
+Features = Literal["auto", "marks", "contrast", "corners"]
 FEATURE_KINDS: tuple[str, ...] = get_args(Features)
 Name = Annotated[str, Field(pattern=r"^[A-Za-z0-9_][A-Za-z0-9_.\-]{0,63}$")]
 

@@ -206,7 +206,7 @@ def test_features_override_sets_every_camera_vehicles_front_end_and_a_bad_kind_i
         load_fleet_scenario("exp2a-features").with_features("hues")
     assert main(["scenario", "run", "exp2a-features", "--features", "hues"]) == 2
     err = capsys.readouterr().err
-    assert "--features" in err and "marks, contrast, corners" in err and err.count("\n") == 1
+    assert "--features" in err and "auto, marks, contrast, corners" in err and err.count("\n") == 1
 
 
 def test_the_feature_kinds_are_one_list():

@@ -268,7 +268,7 @@ def test_bad_sources_are_one_line_and_exit_2(capfd, h1_media, tmp_path):
         (["--source", str(empty)], "the directory holds no images"),
         (["--source", str(tmp_path / "*.png")], "the pattern matches no files"),
         (["--source", str(tmp_path / "f%03d.png")], "no image sequence matches the pattern"),
-        (["--source", str(folder / "seq"), "--features", "edges"], "--features must be one of marks, contrast, corners"),
+        (["--source", str(folder / "seq"), "--features", "edges"], "--features must be one of auto, marks, contrast, corners"),
         (["--camera-info", str(info)], "--camera-info and --camera-pose describe a real camera: they need --source"),
     ]
     for args, expected in cases:

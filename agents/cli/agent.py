@@ -106,8 +106,11 @@ def register(app: typer.Typer) -> None:
         camera_frame: Annotated[str | None, typer.Option(
             help="With --camera-pose ros2:/tf: the camera's optical frame, composed from map through /tf and "
                  "/tf_static (e.g. H1/camera_optical).")] = None,
-        features: Annotated[str, typer.Option(help=f"Feature points: {', '.join(FEATURES)} (colour marks, or a "
-                                                   "chessboard's inner corners).")] = "marks",
+        features: Annotated[str, typer.Option(help=f"Feature points: {', '.join(FEATURES)}: auto is contrast (the "
+                                                   "marks by their contrast, any camera look) on camera images "
+                                                   "(--source, worlds with a camera model) and marks (preset hue "
+                                                   "bands) on drawn worlds; corners: a chessboard's inner corners.")]
+        = "auto",
         mark_scorer: Annotated[Path | None, typer.Option(
             help="With --features contrast: the mark scorer for 2-4 px marks, a JSON file of `evopose train-scorer` "
                  "(default: the shipped one, fitted on rendered worlds).")] = None,

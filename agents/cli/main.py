@@ -58,8 +58,10 @@ def solve_command(
     model: Annotated[str | None, typer.Option(help="Target-model file (or shipped name) for --image.")] = None,
     camera: Annotated[Path | None, typer.Option(help="Camera file for --image: the problem file's camera fields "
                                                      "or a ROS camera_info YAML.")] = None,
-    features: Annotated[str, typer.Option(help="Points --image gives: marks (the model's colour marks) or "
-                                               "corners (a chessboard's inner corners).")] = "marks",
+    features: Annotated[str, typer.Option(help="Points --image gives: auto or contrast (the model's colour marks "
+                                               "by their contrast, any camera look), marks (preset hue bands: "
+                                               "flat-coloured drawings) or corners (a chessboard's inner "
+                                               "corners).")] = "auto",
     overlay: Annotated[Path | None, typer.Option(help="Write a PNG of the first view with its points and "
                                                       "the model projected at the estimate.")] = None,
 ) -> None:

@@ -116,8 +116,9 @@ def run_command(
                                          "its camera's folder (evopose agent --source DIR), on the dataset's world "
                                          "and frames.")] = None,
     features: Annotated[str | None, typer.Option(
-        "--features", metavar="KIND", help="Every camera vehicle's feature front-end: marks (preset hue bands), "
-                                           "contrast (camera images: docs/datasets.md) or corners (default: the "
+        "--features", metavar="KIND", help="Every camera vehicle's feature front-end: auto (contrast on camera "
+                                           "images, marks on drawn worlds), marks (preset hue bands), contrast "
+                                           "(camera images: docs/datasets.md) or corners (default: the "
                                            "scenario's).")] = None,
 ) -> None:
     """Start every agent of the scenario as its own process, run, stop them all, print the results."""

@@ -21,6 +21,7 @@ import numpy as np
 
 from evopose import Bounds, Camera
 from evopose.blobs import MarkPrior, detect_contrast_marks, mark_prior
+from evopose.camera_look import LookTracker, estimate_look
 from evopose.features import colour_ranges, detect_colour_marks, detect_corners, x_junctions
 from evopose.mark_scorer import MarkScorer, feature_names
 from scenarios.fleet import FEATURE_KINDS
@@ -49,6 +50,16 @@ def chessboard_corners(image: np.ndarray) -> np.ndarray:
     return found[x_junctions(image, found)]
 
 
+def resolve_features(kind: str, camera_images: bool) -> str:
+    """The front-end ``kind`` names: ``auto`` is ``contrast`` on camera images (a real camera, a dataset, a world
+    with a camera model: any tone curve, white balance or saturation, :mod:`evopose.camera_look`) and ``marks`` on
+    the project's flat-coloured drawings, where the preset hue bands find every mark (BENCHMARKS.md, "Mark
+    front-ends through camera looks"); any other kind is itself."""
+    if kind != "auto":
+        return kind
+    return "contrast" if camera_images else "marks"
+
+
 def feature_extractor(kind: str, target: TargetModel, area: Bounds | None = None,
                       scorer: MarkScorer | None = None) -> FeatureExtractor:
     """The :class:`FeatureExtractor` of ``kind`` (one of :data:`FEATURE_KINDS`) for ``target``: ``marks`` and
@@ -57,6 +68,8 @@ def feature_extractor(kind: str, target: TargetModel, area: Bounds | None = None
     the target) from which ``contrast`` derives the marks' size in each camera's image. ``scorer``: the mark scorer
     ``contrast`` takes for 2-4 px marks (default: the shipped one, :mod:`evopose.mark_scorer`); ValueError when it
     was fitted on another palette's features."""
+    if kind == "auto":
+        raise ValueError("resolve 'auto' first (resolve_features): whether the images come from a camera")
     if kind == "corners":
         return lambda image, camera=None: (chessboard_corners(image), None)
     if kind == "marks":
@@ -74,10 +87,15 @@ def feature_extractor(kind: str, target: TargetModel, area: Bounds | None = None
         raise ValueError(f"the mark scorer was fitted on the features {', '.join(scorer.names)}; this model's are "
                          f"{', '.join(feature_names(tuple(palette)))}")
 
+    looks: dict[tuple, LookTracker] = {}   # per camera (its intrinsics): a camera keeps its look
+
     def contrast_marks(image: np.ndarray, camera: Camera | None = None) -> tuple[np.ndarray, np.ndarray]:
         prior = MarkPrior() if camera is None or area is None else mark_prior(
             camera, target.mark_radius, size, area.lo[:3], area.hi[:3])
-        found = detect_contrast_marks(image, palette, prior, body=body, scorer=scorer or "shipped")
+        key = None if camera is None else (camera.fx, camera.fy, camera.cx, camera.cy, camera.width, camera.height)
+        tracker = looks.setdefault(key, LookTracker())
+        look = tracker.update(estimate_look(image, body, prior.extent_px))
+        found = detect_contrast_marks(image, palette, prior, body=body, scorer=scorer or "shipped", look=look)
         return found.points, found.labels
 
     return contrast_marks
@@ -89,4 +107,5 @@ def point_extractor(kind: str, target: TargetModel, area: Bounds | None = None) 
     return lambda image: extract(image)[0]
 
 
-__all__ = ["FEATURE_KINDS", "FeatureExtractor", "chessboard_corners", "feature_extractor", "point_extractor"]
+__all__ = ["FEATURE_KINDS", "FeatureExtractor", "chessboard_corners", "feature_extractor", "point_extractor",
+           "resolve_features"]

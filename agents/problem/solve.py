@@ -11,7 +11,7 @@ from evopose import PoseProblem, SearchOptions, View, solve
 from evopose.fitness import FitnessKind
 
 from agents.problem.camera_info import read_camera_file
-from agents.problem.extract import FEATURE_KINDS, feature_extractor
+from agents.problem.extract import FEATURE_KINDS, feature_extractor, resolve_features
 from agents.problem.problem_file import ProblemFileError, ProblemInputs, read_problem, solution_to_dict
 
 
@@ -33,7 +33,7 @@ def solve_file(path: str | Path, *, seed: int | None = None, time_budget: float 
 
 def solve_image(image: str | Path, model: str | Path, camera: str | Path, *, seed: int | None = None,
                 time_budget: float | None = None, fitness: FitnessKind | None = None,
-                overlay: str | Path | None = None, features: str = "marks") -> dict:
+                overlay: str | Path | None = None, features: str = "auto") -> dict:
     """Solve from one image: extract the points of ``model`` (a model file), search inside ``camera``'s view.
 
     ``camera`` is a YAML/JSON file with the problem file's camera fields (intrinsics, optional distortion
@@ -54,7 +54,8 @@ def solve_image(image: str | Path, model: str | Path, camera: str | Path, *, see
                          f"the camera is {cam.width}x{cam.height}")
     if features not in FEATURE_KINDS:
         raise ProblemFileError(f"--features must be one of {', '.join(FEATURE_KINDS)}, got {features!r}")
-    points, labels = feature_extractor(features, target)(picture, cam)
+    kind = resolve_features(features, camera_images=True)   # a picture file is a camera's
+    points, labels = feature_extractor(kind, target)(picture, cam)
     if len(points) < 3:
         raise WorldError(f"{image}: {len(points)} {features} found; at least 3 are needed")
     evo_model = target.evopose_model()

@@ -19,7 +19,7 @@ VIEW_WEIGHTS = ("equal", "step", "adaptive")
 CAMERA_ROLES = ("uav", "ground-station")
 #: Feature points a camera vehicle extracts (``--features``): scenarios.fleet.FEATURE_KINDS, here without pydantic
 #: for the CLI's help (tests/test_scenarios.py checks they are the same).
-FEATURES = ("marks", "contrast", "corners")
+FEATURES = ("auto", "marks", "contrast", "corners")
 #: Largest ROS_DOMAIN_ID (ROS 2's documented range, as ``evopose ros2 --domain``).
 MAX_ROS_DOMAIN = 232
 #: IMU random stream of the scenario's target (as in scenarios.render's ground truth).
@@ -62,8 +62,8 @@ class AgentConfig:
     source_max_age_s: float = 1.0
     #: with ``camera_pose`` a ros2: TFMessage topic (``/tf``): the camera's optical frame, composed from ``map``
     camera_frame: str | None = None
-    features: str = "marks"
-    #: with ``features`` contrast: a mark scorer's JSON (``evopose train-scorer``) instead of the shipped one
+    features: str = "auto"
+    #: with ``features`` contrast (or auto on camera images): a mark scorer's JSON (``evopose train-scorer``) instead of the shipped one
     mark_scorer: str | Path | None = None
     view_weights: str = "step"
 
@@ -82,7 +82,7 @@ class AgentConfig:
             raise FleetError(f"--view-weights must be one of {', '.join(VIEW_WEIGHTS)}, got {self.view_weights!r}")
         if self.features not in FEATURES:
             raise FleetError(f"--features must be one of {', '.join(FEATURES)}, got {self.features!r}")
-        if self.mark_scorer is not None and self.features != "contrast":
+        if self.mark_scorer is not None and self.features not in ("contrast", "auto"):
             raise FleetError(f"--mark-scorer is for --features contrast, got --features {self.features}")
         if self.source is None and (self.camera_info is not None or self.camera_pose is not None):
             raise FleetError("--camera-info and --camera-pose describe a real camera: they need --source")

@@ -19,7 +19,7 @@ import numpy as np
 from evopose import Camera
 from scenarios.render import render_frame
 
-from agents.problem.extract import feature_extractor
+from agents.problem.extract import feature_extractor, resolve_features
 from scenarios.world import Scenario
 
 NS = 1_000_000_000
@@ -114,8 +114,10 @@ class Frame:
 
 
 def default_extractor(scenario: Scenario) -> Callable[..., tuple[np.ndarray, np.ndarray | None]]:
-    """The agents' default front-end for ``scenario``: its target's colour marks (``--features marks``)."""
-    return feature_extractor("marks", scenario.model, scenario.bounds() if scenario.spec.search else None)
+    """The agents' default front-end for ``scenario`` (``--features auto``): the marks by their contrast when the
+    world has a camera model (its images are a camera's), else by the preset hue bands."""
+    kind = resolve_features("auto", camera_images=scenario.render.camera_model is not None)
+    return feature_extractor(kind, scenario.model, scenario.bounds() if scenario.spec.search else None)
 
 
 class SimulatedCamera:

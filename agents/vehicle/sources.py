@@ -49,7 +49,7 @@ from scenarios.world import Scenario
 
 from agents.errors import FleetError
 from agents.problem.camera_info import read_camera_info, read_camera_pose
-from agents.problem.extract import FeatureExtractor, feature_extractor
+from agents.problem.extract import FeatureExtractor, feature_extractor, resolve_features
 from agents.problem.images import read_image
 from agents.transport.bus import FleetBus
 from agents.vehicle.config import AgentConfig
@@ -329,7 +329,8 @@ def open_camera(config: AgentConfig, scenario: Scenario, bus: FleetBus | None = 
     """
     scorer = _mark_scorer(config)
     try:
-        extract = feature_extractor(config.features, scenario.model,
+        camera_images = config.source is not None or scenario.render.camera_model is not None
+        extract = feature_extractor(resolve_features(config.features, camera_images), scenario.model,
                                     scenario.bounds() if scenario.spec.search else None, scorer)
     except ValueError as error:  # a scorer fitted on another palette
         raise FleetError(f"--mark-scorer {config.mark_scorer}: {error}") from None

@@ -1,0 +1,171 @@
+"""The mark front-ends through every camera look: recall, precision and labels per look and scale (issue 32).
+
+Run from the repository root on Cycles datasets that kept their radiance (``raw/*.exr``; docs/datasets.md)::
+
+    .venv/bin/python -m benchmarks.bench_photoreal_looks datasets/photoreal/photoreal-*-g*
+
+Each frame's radiance is developed again through every named look of :mod:`scenarios.looks` (the world's camera
+model with the look's fields over it, the same sensor seeds: docs/camera-model.md, "Looks"), in memory, and the
+front-ends run on the image: ``contrast`` (:func:`evopose.blobs.detect_contrast_marks` as the agents run it: the
+camera's look estimated per frame from the body and undone, :mod:`evopose.camera_look`), ``contrast-fixed`` (the
+same front-end taking every image as the reference look shows it: ``look=None``) and ``marks`` (the preset hue
+bands). Matching as benchmarks/bench_photoreal_features.py: 1.5 px at the paper's scale, 3 px at telephoto, one to
+one, recall over fully visible marks, precision over all detections, labels over matched detections.
+
+Nothing in the front-ends was fitted on these looks: the look estimate's constants were measured on the reference
+look (``camera``) alone, and every other look is held out. The worst look of a scale is reported beside the best.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from .report import provenance
+
+DEFAULT_OUT = Path(__file__).resolve().parent / "results" / "photoreal_looks.md"
+FRONT_ENDS = ("contrast", "contrast-fixed", "marks")
+
+
+def _scale_of(world_name: str) -> str:
+    return "telephoto" if "telephoto" in world_name else "paper"
+
+
+def evaluate(directory: Path, look: str, front_ends: tuple[str, ...] = FRONT_ENDS) -> dict:
+    """Counts ``{front_end: [visible marks, found, detections, correct, right labels]}`` of one dataset developed
+    through ``look``, with the dataset's world name, scale and the seconds per front-end."""
+    from agents.tools.render_dataset import develop_exr
+    from evopose.blobs import SMALL_SPOT_PX, detect_contrast_marks, mark_prior
+    from evopose.features import colour_ranges, detect_colour_marks, match_to_truth
+    from scenarios.dataset import open_dataset
+    from scenarios.looks import look_spec
+    from scenarios.photoreal.develop import camera_model_of
+
+    cv2.setNumThreads(1)
+    dataset = open_dataset(directory)
+    world = dataset.world()
+    area = world.bounds()
+    spec = look_spec(camera_model_of(world), look)
+    counts = {name: np.zeros(5, int) for name in front_ends}
+    seconds = {name: 0.0 for name in front_ends}
+    for cam in dataset.cameras:
+        for k in range(dataset.frames):
+            exr = Path(directory) / cam / "raw" / f"{k:06d}.exr"
+            encoded, _ = develop_exr(world, exr, k, cam, spec)
+            image = cv2.imdecode(np.frombuffer(encoded, np.uint8), cv2.IMREAD_COLOR)
+            camera = dataset.camera(cam, k)
+            marks = dataset.truth(k).cameras[cam].marks
+            uv = np.array([m.uv for m in marks], float).reshape(-1, 2)
+            whole = np.array([m.fully_visible for m in marks], bool)
+            prior = mark_prior(camera, world.model.mark_radius, world.model.size, area.lo[:3], area.hi[:3])
+            match_px = 1.5 if prior.radius_px[1] < SMALL_SPOT_PX else 3.0
+            for name in front_ends:
+                start = time.perf_counter()
+                if name == "marks":
+                    det = detect_colour_marks(image, colour_ranges(world.model.palette))
+                else:
+                    det = detect_contrast_marks(image, world.model.palette, prior, body=world.model.body_colour,
+                                                look="auto" if name == "contrast" else None)
+                seconds[name] += time.perf_counter() - start
+                found, _ = match_to_truth(det.points, uv[whole], match_px)
+                correct, _ = match_to_truth(det.points, uv, match_px)
+                right = sum(det.names[det.labels[i]] == marks[j].colour for i, j in correct)
+                counts[name] += [int(whole.sum()), len(found), len(det.points), len(correct), right]
+    return {"dataset": directory.name, "world": dataset.manifest.world, "scale": _scale_of(dataset.manifest.world),
+            "model": world.model.name, "look": look, "counts": {n: c.tolist() for n, c in counts.items()},
+            "seconds": seconds, "images": len(dataset.cameras) * dataset.frames}
+
+
+def _rates(c: list[int]) -> tuple[float, float, float]:
+    visible, found, detections, correct, right = c
+    return found / max(visible, 1), correct / max(detections, 1), right / max(correct, 1)
+
+
+def pooled(rows: list[dict], front_end: str) -> dict:
+    """``{(model, scale, look): [counts]}`` of ``front_end`` summed over datasets."""
+    out: dict = {}
+    for r in rows:
+        key = (r["model"], r["scale"], r["look"])
+        out[key] = (np.array(out.get(key, np.zeros(5, int))) + r["counts"][front_end]).tolist()
+    return out
+
+
+def markdown(rows: list[dict], command: str, looks: list[str], front_ends: tuple[str, ...]) -> str:
+    lines = ["## Mark front-ends through camera looks", "",
+             f"Produced by `{command}`; {provenance()}, OpenCV {cv2.__version__}, load average "
+             f"{os.getloadavg()[0]:.1f}.", "",
+             __doc__.split("\n\n")[2].replace("\n", " "), "",
+             __doc__.split("\n\n")[3].replace("\n", " "), ""]
+    groups = sorted({(r["model"], r["scale"]) for r in rows})
+    per = {name: pooled(rows, name) for name in front_ends}
+    for model, scale in groups:
+        worlds = sorted({r["world"] for r in rows if r["model"] == model and r["scale"] == scale})
+        images = sum(r["images"] for r in rows if r["model"] == model and r["scale"] == scale and r["look"] == looks[0])
+        lines += [f"### {model}, {scale} scale ({len(worlds)} worlds, {images} images per look)", "",
+                  "| look | " + " | ".join(f"{n} recall / precision / labels" for n in front_ends) + " |",
+                  "|---|" + "---|" * len(front_ends)]
+        for look in looks:
+            cells = []
+            for name in front_ends:
+                c = per[name].get((model, scale, look))
+                cells.append("-" if c is None else "{:.3f} / {:.3f} / {:.3f}".format(*_rates(c)))
+            lines.append(f"| {look} | " + " | ".join(cells) + " |")
+        for name in front_ends:
+            got = [(_rates(per[name][(model, scale, lk)]), lk) for lk in looks if (model, scale, lk) in per[name]]
+            if got:
+                worst_r, best_r = min(got, key=lambda g: g[0][0]), max(got, key=lambda g: g[0][0])
+                worst_p, best_p = min(got, key=lambda g: g[0][1]), max(got, key=lambda g: g[0][1])
+                lines.append(f"\n{name}: recall worst {worst_r[0][0]:.3f} ({worst_r[1]}), best {best_r[0][0]:.3f} "
+                             f"({best_r[1]}); precision worst {worst_p[0][1]:.3f} ({worst_p[1]}), best "
+                             f"{best_p[0][1]:.3f} ({best_p[1]}).")
+        secs = {n: sum(r["seconds"][n] for r in rows if r["model"] == model and r["scale"] == scale)
+                / max(sum(r["images"] for r in rows if r["model"] == model and r["scale"] == scale), 1)
+                for n in front_ends}
+        lines += ["", "Mean seconds per image: " + ", ".join(f"{n} {s:.3f}" for n, s in secs.items()) + ".", ""]
+    return "\n".join(lines) + "\n"
+
+
+def main(argv: list[str] | None = None) -> int:
+    from scenarios.looks import LOOKS
+
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("datasets", nargs="+", type=Path, help="Cycles dataset directories with raw/*.exr")
+    parser.add_argument("--looks", default=",".join(LOOKS), help="comma-separated look names (default: all)")
+    parser.add_argument("--front-ends", default=",".join(FRONT_ENDS))
+    parser.add_argument("--jobs", type=int, default=2)
+    parser.add_argument("--out", type=Path, default=DEFAULT_OUT)
+    args = parser.parse_args(argv)
+    looks = [lk.strip() for lk in args.looks.split(",") if lk.strip()]
+    unknown = [lk for lk in looks if lk not in LOOKS]
+    if unknown:
+        parser.error(f"unknown look(s) {', '.join(unknown)}; known: {', '.join(LOOKS)}")
+    front_ends = tuple(f.strip() for f in args.front_ends.split(",") if f.strip())
+    if bad := [f for f in front_ends if f not in FRONT_ENDS]:
+        parser.error(f"unknown front-end(s) {', '.join(bad)}; known: {', '.join(FRONT_ENDS)}")
+    missing = [str(d) for d in args.datasets if not any((d / c / "raw").is_dir() for c in ("H1", "H2"))]
+    if missing:
+        parser.error(f"no raw/*.exr (render with the Cycles engine, keep_raw): {', '.join(missing)}")
+    jobs = [(d, lk) for lk in looks for d in args.datasets]
+    rows = []
+    with ProcessPoolExecutor(max_workers=max(1, args.jobs)) as pool:
+        for row in pool.map(evaluate, *zip(*jobs), [front_ends] * len(jobs)):
+            rows.append(row)
+            print(f"{row['dataset']:34s} {row['look']:12s} " + "  ".join(
+                "{} {:.2f}/{:.2f}/{:.2f}".format(n, *_rates(row["counts"][n])) for n in front_ends), flush=True)
+    argv_text = " ".join(argv if argv is not None else sys.argv[1:])
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    args.out.write_text(markdown(rows, f".venv/bin/python -m benchmarks.bench_photoreal_looks {argv_text}", looks,
+                                 front_ends), encoding="utf-8")
+    print(f"wrote {args.out}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

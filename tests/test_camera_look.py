@@ -1,0 +1,92 @@
+"""The camera look estimated from the target's body and undone (evopose/camera_look.py), tested by its effect."""
+
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from evopose.camera_look import (DEAD_BAND, Look, LookTracker, chroma_of, estimate_look, neutral_chroma,
+                                 to_reference_look)
+
+DATA = Path(__file__).parent / "data" / "photoreal"
+PIONEER_BODY = (40, 40, 150)
+
+
+def _frames(name: str) -> list[np.ndarray]:
+    return [cv2.imread(str(p)) for p in sorted((DATA / name).glob("H*/00000[0-3].jpg"))]
+
+
+def _grade(bgr: np.ndarray, saturation: float, turn_deg: float, cast: tuple[float, float]) -> np.ndarray:
+    """A look made in the camera's way (not the estimator's): gains (B, R) in linear light, then chroma
+    scaled and turned about the luma in YCrCb."""
+    from scenarios.camera_model import linear_from_srgb, srgb_from_linear
+
+    lin = linear_from_srgb(bgr) * np.array([cast[0], 1.0, cast[1]], np.float32)
+    ycc = cv2.cvtColor(srgb_from_linear(lin), cv2.COLOR_BGR2YCrCb).astype(np.float32)
+    c, s = np.cos(np.radians(turn_deg)), np.sin(np.radians(turn_deg))
+    cr, cb = ycc[..., 1] - 128, ycc[..., 2] - 128
+    ycc[..., 1], ycc[..., 2] = 128 + saturation * (c * cr - s * cb), 128 + saturation * (s * cr + c * cb)
+    return cv2.cvtColor(np.clip(ycc + 0.5, 0, 255).astype(np.uint8), cv2.COLOR_YCrCb2BGR)
+
+
+@pytest.mark.parametrize("name", ["paper", "telephoto", "absent"])
+def test_reference_look_frames_are_left_as_they_are(name):
+    """The front-end was tuned on the reference look: its frames must come back unchanged (no look is bought
+    with another)."""
+    for frame in _frames(name):
+        look = estimate_look(frame, PIONEER_BODY)
+        assert look.is_reference, look
+        assert to_reference_look(frame, look) is frame
+
+
+def test_a_desaturated_turned_cast_look_is_measured_and_undone():
+    frame = _frames("telephoto")[0]
+    graded = _grade(frame, 0.45, 12.0, (1.25, 0.8))
+    look = estimate_look(graded, PIONEER_BODY)
+    assert look.body_pixels > 1000
+    assert 0.35 < look.saturation < 0.6
+    assert 7.0 < np.degrees(look.turn_rad) < 17.0
+    assert not look.is_reference
+    # undone: the body's chroma and the neutral come back near the reference frame's
+    back = to_reference_look(graded, look)
+    _, q_ref = chroma_of(frame)
+    _, q_back = chroma_of(back)
+    _, q_graded = chroma_of(graded)
+    region = np.zeros(frame.shape[:2], bool)
+    ys, xs = np.nonzero(cv2.inRange(frame, (0, 0, 60), (90, 90, 255)))   # the red body, in the reference frame
+    region[ys, xs] = True
+    err_back = np.median(np.hypot(*(q_back[region] - q_ref[region]).T))
+    err_graded = np.median(np.hypot(*(q_graded[region] - q_ref[region]).T))
+    assert err_back < 0.35 * err_graded
+
+
+def test_neutral_follows_a_white_balance_cast():
+    frame = _frames("paper")[0]
+    _, q = chroma_of(frame)
+    n0, _ = neutral_chroma(q, np.ones(q.shape[:2], bool))
+    _, q_warm = chroma_of(_grade(frame, 1.0, 0.0, (0.75, 1.3)))   # red up, blue down
+    n1, _ = neutral_chroma(q_warm, np.ones(q.shape[:2], bool))
+    assert n1[0] > n0[0] + 0.05 and n1[1] < n0[1] - 0.05   # Cr up, Cb down
+    assert not estimate_look(_grade(frame, 1.0, 0.0, (0.75, 1.3)), PIONEER_BODY).is_reference
+
+
+def test_without_a_body_or_a_colour_image_only_the_neutral_or_nothing():
+    frame = _frames("paper")[0]
+    look = estimate_look(frame, None)
+    assert look.saturation == 1.0 and look.turn_rad == 0.0 and look.body_pixels == 0
+    assert estimate_look(np.zeros((4, 4), np.uint8), PIONEER_BODY) == Look()
+    grey_body = estimate_look(frame, (128, 128, 128))   # a paint without hue: the neutral only
+    assert grey_body.body_pixels == 0
+
+
+def test_dead_band_and_tracker():
+    assert Look().is_reference
+    assert not Look(saturation=float(np.exp(DEAD_BAND[1] + 0.05))).is_reference
+    tracker = LookTracker(window=3)
+    for s in (0.5, 0.55, 2.0, 0.52):   # one odd frame does not move a camera's look
+        tracked = tracker.update(Look(saturation=s, body_pixels=100))
+    assert tracked.saturation == pytest.approx(0.55)   # the median of the last three
+    assert tracker.update(Look()).saturation == pytest.approx(0.55)   # a frame without the body keeps the track
+    with pytest.raises(ValueError):
+        LookTracker(0)
