@@ -298,7 +298,7 @@ def test_a_bad_mark_scorer_is_one_line_and_exit_2(capfd, h1_media, tmp_path):
 
     folder, _, _, _ = h1_media
     seq = str(folder / "seq")
-    line = agent_error(capfd, "--source", seq, "--mark-scorer", str(tmp_path / "s.json"))
+    line = agent_error(capfd, "--source", seq, "--features", "marks", "--mark-scorer", str(tmp_path / "s.json"))
     assert "--mark-scorer is for --features contrast, got --features marks" in line
     contrast = ("--source", seq, "--features", "contrast", "--mark-scorer")
     assert "cannot read it" in agent_error(capfd, *contrast, str(tmp_path / "none.json"))
