@@ -91,6 +91,8 @@ MAX_LABEL_MISFIT_ON_BODY = 1.0
 #: 0.857 (0.808 with the bars), 2629 candidates against 1479 detections.
 CANDIDATE_K_SIGMA, CANDIDATE_PAINT_AROUND, CANDIDATE_EXPLAINED = 4.0, 0.05, 0.05
 CHANNEL_PEAKS = True
+#: Where marks are 3 px and more: least radius of a spot as a share of the marks' own scale (:func:`one_scale`).
+SCALE_CONSENSUS = 0.55
 
 
 def _srgb_to_linear(x: np.ndarray) -> np.ndarray:
@@ -342,6 +344,9 @@ def _detect(bgr: np.ndarray, lin: np.ndarray, names: tuple[str, ...], palette: M
         sel = sel[paint_around(paint, pts[sel], radius[sel]) >= (CANDIDATE_PAINT_AROUND if scoring
                                                                  else MIN_PAINT_AROUND)]
     pts, labels, conf, radius, contrast = pts[sel], labels[sel], conf[sel], radius[sel], contrast[sel]
+    if prior.radius_px[1] >= SMALL_SPOT_PX and len(pts) > 2:   # marks of one target share a scale
+        keep = one_scale(radius, contrast)
+        pts, labels, conf, radius, contrast = pts[keep], labels[keep], conf[keep], radius[keep], contrast[keep]
     if prior.extent_px is not None and len(pts) > 1:
         keep = _densest_cluster(pts, contrast, 0.75 * prior.extent_px)
         pts, labels, conf, radius, contrast = pts[keep], labels[keep], conf[keep], radius[keep], contrast[keep]
@@ -390,6 +395,21 @@ def one_per_disc(pts: np.ndarray, score: np.ndarray, disc_radius_px: float) -> n
     return np.array(sorted(taken), int)
 
 
+def one_scale(radius: np.ndarray, contrast: np.ndarray, share: float = SCALE_CONSENSUS) -> np.ndarray:
+    """Indices (sorted) of the spots whose ``radius`` (K,) is at least ``share`` of the marks' own scale: the median
+    radius of the spots at least as contrasted as the median (``contrast`` (K,)).
+
+    The prior's radius range spans the whole operating area and every facing (2.5-12 px at telephoto), while the
+    marks of one target at one distance share a radius within their foreshortening (a disc at 70 deg keeps ~0.6
+    of its scale). What a camera's look adds on the body (its paint's JPEG blocks, noise made visible by a
+    saturation gain, a grazing face's texture) peaks at the finest scales, weaker. Cycles telephoto frames
+    (benchmarks/bench_photoreal_looks.py): true marks 4.7-9.4 px, false spots on the body 2.3-4.7 px."""
+    radius, contrast = np.asarray(radius, float), np.asarray(contrast, float)
+    strong = contrast >= np.median(contrast)
+    scale = float(np.median(radius[strong]))
+    return np.nonzero(radius >= share * scale)[0]
+
+
 def _same_spots(pts: np.ndarray, radius: np.ndarray) -> np.ndarray:
     """Whether each two peaks ``pts`` (K, 2) of ``radius`` (K,) are one spot, bool (K, K): within the larger radius
     (two scales of one disc), or a small peak on the rim of a much larger one (an oblique disc's ends, its
@@ -412,4 +432,4 @@ def _densest_cluster(pts: np.ndarray, weight: np.ndarray, radius: float) -> np.n
 
 
 __all__ = ["ContrastMarks", "MarkPrior", "contrast_responses", "detect_contrast_marks", "label_colours", "mark_prior",
-           "one_per_disc", "scales"]
+           "one_per_disc", "one_scale", "scales"]

@@ -56,8 +56,10 @@ MIN_BODY_PIXELS, MIN_BODY_CHROMA, MIN_BODY_SPREADS = 40, 0.16, 20.0
 MIN_PAINT_CHROMA = 0.12
 #: Looks this close to the reference (neutral offset, log saturation, turn in deg) are left as they are.
 DEAD_BAND = (0.05, 0.15, 4.0)
-#: The correction is bounded: a saturation gain within this range, a turn within this many degrees.
-SATURATION_RANGE, MAX_TURN_DEG = (0.25, 2.5), 30.0
+#: The correction is bounded: a saturation gain within this range, a turn within this many degrees. Above 1.6 the
+#: gain is a dark tone curve's (AgX Punchy: a dark red body's chroma over its small luma reads 2.5 on one camera,
+#: 1.3 on the other), not a saturation setting: taking it back further washes the marks out.
+SATURATION_RANGE, MAX_TURN_DEG = (0.25, 1.6), 30.0
 
 
 @dataclass(frozen=True)
