@@ -67,6 +67,9 @@ BLACK_SLACK = 0.02
 #: Least brightness (channel sum, linear) of a fitted mark colour, relative to the image's median brightness (a
 #: mark in the shade of its own body, lit by the sky alone, keeps ~0.25 of a sunlit ground's).
 MIN_RELATIVE_BRIGHTNESS = 0.2
+#: A paint colour whose linear channel sum is under this is a dark paint (black: 0.04): the lit-paint rule of
+#: MIN_RELATIVE_BRIGHTNESS does not apply to it.
+DARK_PAINT = 0.15
 #: Weight of the chroma axes against lightness in the response (CIE Lab units).
 CHROMA_WEIGHT = 1.0
 #: The body's paint is closed over gaps up to this share of the target's extent too (at the paper's scale marks
@@ -93,6 +96,9 @@ CANDIDATE_K_SIGMA, CANDIDATE_PAINT_AROUND, CANDIDATE_EXPLAINED = 4.0, 0.05, 0.05
 CHANNEL_PEAKS = True
 #: Where marks are 3 px and more: least radius of a spot as a share of the marks' own scale (:func:`one_scale`).
 SCALE_CONSENSUS = 0.55
+#: ... and least contrast as a share of the strong spots' (the 80th percentile): a target's marks are painted
+#: alike, what a look or the ground's texture adds is weak (Cycles telephoto: marks 1.6-9, specks 1.0-2.7).
+RELATIVE_CONTRAST = 0.35
 
 
 def _srgb_to_linear(x: np.ndarray) -> np.ndarray:
@@ -157,8 +163,9 @@ def label_colours(spot: np.ndarray, ring: np.ndarray, palette_linear: np.ndarray
         resid = ring + t[:, None] * u - s[:, None] * colour
         misfit[:, j] = np.linalg.norm(resid, axis=1) / np.maximum(s * np.linalg.norm(colour), 1e-6)
         # lit paint: a spot whose fitted colour is near black is a shadow, a hole, a wheel (any colour fits black at
-        # a small enough s)
-        misfit[s * colour.sum() < min_brightness, j] = np.inf
+        # a small enough s); a dark paint (black marks: the Husky's) is that dark lit, so the rule is not its
+        if colour.sum() >= DARK_PAINT:
+            misfit[s * colour.sum() < min_brightness, j] = np.inf
     order = np.argsort(misfit, axis=1)
     best = misfit[np.arange(k), order[:, 0]]
     second = misfit[np.arange(k), order[:, 1]] if c > 1 else np.full(k, np.inf)
@@ -397,7 +404,8 @@ def one_per_disc(pts: np.ndarray, score: np.ndarray, disc_radius_px: float) -> n
 
 def one_scale(radius: np.ndarray, contrast: np.ndarray, share: float = SCALE_CONSENSUS) -> np.ndarray:
     """Indices (sorted) of the spots whose ``radius`` (K,) is at least ``share`` of the marks' own scale: the median
-    radius of the spots at least as contrasted as the median (``contrast`` (K,)).
+    radius of the spots weighed by their ``contrast`` (K,) squared (the marks stand out; specks are many but weak),
+    and whose contrast is at least :data:`RELATIVE_CONTRAST` of the strong spots'.
 
     The prior's radius range spans the whole operating area and every facing (2.5-12 px at telephoto), while the
     marks of one target at one distance share a radius within their foreshortening (a disc at 70 deg keeps ~0.6
@@ -405,9 +413,11 @@ def one_scale(radius: np.ndarray, contrast: np.ndarray, share: float = SCALE_CON
     saturation gain, a grazing face's texture) peaks at the finest scales, weaker. Cycles telephoto frames
     (benchmarks/bench_photoreal_looks.py): true marks 4.7-9.4 px, false spots on the body 2.3-4.7 px."""
     radius, contrast = np.asarray(radius, float), np.asarray(contrast, float)
-    strong = contrast >= np.median(contrast)
-    scale = float(np.median(radius[strong]))
-    return np.nonzero(radius >= share * scale)[0]
+    order = np.argsort(radius)
+    weight = np.cumsum(contrast[order] ** 2)   # the median radius weighed by contrast squared
+    scale = float(radius[order][np.searchsorted(weight, 0.5 * weight[-1])])
+    strong = float(np.quantile(contrast, 0.8))
+    return np.nonzero((radius >= share * scale) & (contrast >= RELATIVE_CONTRAST * strong))[0]
 
 
 def _same_spots(pts: np.ndarray, radius: np.ndarray) -> np.ndarray:
