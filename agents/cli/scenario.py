@@ -109,8 +109,9 @@ def run_command(
                                                       "docs/ros2.md).")] = False,
     ros2_domain: Annotated[int, typer.Option(min=0, max=232, help="ROS_DOMAIN_ID of --ros2.")] = 0,
     record: Annotated[Path | None, typer.Option("--record", metavar="DIR", help="Record each run's traffic into "
-                                                "DIR/<fleet>.mcap (evopose record: the ROS 2 channels; the raw "
-                                                "ones, for evopose replay, in DIR/<fleet>.raw.mcap).")] = None,
+                                                "the rosbag2 bag directory DIR/<fleet> (evopose record: "
+                                                "<fleet>.mcap and metadata.yaml, what ros2 bag info opens; the "
+                                                "raw channels, for evopose replay, in <fleet>.raw.mcap).")] = None,
     dataset: Annotated[Path | None, typer.Option(
         "--dataset", metavar="DIR", help="Run on a rendered dataset (docs/datasets.md): each camera vehicle plays "
                                          "its camera's folder (evopose agent --source DIR), on the dataset's world "
