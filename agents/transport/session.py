@@ -181,4 +181,28 @@ def open_session(options: SessionOptions) -> zenoh.Session:
     try:
         return zenoh.open(config)
     except zenoh.ZError as err:
-        raise BusConfigError(f"cannot open the Zenoh session: {_zenoh_message(err)}") from None
+        message = _zenoh_message(err)
+        in_use = re.search(r"bound to (\S+?):\s.*Address already in use", message)
+        if in_use:
+            endpoint = in_use.group(1)
+            raise BusConfigError(f"{endpoint} is already in use (another fleet, router or agent listens there): "
+                                 f"stop it, or listen on another port (--listen {_other_port(endpoint)}; "
+                                 "make demo PORT=...)") from None
+        if "Unable to connect to any of" in message and options.connect and not any(
+                listening(endpoint) for endpoint in options.connect):
+            where = ", ".join(options.connect) or "the --connect endpoints of the configuration"
+            raise BusConfigError(f"could not reach the fleet's router at {where}: nothing listens there; start "
+                                 f"it (evopose router --listen {options.connect[0]}) or fix --connect") from None
+        raise BusConfigError(f"cannot open the Zenoh session: {message}") from None
+
+
+def listening(endpoint: str) -> bool:
+    from agents.transport.ports import listening as probe
+
+    return probe(endpoint)
+
+
+def _other_port(endpoint: str) -> str:
+    """``endpoint`` with the next port, as an example of another one."""
+    found = re.fullmatch(r"(.*):(\d+)", endpoint)
+    return f"{found.group(1)}:{int(found.group(2)) + 1}" if found else endpoint
