@@ -134,6 +134,12 @@ def run_command(
         raise typer.BadParameter(f"{record} exists and is not a directory", param_hint="--record")
     if dataset is not None and world is not None:
         raise typer.BadParameter("a dataset has its own world (its world.yaml)", param_hint="--world")
+    from agents.errors import FleetError
+    from agents.transport.ports import listening, next_port
+
+    if listening(listen):  # the fleet's first listener would fail, and its team-mates would wait for it in vain
+        raise FleetError(f"{listen} is already in use (another fleet, router or agent listens there): stop it, or "
+                         f"run on another port (--listen {next_port(listen)}; make demo PORT=...)")
     mirror_domain = ros2_domain if ros2 else None
     from scenarios.fleet import load_fleet_scenario
 

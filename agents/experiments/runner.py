@@ -43,7 +43,6 @@ from pathlib import Path
 from scenarios.fleet import FleetScenario, VariantSpec, load_fleet_scenario
 
 from agents.errors import FleetError
-from agents.transport.ports import listening
 from agents.experiments import DEFAULT_ENDPOINT
 
 #: Where a scenario's fleet can be reached from outside by default.
@@ -225,10 +224,6 @@ def run_variant(scenario: FleetScenario, variant: VariantSpec, run: int, *, fram
     env = {**os.environ, "PYTHONUNBUFFERED": "1"}
     use_router = scenario.spec.router or secure
     keys_dir, temporary = None, None
-    if listening(endpoint):  # the fleet's first listener would fail, and its team-mates wait for it in vain
-        raise ScenarioRunError(f"{endpoint} is already in use (another fleet, router or agent listens there): "
-                               f"stop it, or run on another port (--listen {_next_port(endpoint)}; make demo "
-                               "PORT=...)")
     try:
         if secure:
             endpoint = tls_endpoint(endpoint)
@@ -311,11 +306,6 @@ def _restart_router(dead: subprocess.Popen, cmd: list[str], env: dict, restarts:
                      f"restarting it ({len(restarts)} of {ROUTER_RESTARTS})\n")
     sys.stderr.flush()
     return start_router(cmd, env)
-
-
-def _next_port(endpoint: str) -> str:
-    host, _, port = endpoint.rpartition(":")
-    return f"{host}:{int(port) + 1}" if port.isdigit() else endpoint
 
 
 def run_scenario(scenario: FleetScenario, *, runs: int = 1, frames: int | None = None, seed: int = 0,

@@ -65,3 +65,9 @@ def listening(endpoint: str) -> bool:
         except OSError as err:
             return err.errno == errno.EADDRINUSE
     return False
+
+
+def next_port(endpoint: str) -> str:
+    """``endpoint`` with the next port (``tcp/127.0.0.1:7447`` -> ``tcp/127.0.0.1:7448``), as another one to try."""
+    host, _, port = endpoint.rpartition(":")
+    return f"{host}:{int(port) + 1}" if port.isdigit() else endpoint

@@ -40,6 +40,7 @@ from pathlib import Path
 import zenoh
 
 from agents.errors import BusConfigError
+from agents.transport.ports import listening, next_port
 from protocol.limits import SIZE_LIMITS
 
 MODES = ("peer", "client", "router")
@@ -186,7 +187,7 @@ def open_session(options: SessionOptions) -> zenoh.Session:
         if in_use:
             endpoint = in_use.group(1)
             raise BusConfigError(f"{endpoint} is already in use (another fleet, router or agent listens there): "
-                                 f"stop it, or listen on another port (--listen {_other_port(endpoint)}; "
+                                 f"stop it, or listen on another port (--listen {next_port(endpoint)}; "
                                  "make demo PORT=...)") from None
         if "Unable to connect to any of" in message and options.connect and not any(
                 listening(endpoint) for endpoint in options.connect):
@@ -196,13 +197,4 @@ def open_session(options: SessionOptions) -> zenoh.Session:
         raise BusConfigError(f"cannot open the Zenoh session: {message}") from None
 
 
-def listening(endpoint: str) -> bool:
-    from agents.transport.ports import listening as probe
 
-    return probe(endpoint)
-
-
-def _other_port(endpoint: str) -> str:
-    """``endpoint`` with the next port, as an example of another one."""
-    found = re.fullmatch(r"(.*):(\d+)", endpoint)
-    return f"{found.group(1)}:{int(found.group(2)) + 1}" if found else endpoint
