@@ -24,8 +24,12 @@ $(PHOTOREAL)/.installed: constraints-photoreal.txt
 	$(PHOTOREAL)/bin/pip install --quiet -c constraints-photoreal.txt bpy==4.5.15
 	touch $@
 
+# The demo's fleet listens on tcp/127.0.0.1:$(PORT): `make demo PORT=7448` when another fleet has 7447.
+PORT ?= 7447
 demo: $(STAMP)
-	$(VENV)/bin/evopose scenario run exp2a-features
+	@if $(PY) -c "import sys; from agents.transport.ports import listening; sys.exit(listening('tcp/127.0.0.1:$(PORT)'))"; \
+	then :; else echo "port $(PORT) is in use (another fleet or router?): run make demo PORT=$$(($(PORT) + 1))" >&2; exit 2; fi
+	$(VENV)/bin/evopose scenario run exp2a-features --listen tcp/127.0.0.1:$(PORT)
 
 # Two passes (tests/conftest.py): everything but the real-time tests on two workers, then those one at a time.
 test: $(STAMP)

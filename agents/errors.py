@@ -13,3 +13,7 @@ class BusConfigError(FleetError):
 
 class TeamNotMetError(FleetError):
     """The team-mates a vehicle was told to wait for (``--wait-for``) never appeared."""
+
+    def __init__(self, message: str, missing: list[str] | None = None) -> None:
+        super().__init__(message)
+        self.missing = list(missing or [])

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import os
 import platform
+import re
 import subprocess
 import sys
 import time
@@ -23,14 +24,28 @@ ORDER = ("solvers", "confidence", "weights", "kernels", "features", "fleet", "fr
          "photoreal_fleet", "photoreal_fleet_long", "photoreal_fleet_paper_long", "photoreal_tracking",
          "photoreal_encoding")
 
+#: Titles that several section files share, told apart by what each measures (by file stem).
+TITLES = {
+    "photoreal_features": "Feature front-ends on rendered datasets: the first paper-scale and telephoto datasets",
+    "photoreal_features_sweep": "Feature front-ends on rendered datasets: nine paper-scale worlds "
+                                "(three geometries, three skies)",
+    "photoreal_features_telephoto_sweep": "Feature front-ends on rendered datasets: nine telephoto worlds "
+                                          "(three geometries, three skies)",
+    "photoreal_features_opencv_camera": "Feature front-ends on rendered datasets: the OpenCV renderer through the "
+                                        "camera model",
+    "photoreal_fleet": "The fleet on rendered datasets: paper-scale and telephoto worlds, with and without the robot",
+}
+
 INTRO = """# Benchmarks
 
 Measured on this project's 2-core development machine, which is shared and noisy: compare solvers
 by the ratios measured side by side in one run, not by absolute times across sections.
 `make bench` re-runs every section but the agent footprint (`make bench-footprint`, 30 min) and re-assembles
 this file (`python -m benchmarks.report`). Every section names the command, the commit and the date that
-produced it.
+produced it. Newest first: sections are in the order of the date they were measured, the latest at the top.
 """
+
+DATE = re.compile(r"\b(20\d\d-\d\d-\d\d)\b")
 
 
 def code_version() -> str:
@@ -74,12 +89,39 @@ def write_section(path: Path, title: str, body: str) -> None:
     path.write_text(f"## {title}\n\n{body.rstrip()}\n")
 
 
+def anchor(title: str) -> str:
+    """GitHub's anchor of a heading: lower case, punctuation dropped, spaces as hyphens."""
+    return re.sub(r"[^\w\- ]", "", title.lower()).replace(" ", "-")
+
+
+def sections(results: Path = RESULTS) -> list[tuple[str, str, str, str]]:
+    """``(stem, title, date, body)`` of every section file, newest date first (then :data:`ORDER`). The title is
+    the file's ``#``/``##`` heading unless :data:`TITLES` names it; the date is the first ``YYYY-MM-DD`` of the
+    body (its provenance). Raises ValueError when two sections share a title or one has no date."""
+    found = []
+    for path in results.glob("*.md"):
+        heading, _, body = path.read_text().partition("\n")
+        title = TITLES.get(path.stem, heading.lstrip("#").strip())
+        date = DATE.search(body)
+        if date is None:
+            raise ValueError(f"{path}: no YYYY-MM-DD date in the section (its provenance)")
+        found.append((path.stem, title, date.group(1), body.strip("\n")))
+    titles = [title for _, title, _, _ in found]
+    if len(set(titles)) != len(titles):
+        twice = sorted({t for t in titles if titles.count(t) > 1})
+        raise ValueError(f"sections share a title: {twice}; name them in benchmarks.report.TITLES")
+    position = {stem: i for i, stem in enumerate(ORDER)}
+    found.sort(key=lambda s: (s[2], -position.get(s[0], len(ORDER)), s[0]), reverse=True)
+    return found
+
+
 def assemble(results: Path = RESULTS, out: Path = ROOT / "BENCHMARKS.md") -> Path:
-    """Concatenate the section files in :data:`ORDER` into ``out``."""
-    files = sorted(results.glob("*.md"), key=lambda p: (ORDER.index(p.stem) if p.stem in ORDER else len(ORDER),
-                                                        p.stem))
-    parts = [INTRO] + [f.read_text() for f in files]
-    out.write_text("\n".join(p.rstrip() + "\n" for p in parts))
+    """The section files in ``out``: the intro, a contents list, then each section (``##`` + its one title), newest
+    first (:func:`sections`)."""
+    found = sections(results)
+    contents = ["## Contents", ""] + [f"- [{title}](#{anchor(title)}) ({date})" for _, title, date, _ in found]
+    parts = [INTRO, "\n".join(contents)] + [f"## {title}\n\n{body.strip()}" for _, title, _, body in found]
+    out.write_text("\n\n".join(p.rstrip() for p in parts) + "\n")
     return out
 
 

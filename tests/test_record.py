@@ -259,11 +259,67 @@ def test_scenario_run_records_every_run(tmp_path):
         runner.kill()
     assert len(result["runs"]) == 2 and len({run["fleet"] for run in result["runs"]}) == 2
     for run in result["runs"]:
-        check_recording(run, tmp_path / "runs" / f"{run['fleet']}.mcap", frames)
+        check_recording(run, tmp_path / "runs" / run["fleet"], frames)
 
 
-def check_recording(run: dict, path, frames: int) -> None:
-    assert run["recording"] == str(path) and path.is_file() and raw_path(path).is_file()
+def check_bag_directory(bag) -> dict[str, int]:
+    """A rosbag2 bag directory as ``ros2 bag info DIR`` opens it: metadata.yaml (version 8, storage mcap) naming
+    its one MCAP file, whose topics, types and counts it states; ``rosbags.rosbag2.Reader(DIR)`` reads every
+    message back and decodes it with the types the file carries. Returns the message count per topic."""
+    metadata = yaml.safe_load((bag / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
+    assert metadata["version"] == 8 and metadata["storage_identifier"] == "mcap"
+    assert metadata["relative_file_paths"] == [f"{bag.name}.mcap"] and (bag / f"{bag.name}.mcap").is_file()
+    by_file = check_ros2_file(bag / f"{bag.name}.mcap")
+    stated = {t["topic_metadata"]["name"]: t["message_count"] for t in metadata["topics_with_message_count"]}
+    assert stated == by_file and metadata["message_count"] == sum(by_file.values())
+    read: dict[str, int] = {}
+    with Rosbag2Reader(bag) as reader:
+        typestore = get_typestore(Stores.EMPTY)
+        for connection in reader.connections:
+            assert connection.msgdef.data, connection  # the definitions come from the MCAP file's schemas
+            typestore.register(get_types_from_msg(connection.msgdef.data, connection.msgtype))
+        assert reader.message_count == sum(by_file.values())
+        for connection, timestamp, data in reader.messages():
+            assert reader.start_time <= timestamp < reader.end_time
+            typestore.deserialize_cdr(data, connection.msgtype)
+            read[connection.topic] = read.get(connection.topic, 0) + 1
+    assert read == by_file
+    return read
+
+
+def test_record_into_a_bag_directory(tmp_path):
+    """``evopose record --out DIR``: a rosbag2 bag directory (DIR/DIR.mcap and the metadata.yaml rosbag2 writes)
+    that rosbags' Reader(DIR) opens and reads every message of; a non-empty directory is refused."""
+    from agents.bridges.recording import bag_file, bag_metadata
+
+    bag = tmp_path / "bag"
+    bag.mkdir()
+    out = bag_file(bag)
+    rng = np.random.default_rng(2)
+    with open(out, "wb") as stream:
+        writer = Writer(stream)
+        writer.start(profile="ros2", library="test")
+        recorder = Recorder(writer, None)
+        for seq in range(3):
+            for topic in (Topic.POSE, Topic.FEATURES, Topic.IMAGE, Topic.ATTITUDE, Topic.HINT):
+                header = {"sender": "uav-1", "seq": seq, "stamp_ns": 1_700_000_000_000_000_000 + seq * 100_000_000}
+                message = sample_message(PublishSpec(topic, width=64, height=48), header, rng)
+                recorder.handle(RawSample(topic_key("rec-x", "uav-1", topic.value), encode(message),
+                                          header["stamp_ns"] + 5_000_000))
+        writer.finish()
+    (bag / "metadata.yaml").write_text(yaml.safe_dump(bag_metadata(recorder, out.name), sort_keys=False))
+    assert check_bag_directory(bag) == {"/rec_x/uav_1/target_pose": 3, "/rec_x/uav_1/camera_info": 6,
+                                        "/rec_x/uav_1/image_raw": 3, "/rec_x/uav_1/imu": 3, "/rec_x/uav_1/hint": 3,
+                                        "/tf": 9}
+    with pytest.raises(RecordingError, match="not an empty directory"):
+        run_record(SessionOptions(), threading.Event(), "f", bag)
+
+
+def check_recording(run: dict, bag, frames: int) -> None:
+    path = bag / f"{bag.name}.mcap"
+    assert run["recording"] == str(bag) and path.is_file() and raw_path(path).is_file()
+    assert set(check_bag_directory(bag)) == set(check_ros2_file(path))
+    assert raw_recording(bag) == raw_path(path)
     ros_topics = set(check_ros2_file(path))
     expected = {"/tf", *(topic_name(run["fleet"], v, "target_pose") for v in ("H1", "H2"))}
     assert expected <= ros_topics, ros_topics

@@ -1,5 +1,5 @@
 """`time_budget` holds inside a generation: candidates are evaluated and refined a chunk at a time while time is
-left (README, "Limits"). Tested through deadlines already past or far away, never through the clock's speed: the
+left (docs/security.md, "Untrusted input": time budget). Tested through deadlines already past or far away, never through the clock's speed: the
 amount of work done must follow the deadline, and the result must not depend on the chunking."""
 
 from __future__ import annotations

@@ -110,6 +110,93 @@ def test_a_websocket_client_receives_every_channel_of_a_live_fleet(fleet):
     assert all(m["vehicle"] == "uav_1" and 0 <= m["mismatch"] <= 1 for m in metrics)
 
 
+# -- what Lichtblick's and Foxglove's parsers accept ----------------------------------------------------------
+
+JS_SAFE_INTEGER = 2**53 - 1
+
+
+def check_viewer_schema(schema: dict, where: str = "") -> None:
+    """A JSON schema every viewer's parser reads: one plain type per field (Lichtblick: "Unsupported type
+    [...]" for a list), no integer that can exceed 2^53 (JavaScript numbers round it), times as ``{sec, nsec}``."""
+    kind = schema.get("type")
+    assert isinstance(kind, str), f"{where or 'schema'}: type {kind!r} is not one plain type"
+    assert not ({"anyOf", "oneOf", "allOf"} & set(schema)), f"{where}: a union ({sorted(schema)})"
+    if kind == "integer":
+        assert schema.get("maximum", math.inf) <= JS_SAFE_INTEGER, f"{where}: an integer with no maximum <= 2^53"
+        assert schema.get("minimum", -math.inf) >= -JS_SAFE_INTEGER, f"{where}: an integer with no minimum"
+    for name, field in schema.get("properties", {}).items():
+        check_viewer_schema(field, f"{where}.{name}")
+    if "items" in schema:
+        check_viewer_schema(schema["items"], f"{where}[]")
+
+
+def test_every_advertised_schema_parses_in_the_viewers_and_every_message_validates(fleet):
+    """Every channel `evopose view` advertises for a live fleet (pose with and without a truth, features): the JSON
+    ones have schemas :func:`check_viewer_schema` accepts and every message sent on them validates against the
+    advertised schema (jsonschema); the others are Foxglove's own protobuf schemas. /metrics' time is Foxglove's
+    ``{sec, nsec}``; its errors appear once the truth is known, and are numbers."""
+    import jsonschema
+
+    view = fleet.start("view", "--fleet", fleet.fleet, "--port", "0", "--json")
+    ready = view.next_record(60, lambda r: r.get("event") == "ready")
+    fleet.start("publish", "--fleet", fleet.fleet, "--vehicle", "uav-1", "--topic", "pose", "--rate", "20",
+                "--count", "1200", "--wait", "10")
+    fleet.start("publish", "--fleet", fleet.fleet, "--vehicle", "uav-1", "--topic", "features", "--rate", "20",
+                "--count", "1200", "--wait", "10")
+    channels, before = asyncio.run(receive_every_channel(ready["url"], EXPECTED, 90))  # no truth yet
+    assert EXPECTED <= set(before), (sorted(channels), sorted(before))
+    fleet.start("publish", "--fleet", fleet.fleet, "--vehicle", "target", "--topic", "pose", "--rate", "20",
+                "--count", "1200", "--wait", "10")
+    time.sleep(3)
+    channels, after = asyncio.run(receive_every_channel(ready["url"], EXPECTED | {"never"}, 5))
+    payloads = {topic: before.get(topic, []) + after.get(topic, []) for topic in channels}
+    for topic, channel in channels.items():
+        if channel["schemaEncoding"] == "jsonschema":
+            schema = json.loads(channel["schema"])
+            check_viewer_schema(schema, topic)
+            jsonschema.Draft202012Validator.check_schema(schema)
+            for payload in payloads.get(topic, []):
+                jsonschema.validate(json.loads(payload), schema)
+        else:
+            assert channel["schemaEncoding"] == "protobuf" and channel["schemaName"].startswith("foxglove."), channel
+    metrics = [json.loads(p) for p in payloads["/metrics"]]
+    assert {m["has_truth"] for m in metrics} == {False, True}, "estimates with and without a truth"
+    for m in metrics:
+        assert set(m["timestamp"]) == {"sec", "nsec"} and m["timestamp"]["sec"] > 1_600_000_000
+        assert ("error_position_m" in m) == ("error_rotation_deg" in m) == m["has_truth"], m
+
+
+def test_a_schema_with_a_union_or_a_big_integer_is_refused():
+    """The check itself: what Lichtblick refused (a list type) and a nanosecond stamp fail it."""
+    from agents.bridges.view import METRICS_SCHEMA
+
+    check_viewer_schema(METRICS_SCHEMA)
+    with pytest.raises(AssertionError, match="plain type"):
+        check_viewer_schema({"type": "object", "properties": {"confident": {"type": ["boolean", "null"]}}})
+    with pytest.raises(AssertionError, match="2\\^53"):
+        check_viewer_schema({"type": "object", "properties": {"stamp_ns": {"type": "integer"}}})
+
+
+def test_tf_and_scene_stay_within_the_viewers_rates(fleet):
+    """Three senders at 20 Hz each (a vehicle's pose and features, the truth: 60 /tf and 60 /scene samples a
+    second before coalescing): /tf and /scene arrive at most VIEW_RATE_HZ a second, and still carry every frame."""
+    from agents.bridges.view import VIEW_RATE_HZ
+
+    view = fleet.start("view", "--fleet", fleet.fleet, "--port", "0", "--json")
+    ready = view.next_record(60, lambda r: r.get("event") == "ready")
+    for vehicle, topic in (("uav-1", "pose"), ("uav-1", "features"), ("target", "pose")):
+        fleet.start("publish", "--fleet", fleet.fleet, "--vehicle", vehicle, "--topic", topic, "--rate", "20",
+                    "--count", "1200", "--wait", "10")
+    asyncio.run(receive_every_channel(ready["url"], EXPECTED, 90))  # everything flows
+    window = 4.0
+    channels, payloads = asyncio.run(receive_every_channel(ready["url"], EXPECTED | {"never"}, window))
+    for topic in ("/tf", "/scene"):
+        rate = len(payloads[topic]) / window
+        assert rate <= VIEW_RATE_HZ * 1.15 + 1, (topic, rate)
+        assert rate >= 10, (topic, rate)  # coalesced, not starved
+    assert len(payloads["/metrics"]) / window <= 30
+
+
 # -- the official client, and what Lichtblick reads -------------------------------------------------------------
 
 NODE_DIR = ROOT / "tests" / "node"

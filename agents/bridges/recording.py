@@ -1,5 +1,10 @@
 """``evopose record`` and ``evopose replay``: a fleet in two MCAP files, and back (docs/ros2.md, "Record and replay").
 
+``--out DIR`` (no ``.mcap`` suffix) writes a rosbag2 bag directory, as ``ros2 bag record`` does: ``DIR/DIR.mcap``,
+``DIR/metadata.yaml`` (rosbag2 metadata version 8, storage ``mcap``: :func:`bag_metadata`) and the raw channels in
+``DIR/DIR.raw.mcap``, which the metadata does not list; ``ros2 bag info DIR`` and ``rosbags.rosbag2.Reader(DIR)``
+open it. ``--out X.mcap`` writes the two files alone.
+
 ``run.mcap`` has the ROS 2 profile (header profile ``ros2``) and nothing else: each ROS 2 message the mirror would
 publish (:mod:`agents.bridges.translate`) is a CDR message on a channel named after its ROS topic, with a ``ros2msg``
 schema and the metadata rosbag2's MCAP storage plugin writes and reads (``offered_qos_profiles``, the QoS the mirror
@@ -62,6 +67,19 @@ def raw_path(out: Path) -> Path:
     return out.with_name((out.stem if out.suffix == ".mcap" else out.name) + ".raw.mcap")
 
 
+#: rosbag2 metadata version written in metadata.yaml: 8 (Jazzy's) keeps offered_qos_profiles as a YAML string with
+#: integer policies (:func:`offered_qos_profiles`), which Jazzy and later read; 9 is the same with policy names.
+BAG_VERSION = 8
+BAG_METADATA = "metadata.yaml"
+
+
+def bag_file(out: Path) -> Path:
+    """The ROS 2 MCAP file of the recording ``out``: ``out`` itself when it ends in ``.mcap``, else the file of the
+    bag directory ``out`` (``out/<name>.mcap``)."""
+    out = Path(out)
+    return out if out.suffix == ".mcap" else out / f"{out.name}.mcap"
+
+
 def offered_qos_profiles(qos: QoS) -> str:
     """The channel metadata ``offered_qos_profiles`` of a topic offered with ``qos``, as rosbag2 serialises it
     (rosbag2_storage ``serialize_rclcpp_qos_vector``: a YAML list of profiles). The integer form of the policies
@@ -86,6 +104,11 @@ class Recorder:
         self._channels: dict[str, int] = {}
         self._raw_channels: dict[str, int] = {}
         self._sequence: Counter[tuple[int, int]] = Counter()
+        #: ROS topic -> (type, QoS) and message count, first and last log time: the bag's metadata.yaml.
+        self.topics: dict[str, tuple[str, QoS]] = {}
+        self.ros_counts: Counter[str] = Counter()
+        self.first_ns: int | None = None
+        self.last_ns: int | None = None
 
     def _ros_channel(self, out: RosMessage) -> int:
         channel = self._channels.get(out.topic)
@@ -98,6 +121,7 @@ class Recorder:
                         "topic_type_hash": ros_msgs.type_hash(out.msgtype)}
             channel = self._channels[out.topic] = self.ros.register_channel(
                 topic=out.topic, message_encoding="cdr", schema_id=schema, metadata=metadata)
+            self.topics[out.topic] = (out.msgtype, out.qos)
         return channel
 
     def _raw_channel(self, key: str, encoding: str) -> int:
@@ -126,6 +150,32 @@ class Recorder:
         if self.ros is not None and message is not None:
             for out in translate(key, message, raw.received_ns):
                 self._add(self.ros, self._ros_channel(out), raw.received_ns, out.cdr(), out.stamp_ns, out.topic)
+                self.ros_counts[out.topic] += 1
+                self.first_ns = raw.received_ns if self.first_ns is None else min(self.first_ns, raw.received_ns)
+                self.last_ns = raw.received_ns if self.last_ns is None else max(self.last_ns, raw.received_ns)
+
+
+def bag_metadata(recorder: Recorder, mcap_name: str) -> dict:
+    """rosbag2's metadata.yaml of a bag whose one file ``mcap_name`` holds ``recorder``'s ROS 2 channels (what
+    rosbag2_storage's ``MetadataIo`` writes, version :data:`BAG_VERSION`)."""
+    start = recorder.first_ns or 0
+    duration = (recorder.last_ns - start) if recorder.last_ns is not None else 0
+    count = sum(recorder.ros_counts.values())
+    return {"rosbag2_bagfile_information": {
+        "version": BAG_VERSION, "storage_identifier": "mcap", "relative_file_paths": [mcap_name],
+        "duration": {"nanoseconds": duration}, "starting_time": {"nanoseconds_since_epoch": start},
+        "message_count": count,
+        "topics_with_message_count": [
+            {"topic_metadata": {"name": topic, "type": msgtype, "serialization_format": "cdr",
+                                "offered_qos_profiles": offered_qos_profiles(qos),
+                                "type_description_hash": ros_msgs.type_hash(msgtype)},
+             "message_count": recorder.ros_counts[topic]}
+            for topic, (msgtype, qos) in sorted(recorder.topics.items())],
+        "compression_format": "", "compression_mode": "",
+        "files": [{"path": mcap_name, "starting_time": {"nanoseconds_since_epoch": start},
+                   "duration": {"nanoseconds": duration}, "message_count": count}],
+        "custom_data": {"evopose_raw": raw_path(Path(mcap_name)).name},
+        "ros_distro": "evopose"}}
 
 
 def run_record(options: SessionOptions, stop: threading.Event, fleet: str, out: Path, *,
@@ -143,7 +193,11 @@ def run_record(options: SessionOptions, stop: threading.Event, fleet: str, out: 
     if not (ros or raw):
         raise RecordingError("--no-ros and --no-raw: nothing to record")
     emit = emit or (lambda record: None)
-    out = Path(out)
+    bag = Path(out) if Path(out).suffix != ".mcap" else None
+    if bag is not None and bag.exists() and (not bag.is_dir() or any(bag.iterdir())):
+        raise RecordingError(f"{bag}: exists and is not an empty directory; name a new bag directory "
+                             "(or X.mcap for a file)")
+    out = bag_file(Path(out))
     paths = {"out": out if ros else None, "raw": raw_path(out) if raw else None}
     if paths["out"] is not None and paths["out"] == paths["raw"]:
         raise RecordingError(f"{out}: name the ROS 2 file, not the raw one (*.raw.mcap)")
@@ -171,6 +225,11 @@ def run_record(options: SessionOptions, stop: threading.Event, fleet: str, out: 
     finally:
         for stream in streams:
             stream.close()
+    if bag is not None and ros:  # a rosbag2 bag directory: its metadata.yaml, once the file is finished
+        import yaml
+
+        (bag / BAG_METADATA).write_text(yaml.safe_dump(bag_metadata(recorder, out.name), sort_keys=False))
+        paths["bag"] = bag
     return {"event": "stopped", **{k: str(v) for k, v in paths.items() if v}, "written": dict(recorder.written),
             "rejected": recorder.rejected, "dropped": tap.dropped, "seconds": time.monotonic() - started}
 
@@ -178,9 +237,11 @@ def run_record(options: SessionOptions, stop: threading.Event, fleet: str, out: 
 # -- replay ------------------------------------------------------------------------------------------
 
 def raw_recording(path: Path) -> Path:
-    """The file with the raw channels of the recording ``path``: ``path`` itself when it has them (a ``*.raw.mcap``
-    or a one-file recording of older versions), else its :func:`raw_path`."""
+    """The file with the raw channels of the recording ``path`` (a file or a bag directory): ``path`` itself when it
+    has them (a ``*.raw.mcap`` or a one-file recording of older versions), else its :func:`raw_path`."""
     path = Path(path)
+    if path.is_dir():  # a bag directory of evopose record: its raw file
+        path = bag_file(path)
     if not raw_path(path).exists():
         return path
     if path.exists():

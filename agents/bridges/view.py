@@ -13,8 +13,12 @@ Channels (open ``docs/foxglove-layout.json`` in Foxglove for the panels):
 - ``/<V>/image`` (foxglove.CompressedImage): the shared image, else a blank canvas of the camera's size;
 - ``/<V>/features`` (foxglove.ImageAnnotations): the feature points (green), the model projected at V's estimate
   (red) and at the truth (blue);
-- ``/metrics`` (JSON, schema ``evopose.Metrics``): per estimate: vehicle, fitness, mismatch, converged, confident,
-  position and rotation error to the truth.
+- ``/metrics`` (JSON, schema ``evopose.Metrics``, :data:`METRICS_SCHEMA`): per estimate: its time (Foxglove's
+  ``{sec, nsec}``), vehicle, fitness, mismatch, converged, confident, generations and, once a truth is known
+  (``has_truth``), position and rotation error to it.
+
+``/tf`` and ``/scene`` are coalesced to at most :data:`VIEW_RATE_HZ` messages a second (:meth:`FleetView.flush`); the
+camera channels carry one message per shared frame, ``/metrics`` one per estimate.
 
 Vehicle names and frames follow :mod:`agents.bridges.names`. Errors are against the truth of the same stamp (else the
 newest), without the model's symmetries.
@@ -44,16 +48,41 @@ from agents.transport.session import SessionOptions, open_session
 
 #: The name of the /metrics JSON schema (every channel's schema has a name: Foxglove and Lichtblick show it).
 METRICS_SCHEMA_NAME = "evopose.Metrics"
+#: Foxglove's time type in a JSON schema (what its own schemas, e.g. foxglove.Log, declare): seconds and nanoseconds
+#: since the epoch, each an integer a JavaScript number holds exactly (a nanosecond count since 1970 does not).
+TIME_SCHEMA = {
+    "type": "object", "title": "time",
+    "properties": {"sec": {"type": "integer", "minimum": 0, "maximum": 2**32 - 1},
+                   "nsec": {"type": "integer", "minimum": 0, "maximum": 999_999_999}},
+    "required": ["sec", "nsec"],
+}
+#: One plain type per field: Lichtblick's and Foxglove's JSON-schema parsers accept no type unions. The errors to the
+#: truth are left out while there is no truth to compare with (``has_truth`` false), never null.
 METRICS_SCHEMA = {
     "title": METRICS_SCHEMA_NAME,
     "type": "object",
     "properties": {
-        "vehicle": {"type": "string"}, "stamp_ns": {"type": "integer"}, "fitness": {"type": "number"},
-        "mismatch": {"type": "number"}, "converged": {"type": "boolean"}, "confident": {"type": ["boolean", "null"]},
-        "generations": {"type": "integer"}, "error_position_m": {"type": ["number", "null"]},
-        "error_rotation_deg": {"type": ["number", "null"]},
+        "timestamp": TIME_SCHEMA, "vehicle": {"type": "string"}, "fitness": {"type": "number"},
+        "mismatch": {"type": "number"}, "converged": {"type": "boolean"}, "confident": {"type": "boolean"},
+        "generations": {"type": "integer", "minimum": 0, "maximum": 2**32 - 1},
+        "has_truth": {"type": "boolean"}, "error_position_m": {"type": "number"},
+        "error_rotation_deg": {"type": "number"},
     },
+    "required": ["timestamp", "vehicle", "fitness", "mismatch", "converged", "confident", "generations",
+                 "has_truth"],
 }
+#: /tf and /scene are coalesced: what arrived since the last flush goes out as one message (the newest transform per
+#: child frame, the newest entity per id), at most this often. Viewers warn above 60 Hz; frames of several vehicles
+#: arrive together (~50 messages/s each for a team of three at 10 frames/s).
+VIEW_RATE_HZ = 25.0
+
+
+def time_of(stamp_ns: int) -> dict:
+    """A nanosecond stamp as Foxglove's ``{sec, nsec}``."""
+    sec, nsec = divmod(int(stamp_ns), 1_000_000_000)
+    return {"sec": sec, "nsec": nsec}
+
+
 #: Truth poses kept to pair estimates by stamp.
 TRUTH_KEPT = 256
 
@@ -74,6 +103,9 @@ class FleetView:
         self._cameras: dict[str, tuple] = {}
         self._estimates: dict[str, tuple[float, ...]] = {}
         self._truth: OrderedDict[int, tuple[float, ...]] = OrderedDict()
+        self._pending_tf: dict[str, object] = {}
+        self._pending_entities: dict[str, object] = {}
+        self._lock = threading.Lock()
         self.logged = 0
         if model is not None:
             self._triangles = mesh_triangles(model.body.vertices, model.body.faces, model.body.colours)
@@ -107,6 +139,26 @@ class FleetView:
     def _log(self, channel, message) -> None:
         channel.log(message)
         self.logged += 1
+
+    def _send_tf(self, *transforms: tuple[str, object]) -> None:
+        """Queue ``(child frame, FrameTransform)`` pairs for the next :meth:`flush` (the newest per child)."""
+        with self._lock:
+            self._pending_tf.update(transforms)
+
+    def _send_entity(self, entity_id: str, entity) -> None:
+        with self._lock:
+            self._pending_entities[entity_id] = entity
+
+    def flush(self) -> None:
+        """Send what /tf and /scene gathered since the last flush, one message each (called every
+        1 / :data:`VIEW_RATE_HZ` s)."""
+        with self._lock:
+            transforms, self._pending_tf = list(self._pending_tf.values()), {}
+            entities, self._pending_entities = list(self._pending_entities.values()), {}
+        if transforms:
+            self._log(self.tf, self._m().FrameTransforms(transforms=transforms))
+        if entities:
+            self._log(self.scene, self._m().SceneUpdate(entities=entities))
 
     def _model_entity(self, entity_id: str, frame: str, stamp_ns: int, alpha: float):
         m = self._m()
@@ -147,31 +199,26 @@ class FleetView:
             while len(self._truth) > TRUTH_KEPT:
                 self._truth.popitem(last=False)
             frame = names.truth_frame(vehicle)
-            self._log(self.tf, self._m().FrameTransforms(transforms=[
-                self._transform(names.MAP_FRAME, frame, stamp, pose[:3], q)]))
-            self._log(self.scene, self._m().SceneUpdate(entities=[self._model_entity("truth", frame, stamp, 0.35)]))
+            self._send_tf((frame, self._transform(names.MAP_FRAME, frame, stamp, pose[:3], q)))
+            self._send_entity("truth", self._model_entity("truth", frame, stamp, 0.35))
             return
         self._estimates[vehicle] = pose
         frame = names.estimate_frame(vehicle)
-        self._log(self.tf, self._m().FrameTransforms(transforms=[
-            self._transform(names.MAP_FRAME, frame, stamp, pose[:3], q)]))
-        self._log(self.scene, self._m().SceneUpdate(entities=[
-            self._model_entity(f"estimate/{names.ros_name(vehicle)}", frame, stamp, 1.0)]))
+        entity_id = f"estimate/{names.ros_name(vehicle)}"
+        self._send_tf((frame, self._transform(names.MAP_FRAME, frame, stamp, pose[:3], q)))
+        self._send_entity(entity_id, self._model_entity(entity_id, frame, stamp, 1.0))
         truth = self._truth.get(stamp) or (next(reversed(self._truth.values())) if self._truth else None)
-        position, rotation = pose_errors(pose, truth) if truth is not None else (None, None)
-        self._log(self.metrics, {"vehicle": names.ros_name(vehicle), "stamp_ns": stamp, "fitness": message.fitness,
-                                 "mismatch": message.mismatch, "converged": message.converged,
-                                 "confident": getattr(message, "confident", None), "generations": message.generations,
-                                 "error_position_m": position, "error_rotation_deg": rotation})
+        self._log(self.metrics, metrics_message(names.ros_name(vehicle), message,
+                                                pose_errors(pose, truth) if truth is not None else None))
 
     def _camera(self, vehicle: str, message: FeatureSet | ImageFrame) -> None:
         m, stamp, camera = self._m(), message.stamp_ns, message.camera
         calibration, image, features = self._camera_channels(vehicle)
         base, optical = names.base_frame(vehicle), names.camera_frame(vehicle)
         position, r_world_base, r_base_camera = camera_rig(camera.world_from_camera)
-        self._log(self.tf, m.FrameTransforms(transforms=[
-            self._transform(names.MAP_FRAME, base, stamp, position, quaternion_from_matrix(r_world_base)),
-            self._transform(base, optical, stamp, (0, 0, 0), quaternion_from_matrix(r_base_camera))]))
+        self._send_tf((base, self._transform(names.MAP_FRAME, base, stamp, position,
+                                             quaternion_from_matrix(r_world_base))),
+                      (optical, self._transform(base, optical, stamp, (0, 0, 0), quaternion_from_matrix(r_base_camera))))
         k = [camera.fx, 0.0, camera.cx, 0.0, camera.fy, camera.cy, 0.0, 0.0, 1.0]
         self._log(calibration, m.CameraCalibration(
             timestamp=self._stamp(stamp), frame_id=optical, width=camera.width, height=camera.height,
@@ -181,12 +228,13 @@ class FleetView:
         target = self._estimates.get(vehicle) or (next(reversed(self._truth.values())) if self._truth else None)
         depth = float(np.linalg.norm(np.subtract(target[:3], position))) if target is not None else 2.0
         lines = frustum_lines(camera, depth)
-        self._log(self.scene, m.SceneUpdate(entities=[m.SceneEntity(
-            timestamp=self._stamp(stamp), frame_id=optical, id=f"frustum/{names.ros_name(vehicle)}",
+        frustum = f"frustum/{names.ros_name(vehicle)}"
+        self._send_entity(frustum, m.SceneEntity(
+            timestamp=self._stamp(stamp), frame_id=optical, id=frustum,
             frame_locked=True, lines=[m.LinePrimitive(
                 type=m.LinePrimitiveLineType.LineList, thickness=2.0, scale_invariant=True,
                 points=[m.Point3(x=float(x), y=float(y), z=float(z)) for x, y, z in lines],
-                color=m.Color(r=1.0, g=0.8, b=0.2, a=1.0))])]))
+                color=m.Color(r=1.0, g=0.8, b=0.2, a=1.0))]))
         self._log(features, m.ImageAnnotations(points=self._annotations(vehicle, message, stamp)))
 
     def _image(self, message: FeatureSet | ImageFrame) -> dict:
@@ -211,6 +259,21 @@ class FleetView:
         return [m.PointsAnnotation(timestamp=self._stamp(stamp), type=m.PointsAnnotationType.Points,
                                    points=[m.Point2(x=float(u), y=float(v)) for u, v in uv], outline_color=colour,
                                    fill_color=colour, thickness=size) for uv, colour, size in sets]
+
+
+def metrics_message(vehicle: str, message: PoseEstimate, errors: tuple[float, float] | None) -> dict:
+    """The /metrics message of an estimate (:data:`METRICS_SCHEMA`); ``errors``: (position m, rotation deg) to the
+    truth, None without one; a non-finite error is left out, as JSON has no NaN (fitness and mismatch are finite:
+    the protocol refuses others)."""
+    out = {"timestamp": time_of(message.stamp_ns), "vehicle": vehicle, "fitness": float(message.fitness),
+           "mismatch": float(message.mismatch), "converged": bool(message.converged),
+           "confident": bool(getattr(message, "confident", False)), "generations": int(message.generations),
+           "has_truth": errors is not None}
+    if errors is not None:
+        for name, value in zip(("error_position_m", "error_rotation_deg"), errors):
+            if value is not None and np.isfinite(value):
+                out[name] = float(value)
+    return out
 
 
 def load_target_model(name: str | None):
@@ -244,7 +307,8 @@ def run_view(options: SessionOptions, stop: threading.Event, fleet: str, *, host
         port = relay.start()
         with open_session(observer_options(options)) as session, FleetTap(session, fleet, view.handle) as tap:
             emit({"event": "ready", "fleet": fleet, "host": host, "port": port, "url": f"ws://{host}:{port}"})
-            while not stop.wait(0.1):
+            while not stop.wait(1.0 / VIEW_RATE_HZ):
+                view.flush()
                 if duration is not None and time.monotonic() - started >= duration:
                     break
     finally:

@@ -69,8 +69,10 @@ def register(app: typer.Typer) -> None:
 
     @app.command("record")
     def record_command(fleet: Fleet,
-                       out: Annotated[Path, typer.Option("--out", "-o", help="The ROS 2 MCAP file to write (the "
-                                                         "raw channels go beside it: X.mcap -> X.raw.mcap).")],
+                       out: Annotated[Path, typer.Option("--out", "-o", help="A new rosbag2 bag directory DIR "
+                                                         "(DIR/DIR.mcap, metadata.yaml and the raw channels in "
+                                                         "DIR/DIR.raw.mcap), or the ROS 2 MCAP file X.mcap (the raw "
+                                                         "channels beside it: X.raw.mcap).")],
                        duration: Duration = None,
                        ros: Annotated[bool, typer.Option("--ros/--no-ros", help="The ROS 2 channels (CDR).")] = True,
                        raw: Annotated[bool, typer.Option("--raw/--no-raw", help="The raw fleet channels (msgpack): "
@@ -88,8 +90,9 @@ def register(app: typer.Typer) -> None:
         emit_json(summary) if as_json else Console(stderr=True).print(summary)
 
     @app.command("replay")
-    def replay_command(path: Annotated[Path, typer.Argument(metavar="RECORDING", help="An MCAP file of evopose "
-                                                                                      "record (X.mcap or X.raw.mcap)."
+    def replay_command(path: Annotated[Path, typer.Argument(metavar="RECORDING", help="A recording of evopose "
+                                                                                      "record (a bag directory, X.mcap "
+                                                                                      "or X.raw.mcap)."
                                                                                       )],
                        rate: Annotated[float, typer.Option(min=0.01, max=100, help="Speed: 2 replays twice as fast.")]
                        = 1.0,

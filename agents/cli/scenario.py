@@ -109,8 +109,9 @@ def run_command(
                                                       "docs/ros2.md).")] = False,
     ros2_domain: Annotated[int, typer.Option(min=0, max=232, help="ROS_DOMAIN_ID of --ros2.")] = 0,
     record: Annotated[Path | None, typer.Option("--record", metavar="DIR", help="Record each run's traffic into "
-                                                "DIR/<fleet>.mcap (evopose record: the ROS 2 channels; the raw "
-                                                "ones, for evopose replay, in DIR/<fleet>.raw.mcap).")] = None,
+                                                "the rosbag2 bag directory DIR/<fleet> (evopose record: "
+                                                "<fleet>.mcap and metadata.yaml, what ros2 bag info opens; the "
+                                                "raw channels, for evopose replay, in <fleet>.raw.mcap).")] = None,
     dataset: Annotated[Path | None, typer.Option(
         "--dataset", metavar="DIR", help="Run on a rendered dataset (docs/datasets.md): each camera vehicle plays "
                                          "its camera's folder (evopose agent --source DIR), on the dataset's world "
@@ -134,6 +135,12 @@ def run_command(
         raise typer.BadParameter(f"{record} exists and is not a directory", param_hint="--record")
     if dataset is not None and world is not None:
         raise typer.BadParameter("a dataset has its own world (its world.yaml)", param_hint="--world")
+    from agents.errors import FleetError
+    from agents.transport.ports import listening, next_port
+
+    if listening(listen):  # the fleet's first listener would fail, and its team-mates would wait for it in vain
+        raise FleetError(f"{listen} is already in use (another fleet, router or agent listens there): stop it, or "
+                         f"run on another port (--listen {next_port(listen)}; make demo PORT=...)")
     mirror_domain = ros2_domain if ros2 else None
     from scenarios.fleet import load_fleet_scenario
 

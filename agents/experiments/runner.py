@@ -181,8 +181,8 @@ def start_ros2_mirror(fleet: str, domain: int, endpoint: str, use_router: bool, 
 
 
 def start_recorder(fleet: str, out: Path, endpoint: str, use_router: bool, env: dict) -> subprocess.Popen:
-    """``evopose record`` of the fleet into ``out`` (MCAP: the ROS 2 channels; the raw ones beside it), once
-    subscribed; stopped (SIGTERM: the file is finished) with the agents."""
+    """``evopose record`` of the fleet into the rosbag2 bag directory ``out`` (``out/<name>.mcap``: the ROS 2
+    channels, with its metadata.yaml; the raw ones beside it), once subscribed; stopped (SIGTERM: the file is finished) with the agents."""
     network = ["--mode", "client", "--connect", endpoint] if use_router else ["--connect", endpoint]
     out.parent.mkdir(parents=True, exist_ok=True)
     recorder = subprocess.Popen([sys.executable, "-m", "agents.cli", "record", "--fleet", fleet, "--out", str(out),
@@ -210,8 +210,8 @@ def run_variant(scenario: FleetScenario, variant: VariantSpec, run: int, *, fram
     ``secure``: TLS, mTLS and the router's ACL, with this run's credentials in ``credentials/<fleet>`` (kept)
     or in a temporary directory (removed). ``ros2_domain``: also run ``evopose ros2`` (docs/ros2.md) on the
     fleet, publishing its ROS 2 mirror in that domain. ``record_dir``: the run's traffic is recorded into
-    ``record_dir/<fleet>.mcap`` (``evopose record``: readable by ROS 2 tools; the raw channels, replayable, in
-    ``record_dir/<fleet>.raw.mcap``). ``dataset``: every
+    the rosbag2 bag directory ``record_dir/<fleet>`` (``evopose record``: ``<fleet>.mcap`` and ``metadata.yaml``,
+    what ROS 2 tools open; the raw channels, replayable, in ``<fleet>.raw.mcap`` inside it). ``dataset``: every
     camera vehicle plays that rendered dataset (``--source``; see :func:`dataset_scenario`).
     """
     fps = fps or scenario.fps
@@ -238,7 +238,7 @@ def run_variant(scenario: FleetScenario, variant: VariantSpec, run: int, *, fram
         if ros2_domain is not None:  # before the agents, so that it mirrors their first frames
             children.append(start_ros2_mirror(fleet, ros2_domain, endpoint, use_router, env))
         if record_dir is not None:  # before the agents too: their first frames are in the file
-            children.append(start_recorder(fleet, Path(record_dir) / f"{fleet}.mcap", endpoint, use_router, env))
+            children.append(start_recorder(fleet, Path(record_dir) / fleet, endpoint, use_router, env))
         epoch_ns = time.time_ns() + int(START_MARGIN_S * 1e9)
         for i, agent in enumerate(variant.agents):
             if secure:  # the vehicle's file: a TLS client with its certificate
@@ -288,7 +288,7 @@ def run_variant(scenario: FleetScenario, variant: VariantSpec, run: int, *, fram
         raise ScenarioRunError(f"run {run} of {scenario.name}/{variant.name}: {details}")
     return {"scenario": scenario.name, "world": scenario.world.name, "variant": variant.name, "run": run,
             "fleet": fleet, "slow": slow, "secure": secure, "router_restarts": router_restarts,
-            "recording": str(Path(record_dir) / f"{fleet}.mcap") if record_dir is not None else None,
+            "recording": str(Path(record_dir) / fleet) if record_dir is not None else None,
             "dataset": None if dataset is None else str(dataset),
             "interrupted": stop.is_set(), "seconds": time.monotonic() - started,
             "agents": {p.vehicle: p.summary for p in procs}}

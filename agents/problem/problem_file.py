@@ -27,7 +27,7 @@ from scenarios.documents import FullPoseSpec, Spec, describe, read_mapping, vali
 
 from agents.problem.images import detect_marks, read_image
 
-#: Problem-size limits (README, "Solving a pose problem"): each breach is one line naming the field.
+#: Problem-size limits (docs/security.md, "Untrusted input"): each breach is one line naming the field.
 MAX_MODEL_POINTS = 4096
 MAX_IMAGE_POINTS = 16384  # as many as a feature set may carry on the wire
 MAX_VIEWS = 32

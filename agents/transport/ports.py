@@ -10,6 +10,7 @@ the ephemeral range is only ever taken by an explicit bind, so it is drawn there
 
 from __future__ import annotations
 
+import errno
 import random
 import socket
 from pathlib import Path
@@ -44,3 +45,29 @@ def free_loopback_port(attempts: int = 200) -> int:
                 continue
             return port
     raise OSError(f"no free loopback TCP port in {low}-{high} after {attempts} attempts")
+
+
+def listening(endpoint: str) -> bool:
+    """Whether something listens on the TCP endpoint ``tcp/HOST:PORT`` (``tls/`` too) now: a bind that fails. False
+    for other endpoints and port 0. The probe reuses the address, as listeners do, so a port left in TIME_WAIT by a
+    fleet that just stopped is free."""
+    import re
+
+    found = re.fullmatch(r"(?:tcp|tls)/\[?([^\]]*?)\]?:(\d+)(?:#.*)?", endpoint)
+    if found is None or int(found.group(2)) == 0:
+        return False
+    host, port = found.group(1), int(found.group(2))
+    family = socket.AF_INET6 if ":" in host else socket.AF_INET
+    with socket.socket(family, socket.SOCK_STREAM) as sock:
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        try:
+            sock.bind((host, port))
+        except OSError as err:
+            return err.errno == errno.EADDRINUSE
+    return False
+
+
+def next_port(endpoint: str) -> str:
+    """``endpoint`` with the next port (``tcp/127.0.0.1:7447`` -> ``tcp/127.0.0.1:7448``), as another one to try."""
+    host, _, port = endpoint.rpartition(":")
+    return f"{host}:{int(port) + 1}" if port.isdigit() else endpoint

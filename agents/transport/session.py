@@ -40,6 +40,7 @@ from pathlib import Path
 import zenoh
 
 from agents.errors import BusConfigError
+from agents.transport.ports import listening, next_port
 from protocol.limits import SIZE_LIMITS
 
 MODES = ("peer", "client", "router")
@@ -181,4 +182,19 @@ def open_session(options: SessionOptions) -> zenoh.Session:
     try:
         return zenoh.open(config)
     except zenoh.ZError as err:
-        raise BusConfigError(f"cannot open the Zenoh session: {_zenoh_message(err)}") from None
+        message = _zenoh_message(err)
+        in_use = re.search(r"bound to (\S+?):\s.*Address already in use", message)
+        if in_use:
+            endpoint = in_use.group(1)
+            raise BusConfigError(f"{endpoint} is already in use (another fleet, router or agent listens there): "
+                                 f"stop it, or listen on another port (--listen {next_port(endpoint)}; "
+                                 "make demo PORT=...)") from None
+        if "Unable to connect to any of" in message and options.connect and not any(
+                listening(endpoint) for endpoint in options.connect):
+            where = ", ".join(options.connect) or "the --connect endpoints of the configuration"
+            raise BusConfigError(f"could not reach the fleet's router at {where}: nothing listens there; start "
+                                 f"it (evopose router --listen {options.connect[0]}) or fix --connect") from None
+        raise BusConfigError(f"cannot open the Zenoh session: {message}") from None
+
+
+

@@ -14,9 +14,9 @@ from pathlib import Path
 
 from scenarios.world import Scenario, build_scenario, load_scenario
 
-from agents.errors import FleetError
+from agents.errors import FleetError, TeamNotMetError
 from agents.transport.bus import FleetBus
-from agents.transport.presence import ensure_name_free
+from agents.transport.presence import ensure_name_free, why_absent
 from agents.transport.session import SessionOptions, open_session
 from agents.vehicle.config import CAMERA_ROLES, AgentConfig
 from agents.vehicle.memory import pin_mmap_threshold
@@ -91,4 +91,11 @@ def run_agent(options: SessionOptions, config: AgentConfig, stop: threading.Even
         vehicle = ROLE_CLASSES[role](config, bus, scenario, emit)
         vehicle.subscribe()
         bus.announce()  # present only once warm and listening: a team-mate may start on seeing it
-        return vehicle.run(stop)
+        try:
+            return vehicle.run(stop)
+        except TeamNotMetError as err:  # say why, when it can be seen: no one reached, or another fleet name
+            cause = why_absent(session, config.fleet, err.missing, options.connect)
+            if cause is None:
+                raise
+            raise TeamNotMetError(f"{err.missing and ', '.join(err.missing)} of {config.vehicle} did not appear "
+                                  f"within {config.wait_timeout_s:g} s: {cause}", err.missing) from None

@@ -103,7 +103,7 @@ class Vehicle(ABC):
                 raise TeamNotMetError(f"team-mates {', '.join(missing)} of {self.config.vehicle} did not appear in "
                                       f"fleet {self.config.fleet!r} within {self.config.wait_timeout_s:g} s "
                                       "(--wait-timeout); check --connect/--listen (multicast scouting is off "
-                                      "unless --multicast)")
+                                      "unless --multicast)", missing)
         self.emit({"event": "ready", "vehicle": self.config.vehicle, "role": self.role, "share": self.config.share,
                    "fps": self.clock.fps})
         n = None
