@@ -38,9 +38,10 @@ def _scale_of(world_name: str) -> str:
     return "telephoto" if "telephoto" in world_name else "paper"
 
 
-def evaluate(directory: Path, look: str, front_ends: tuple[str, ...] = FRONT_ENDS) -> dict:
+def evaluate(directory: Path, look: str, front_ends: tuple[str, ...] = FRONT_ENDS, frames: int | None = None) -> dict:
     """Counts ``{front_end: [visible marks, found, detections, correct, right labels]}`` of one dataset developed
-    through ``look``, with the dataset's world name, scale and the seconds per front-end."""
+    through ``look`` (its first ``frames`` frames; None: all), with the dataset's world name, scale and the seconds
+    per front-end."""
     from agents.tools.render_dataset import develop_exr
     from evopose.blobs import SMALL_SPOT_PX, detect_contrast_marks, mark_prior
     from evopose.features import colour_ranges, detect_colour_marks, match_to_truth
@@ -56,7 +57,7 @@ def evaluate(directory: Path, look: str, front_ends: tuple[str, ...] = FRONT_END
     counts = {name: np.zeros(5, int) for name in front_ends}
     seconds = {name: 0.0 for name in front_ends}
     for cam in dataset.cameras:
-        for k in range(dataset.frames):
+        for k in range(dataset.frames if frames is None else min(frames, dataset.frames)):
             exr = Path(directory) / cam / "raw" / f"{k:06d}.exr"
             encoded, _ = develop_exr(world, exr, k, cam, spec)
             image = cv2.imdecode(np.frombuffer(encoded, np.uint8), cv2.IMREAD_COLOR)
@@ -80,7 +81,8 @@ def evaluate(directory: Path, look: str, front_ends: tuple[str, ...] = FRONT_END
                 counts[name] += [int(whole.sum()), len(found), len(det.points), len(correct), right]
     return {"dataset": directory.name, "world": dataset.manifest.world, "scale": _scale_of(dataset.manifest.world),
             "model": world.model.name, "look": look, "counts": {n: c.tolist() for n, c in counts.items()},
-            "seconds": seconds, "images": len(dataset.cameras) * dataset.frames}
+            "seconds": seconds,
+            "images": len(dataset.cameras) * (dataset.frames if frames is None else min(frames, dataset.frames))}
 
 
 def _rates(c: list[int]) -> tuple[float, float, float]:
@@ -140,6 +142,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--looks", default=",".join(LOOKS), help="comma-separated look names (default: all)")
     parser.add_argument("--front-ends", default=",".join(FRONT_ENDS))
     parser.add_argument("--jobs", type=int, default=2)
+    parser.add_argument("--frames", type=int, default=None, help="the first N frames of each dataset (default: all)")
     parser.add_argument("--out", type=Path, default=DEFAULT_OUT)
     args = parser.parse_args(argv)
     looks = [lk.strip() for lk in args.looks.split(",") if lk.strip()]
@@ -155,7 +158,7 @@ def main(argv: list[str] | None = None) -> int:
     jobs = [(d, lk) for lk in looks for d in args.datasets]
     rows = []
     with ProcessPoolExecutor(max_workers=max(1, args.jobs)) as pool:
-        for row in pool.map(evaluate, *zip(*jobs), [front_ends] * len(jobs)):
+        for row in pool.map(evaluate, *zip(*jobs), [front_ends] * len(jobs), [args.frames] * len(jobs)):
             rows.append(row)
             print(f"{row['dataset']:34s} {row['look']:12s} " + "  ".join(
                 "{} {:.2f}/{:.2f}/{:.2f}".format(n, *_rates(row["counts"][n])) for n in front_ends), flush=True)
