@@ -79,12 +79,10 @@ BODY_GAP = 0.12
 #: (:func:`evopose.body_paint.paint_around`): a mark on a face is ringed by paint, about half of it on the face's
 #: outline; a spot on the body's outline, or on the ground beside it, is not. Cycles sweeps: precision 0.456 ->
 #: 0.486 at the paper's scale (recall 0.697 -> 0.695; without the glossy faces 0.517 but 0.685, and low-sun top faces
-#: lost), 0.484 -> 0.547 at telephoto (recall 0.972 -> 0.966); 0.3 took telephoto recall to 0.956.
+#: lost), 0.484 -> 0.547 at telephoto (recall 0.972 -> 0.966); 0.3 took telephoto recall to 0.956. Through random
+#: looks (scenarios.looks.random_look, telephoto g1-low and g3-overcast): 0.2 recall 0.744 / precision 0.820, 0.3
+#: 0.703 / 0.824, 0.45 0.631 / 0.847 (under odd looks the paint mask frays; the Husky's outline spots want 0.45).
 MIN_PAINT_AROUND = 0.2
-#: The same where marks are 3 px and more (telephoto): the ring 1-2 px outside a disc of 5-12 px is resolved, a
-#: mark on a face is ringed by paint at 0.5-1.0 (on the face's edge ~0.5), a spot on the body's outline or beside it
-#: at 0.2-0.5 (Cycles telephoto frames of the Husky: 40 of 54 false spots under 0.45, 0 of 10 marks).
-MIN_PAINT_AROUND_LARGE = 0.45
 #: Least pixels beside the body for the response's spread to be taken there (else over the whole crop), and the
 #: least margin of ground kept around the body (the spread is the ground's texture, not the body's outline).
 MIN_BACKGROUND_PX, MIN_MARGIN_PX = 200, 48
@@ -352,9 +350,8 @@ def _detect(bgr: np.ndarray, lin: np.ndarray, names: tuple[str, ...], palette: M
             break
     sel = np.array(sorted(taken), int)
     if paint is not None and len(sel):  # a mark on a face is ringed by the body's paint
-        least = CANDIDATE_PAINT_AROUND if scoring else (
-            MIN_PAINT_AROUND if prior.radius_px[1] < SMALL_SPOT_PX else MIN_PAINT_AROUND_LARGE)
-        sel = sel[paint_around(paint, pts[sel], radius[sel]) >= least]
+        sel = sel[paint_around(paint, pts[sel], radius[sel]) >= (CANDIDATE_PAINT_AROUND if scoring
+                                                                 else MIN_PAINT_AROUND)]
     pts, labels, conf, radius, contrast = pts[sel], labels[sel], conf[sel], radius[sel], contrast[sel]
     if prior.radius_px[1] >= SMALL_SPOT_PX and len(pts) > 2:   # marks of one target share a scale
         keep = one_scale(radius, contrast)

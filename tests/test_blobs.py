@@ -192,6 +192,60 @@ def test_on_the_committed_photoreal_frames_the_contrast_front_end_with_the_body_
         assert found["contrast"]["recall"] > found["bars"]["recall"] - 0.05, found
 
 
+def _contrast_counts(name: str, look) -> dict:
+    """Recall, precision and labels of the contrast front-end (``look``: "auto" or None) on a committed dataset,
+    matched as benchmarks/bench_photoreal_features.py matches."""
+    from evopose.blobs import SMALL_SPOT_PX
+    from evopose.features import match_to_truth
+    from scenarios.dataset import open_dataset
+
+    data = open_dataset(Path(__file__).parent / "data" / "photoreal" / name)
+    world, area = data.world(), data.world().bounds()
+    c = np.zeros(5)
+    for cam in data.cameras:
+        for k in range(data.frames):
+            image = cv2.imread(str(data.image_path(cam, k)), cv2.IMREAD_COLOR)
+            prior = mark_prior(data.camera(cam, k), world.model.mark_radius, world.model.size, area.lo[:3],
+                               area.hi[:3])
+            px = 1.5 if prior.radius_px[1] < SMALL_SPOT_PX else 3.0
+            found = detect_contrast_marks(image, world.model.palette, prior, body=world.model.body_colour, look=look)
+            marks = data.truth(k).cameras[cam].marks
+            uv, whole = np.array([m.uv for m in marks]), np.array([m.fully_visible for m in marks])
+            seen, _ = match_to_truth(found.points, uv[whole], px)
+            right, _ = match_to_truth(found.points, uv, px)
+            labelled = sum(found.names[found.labels[i]] == marks[j].colour for i, j in right)
+            c += [whole.sum(), len(seen), len(found), len(right), labelled]
+    return {"recall": c[1] / c[0], "precision": c[3] / max(c[2], 1), "labels": c[4] / max(c[3], 1)}
+
+
+@pytest.mark.parametrize("name, recall, precision", [
+    ("paper-agx", 0.8, 0.75), ("telephoto-agx", 0.98, 0.95),          # measured 0.86 / 0.80, 1.00 / 1.00
+    ("paper-flat-cool", 0.6, 0.75), ("telephoto-flat-cool", 0.85, 0.6),   # 0.66 / 0.82, 0.90 / 0.66
+])
+def test_through_looks_it_was_never_tuned_on_the_marks_are_found(name, recall, precision):
+    # the Pioneer's g2 worlds (a geometry the committed reference-look frames do not have) developed through Blender's
+    # AgX view and a cold, flat, dark, JPEG-50 camera (scenarios/looks.py); nothing was fitted on either look. The
+    # flat camera halves the chroma and casts it blue: taken as the reference look shows it, the front-end is
+    # blind there (recall 0.25 and 0.03 measured), with the look estimated from the body it sees
+    found = _contrast_counts(name, "auto")
+    assert found["recall"] >= recall and found["precision"] >= precision, found
+    if "flat-cool" in name:
+        blind = _contrast_counts(name, None)
+        assert found["recall"] > 2 * blind["recall"], (found, blind)
+
+
+def test_on_a_second_robot_it_was_never_tuned_on():
+    # the Husky-like UGV (scenarios/models/husky.yaml): yellow body, red, blue, violet and black marks. Found: 0.90 of
+    # its marks at telephoto (black ones too: a dark paint escapes the lit-paint rule; 0.69 without), labels all
+    # right. Its precision is the front-end's open gap (0.16 here: spots on the body's outline, the yellow clutter's
+    # and the black plate's edges), said so in BENCHMARKS.md; at the paper's scale recall 0.54, precision 0.19 (the
+    # shipped scorer serves the Pioneer's palette only)
+    tele = _contrast_counts("husky-telephoto", "auto")
+    assert tele["recall"] >= 0.85 and tele["labels"] >= 0.95, tele
+    paper = _contrast_counts("husky-paper", "auto")
+    assert paper["recall"] >= 0.5, paper
+
+
 def test_one_per_disc_keeps_the_likeliest_of_a_mark_seen_twice_and_both_of_two_marks_apart():
     from evopose.blobs import one_per_disc
 

@@ -83,7 +83,7 @@ def test_a_vehicle_without_its_camera_or_a_bad_dataset_is_one_line_and_exit_2(ca
     assert Path(h1 / "world.yaml").is_file()
 
 
-@pytest.mark.parametrize("scale", ["paper", "telephoto"])
+@pytest.mark.parametrize("scale", ["paper", "telephoto", "telephoto-agx", "telephoto-flat-cool"])
 def test_two_helicopters_on_the_committed_cycles_frames_agree_and_no_good_pose_is_wrong(scale):
     # Blender Cycles frames (tests/data/photoreal, docs/datasets.md), the contrast front-end, feature sets shared
     # (eq. 4): both publish the same pose, and a pose either calls good is within the issue's bar (0.5 m, 5 deg)
@@ -93,9 +93,12 @@ def test_two_helicopters_on_the_committed_cycles_frames_agree_and_no_good_pose_i
     # at the paper's scale the 16-frame sequence: a search from scratch takes ~22 generations there, 4 a frame, and
     # may end in a wrong basin, unsure (3 of 10 seeds on its first frame, whose features mislead it), so the pair
     # needs a second search before it is good (frame 7 in process); 4 frames only showed whether the first won
+    # telephoto-agx and telephoto-flat-cool: the g2 world through two looks nothing was tuned on (scenarios/looks.py),
+    # with the agents' default front-end (--features auto: the contrast front-end on a dataset's camera images)
     folder = ROOT / "tests" / "data" / "photoreal" / ("paper-sequence" if scale == "paper" else scale)
+    chosen = ["--features", "contrast"] if scale in ("paper", "telephoto") else []
     done = subprocess.run([sys.executable, "-m", "agents.cli", "scenario", "run", "exp2a-features", "--dataset",
-                           str(folder), "--features", "contrast", "--listen", f"tcp/127.0.0.1:{free_port()}",
+                           str(folder), *chosen, "--listen", f"tcp/127.0.0.1:{free_port()}",
                            "--json"], cwd=ROOT, capture_output=True, text=True, timeout=300)
     assert done.returncode == 0 and "Traceback" not in done.stderr, done.stderr
     (run,) = json.loads(done.stdout.splitlines()[-1])["runs"]
@@ -109,7 +112,7 @@ def test_two_helicopters_on_the_committed_cycles_frames_agree_and_no_good_pose_i
     # time slices, i.e. within the accuracy a right pose has at that scale (measured on two loaded cores: telephoto
     # up to 0.5 mm and 0.2 deg apart, each 0.2 deg from the truth; paper scale up to 1.5 cm and 1.9 deg apart, each
     # up to 3.6 deg from the truth, which is the bar below for the last pose: 10 cm, 5 deg)
-    same_m, same_deg = (0.01, 0.5) if scale == "telephoto" else (0.1, 5.0)
+    same_m, same_deg = (0.01, 0.5) if scale.startswith("telephoto") else (0.1, 5.0)
     for k in range(data.frames):
         apart = pose_error(np.array(rows["H1"][k].pose), np.array(rows["H2"][k].pose))
         assert apart["position"] <= same_m and max(apart[a] for a in ("roll", "pitch", "yaw")) <= same_deg, (k, apart)
