@@ -100,12 +100,13 @@ def paint_around(paint: np.ndarray, points: np.ndarray, radius: np.ndarray) -> n
     return share
 
 
-def body_region(paint: np.ndarray, mark_px: float, gap_px: float = 0.0) -> np.ndarray:
+def body_region(paint: np.ndarray, mark_px: float, gap_px: float = 0.0, grow: bool = True) -> np.ndarray:
     """Where the target's marks can be (bool (H, W)): the body's ``paint`` (bool (H, W): :func:`body_paint`'s sure
     pixels, or with the glossy faces) less single specks; closed with a disc of the largest mark's radius
     ``mark_px`` and its holes filled (a mark inside a face is a hole in the paint, a mark on a face's outline a
     notch), then grown by half that radius, at least 2 px (a mark on the outline of a face lies half outside its
-    paint; a 2-3 px mark's pixels are mixed with what lies beside the body)."""
+    paint; a 2-3 px mark's pixels are mixed with what lies beside the body). ``grow=False``: the closed, filled
+    paint alone (the body's silhouette: where a mark of 3 px and more has its centre)."""
     paint = cv2.morphologyEx(paint.astype(np.uint8), cv2.MORPH_OPEN,
                              np.ones((2, 2), np.uint8))
     region = np.zeros(paint.shape, bool)
@@ -126,7 +127,8 @@ def body_region(paint: np.ndarray, mark_px: float, gap_px: float = 0.0) -> np.nd
     outside = padded.copy()
     cv2.floodFill(outside, np.zeros((padded.shape[0] + 2, padded.shape[1] + 2), np.uint8), (0, 0), 2)
     filled = (outside[1:-1, 1:-1] != 2).astype(np.uint8)
-    region[y0:y1, x0:x1] = cv2.dilate(filled, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * g + 1, 2 * g + 1))) > 0
+    region[y0:y1, x0:x1] = (cv2.dilate(filled, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * g + 1, 2 * g + 1)))
+                            if grow else filled) > 0
     return region
 
 
