@@ -1,6 +1,7 @@
 """Which image points a target gives EvoPose: its colour marks, or a chessboard's inner corners.
 
-``--features marks`` (the default of ``evopose agent`` and ``evopose solve --image``) finds the model's colour
+``--features auto`` (the default of ``evopose agent`` and ``evopose solve --image``) is ``contrast`` on camera images
+and ``marks`` on drawn worlds (:func:`resolve_features`). ``--features marks`` finds the model's colour
 marks by preset hue bands (:func:`evopose.features.detect_colour_marks`, the paper's Section IV: flat-coloured
 drawings); ``--features contrast`` by their contrast (:func:`evopose.blobs.detect_contrast_marks`: camera images);
 ``--features corners`` finds
