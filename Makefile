@@ -4,7 +4,7 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test fuzz bench bench-footprint examples install clean lock compose photoreal
+.PHONY: demo test fuzz bench bench-looks bench-footprint examples install clean lock compose photoreal
 
 $(STAMP): pyproject.toml constraints.txt
 	$(PYTHON) -m venv $(VENV)
@@ -59,6 +59,16 @@ bench: $(STAMP)
 	$(PY) -m benchmarks.bench_flood
 	$(PY) -m benchmarks.bench_blas_threads
 	$(PY) -m benchmarks.bench_photoreal_features tests/data/photoreal/paper tests/data/photoreal/telephoto
+	$(PY) -m benchmarks.report
+
+# The mark front-ends through eight camera looks (~1 h here: renders the Cycles worlds of the Pioneer and the second
+# robot once, keeping their radiance, then develops each frame through every look of scenarios/looks.py).
+bench-looks: $(STAMP) photoreal
+	$(PY) -m benchmarks.photoreal_worlds --render --frames 4 --out datasets/photoreal
+	$(PY) -m benchmarks.photoreal_worlds --set husky --render --frames 4 --out datasets/photoreal-husky
+	$(PY) -m benchmarks.bench_photoreal_looks datasets/photoreal/photoreal-*-g*
+	$(PY) -m benchmarks.bench_photoreal_looks datasets/photoreal-husky/photoreal-husky-*-g* \
+		--front-ends contrast,contrast-fixed,marks --out benchmarks/results/photoreal_looks_husky.md
 	$(PY) -m benchmarks.report
 
 # Three agent pairs for 10 minutes each (30 min): memory and CPU over time.
