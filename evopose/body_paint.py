@@ -21,6 +21,8 @@ PAINT_RESIDUAL, PAINT_SHARE, PAINT_NOISE = 0.12, 0.3, 0.01
 PAINT_SHARE_CONNECTED = 0.18
 #: How far above the ground's own paint share (its 90th percentile) the hysteresis starts (:func:`connected_share`).
 GROUND_SHARE_MARGIN = 0.05
+#: The ground's share is read this far (pixels) and more from the sure paint.
+GROUND_AWAY_PX = 12
 
 
 def paint_share(lin: np.ndarray, body_linear: np.ndarray) -> np.ndarray:
@@ -57,13 +59,14 @@ def connected_paint(lin: np.ndarray, body_linear: np.ndarray) -> np.ndarray:
     return body_paint(lin, body_linear)[1]
 
 
-def connected_share(share: np.ndarray) -> float:
+def connected_share(share: np.ndarray, sure: np.ndarray) -> float:
     """The hysteresis's low threshold for a :func:`paint_share` image (H, W): :data:`PAINT_SHARE_CONNECTED`, or
     above the ground's own share where the ground fits the paint that well (a yellow body on beige ground: the
     ground is yellow paint plus white at a share of 0.1-0.23, the Pioneer's grey ground ~0.05): the 90th percentile
-    of the pixels that fit the paint below :data:`PAINT_SHARE` (the ground, and a few glossy faces), plus
-    :data:`GROUND_SHARE_MARGIN`."""
-    below = share[(share >= 0) & (share < PAINT_SHARE)][::7]
+    of the pixels below :data:`PAINT_SHARE` away from the ``sure`` paint (H, W) bool (the ground, not the body's own
+    glossy faces; a pixel the paint does not fit counts 0), plus :data:`GROUND_SHARE_MARGIN`."""
+    away = ~cv2.dilate(sure.astype(np.uint8), np.ones((2 * GROUND_AWAY_PX + 1,) * 2, np.uint8)).astype(bool)
+    below = np.maximum(share[(share < PAINT_SHARE) & away][::7], 0.0)   # a pixel the paint does not fit: share 0
     if not len(below):
         return PAINT_SHARE_CONNECTED
     return float(min(max(PAINT_SHARE_CONNECTED, np.quantile(below, 0.9) + GROUND_SHARE_MARGIN), PAINT_SHARE))
@@ -73,7 +76,8 @@ def body_paint(lin: np.ndarray, body_linear: np.ndarray) -> tuple[np.ndarray, np
     """The body's paint, bool (H, W) each: the sure pixels (:func:`paint_pixels`) and those with the glossy faces
     touching them (:func:`connected_paint`), from one :func:`paint_share`."""
     share = paint_share(lin, body_linear)
-    sure, weak = share >= PAINT_SHARE, share >= connected_share(share)
+    sure = share >= PAINT_SHARE
+    weak = share >= connected_share(share, sure)
     count, patches = cv2.connectedComponents(weak.astype(np.uint8), connectivity=8)
     touching = np.zeros(count, bool)
     touching[np.unique(patches[sure])] = True

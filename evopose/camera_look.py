@@ -34,6 +34,8 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from geometry import angle_difference, wrap_angle
+
 #: Pixels whose luma is outside this range carry no chroma worth measuring (black, or clipped).
 LUMA_RANGE = (24.0, 245.0)
 #: The neutral is the median chroma of this share of the pixels nearest it (iterated from the image's median).
@@ -61,6 +63,9 @@ MIN_PAINT_CHROMA = 0.12
 #: within these is left as it is, and a look beyond them is brought back to their edge, never past the front-end's
 #: own tolerance, which these frames show.
 DEAD_BAND = (0.06, 0.3, 8.0)
+#: A neutral further than this from the reference's is no white-balance error (+-30 % per channel moves it ~0.2)
+#: but a picture without grey (a close-up of one paint): the reference neutral is kept.
+MAX_NEUTRAL_SHIFT = 0.3
 #: The correction is bounded: a saturation gain within this range, a turn within this many degrees. Above 1.6 the
 #: gain is a dark tone curve's (AgX Punchy: a dark red body's chroma over its small luma reads 2.5 on one camera,
 #: 1.3 on the other), not a saturation setting: taking it back further washes the marks out.
@@ -121,7 +126,7 @@ def body_chroma(q: np.ndarray, usable: np.ndarray, neutral: np.ndarray, spread: 
     r = np.hypot(rel[..., 0], rel[..., 1])
     turn = np.radians(REFERENCE_BODY_TURN_DEG)
     expect = np.arctan2(paint_q[1], paint_q[0]) + turn
-    off = np.abs((np.arctan2(rel[..., 1], rel[..., 0]) - expect + np.pi) % (2 * np.pi) - np.pi)
+    off = np.abs(angle_difference(np.arctan2(rel[..., 1], rel[..., 0]), expect))
     mask = usable & (off <= np.radians(BODY_TURN_DEG)) & (r >= max(BODY_NOISE_SPREADS * spread, BODY_MIN_CHROMA))
     if mask.sum() < MIN_BODY_PIXELS:
         return None, 0
@@ -156,6 +161,8 @@ def estimate_look(bgr: np.ndarray, body_bgr: tuple[int, int, int] | None, extent
     y, q = chroma_of(bgr)
     usable = (y >= LUMA_RANGE[0]) & (y <= LUMA_RANGE[1])
     neutral, spread = neutral_chroma(q, usable)
+    if float(np.hypot(*(neutral - np.asarray(REFERENCE_NEUTRAL)))) > MAX_NEUTRAL_SHIFT:
+        neutral = np.asarray(REFERENCE_NEUTRAL, np.float32)   # no grey in the picture: a scene of one colour
     look = Look(neutral=(float(neutral[0]), float(neutral[1])))
     if body_bgr is None:
         return look
@@ -168,7 +175,7 @@ def estimate_look(bgr: np.ndarray, body_bgr: tuple[int, int, int] | None, extent
     gain = float(np.hypot(*seen)) / (REFERENCE_BODY_GAIN * float(np.hypot(*paint_q)))
     turn = float(np.arctan2(seen[1], seen[0]) - np.arctan2(paint_q[1], paint_q[0])) \
         - np.radians(REFERENCE_BODY_TURN_DEG)
-    turn = (turn + np.pi) % (2 * np.pi) - np.pi
+    turn = float(wrap_angle(turn))
     gain = float(np.clip(gain, *SATURATION_RANGE))
     turn = float(np.clip(turn, -np.radians(MAX_TURN_DEG), np.radians(MAX_TURN_DEG)))
     return Look(neutral=look.neutral, saturation=gain, turn_rad=turn, body_pixels=n)

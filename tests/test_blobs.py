@@ -140,13 +140,16 @@ def test_a_glossy_face_is_paint_where_it_touches_the_surely_painted_body_and_gre
 
     red = _srgb_to_linear(np.array([40, 40, 150], np.float32) / 255)
     glossy = 0.39 * red + 0.165                                   # share 0.21 (measured on the Cycles face)
-    image = np.zeros((20, 30, 3), np.float32) + np.float32(0.2)   # grey ground
+    # grey ground, most of the picture as in a camera's (the hysteresis reads the ground's own share away from the
+    # body: a yellow body on beige ground raises it, evopose.body_paint.connected_share)
+    image = np.zeros((60, 80, 3), np.float32) + np.float32(0.2)
     image[2:18, 2:10] = red                                       # the sunlit side
     image[2:18, 10:18] = glossy                                   # the glossy top, touching it
     image[2:18, 22:28] = glossy                                   # the same colour apart: a grey-pink patch
     assert not paint_pixels(image, red)[5, 12]
     paint = connected_paint(image, red)
     assert paint[2:18, 2:18].all() and not paint[2:18, 22:28].any() and not paint[0].any() and not paint[:, 19].any()
+    assert not paint[20:].any() and not paint[:, 30:].any()
 
 
 def test_a_mark_on_a_face_is_ringed_by_paint_and_a_spot_on_or_beside_the_outline_is_not():
