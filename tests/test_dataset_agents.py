@@ -185,8 +185,10 @@ def test_a_team_playing_a_recording_behind_the_wall_clock_still_pairs_its_views(
     # refused as stale (on the wall clock it was, and each then solved a problem of its own)
     exp2, _ = datasets
     epoch, port = time.time_ns() + int(3e9), free_port()
+    # the hue bands, as when this was written: with the slower contrast front-end (auto's choice for a dataset) H1
+    # refused 5 of H2's 10 views as stale here (a lead, not yet understood: docs/limits.md)
     base = ["--fleet", "behind", "--source", str(exp2), "--share", "features", "--fps", "1000", "--max-age", "0.1",
-            "--epoch-ns", str(epoch), "--wait-for", "H1,H2", "--json", "--no-multicast"]
+            "--epoch-ns", str(epoch), "--wait-for", "H1,H2", "--json", "--no-multicast", "--features", "marks"]
     procs = {"H1": Proc([sys.executable, "-m", "agents.cli", "agent", "--vehicle", "H1", *base,
                          "--listen", f"tcp/127.0.0.1:{port}"]),
              "H2": Proc([sys.executable, "-m", "agents.cli", "agent", "--vehicle", "H2", *base,

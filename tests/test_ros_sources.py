@@ -604,8 +604,10 @@ def assert_renderers_poses(records: list[dict], renderer_records: list[dict]) ->
 @pytest.mark.parametrize("compressed", [False, True], ids=["image", "compressed-png"])
 def test_an_agent_on_ros_topics_publishes_the_renderers_poses(fleet, renderer_run, h1_frames, compressed):
     topic = COMPRESSED_TOPIC if compressed else IMAGE_TOPIC
+    # the renderer's drawings on ROS topics: the renderer's own front-end (auto would take them for a camera's)
     agent, epoch = start_agent(fleet, f"ros-h1-{int(compressed)}", "--source", "ros2:" + topic,
-                               "--camera-info", "ros2:" + INFO_TOPIC, "--camera-pose", "ros2:" + POSE_TOPIC)
+                               "--camera-info", "ros2:" + INFO_TOPIC, "--camera-pose", "ros2:" + POSE_TOPIC,
+                               "--features", "marks")
     try:
         publish_camera(fleet, agent, epoch, h1_frames, compressed)
         code, records, stderr = finish(agent)
@@ -641,7 +643,8 @@ def test_an_agent_on_tf_skips_stale_images_and_poses(fleet, renderer_run, h1_fra
 
     agent, epoch = start_agent(fleet, "ros-stale", "--frames", str(STALE_FRAMES), "--source", "ros2:" + STALE_TOPIC,
                                "--camera-info", "ros2:" + STALE_INFO, "--camera-pose", "ros2:/tf",
-                               "--camera-frame", "H1/camera_optical", "--source-max-age", str(SOURCE_MAX_AGE_S))
+                               "--camera-frame", "H1/camera_optical", "--source-max-age", str(SOURCE_MAX_AGE_S),
+                               "--features", "marks")
     try:
         with client_session(fleet.endpoint) as session, Ros2Node(session, Node("camera", "/h1s")) as node, \
                 Ros2Listener(session, topics=[], keep_samples=0) as graph:

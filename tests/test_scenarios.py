@@ -214,4 +214,4 @@ def test_the_feature_kinds_are_one_list():
     from agents.vehicle.config import FEATURES
     from scenarios.fleet import FEATURE_KINDS
 
-    assert FEATURES == FEATURE_KINDS == extractors == ("marks", "contrast", "corners")
+    assert FEATURES == FEATURE_KINDS == extractors == ("auto", "marks", "contrast", "corners")

@@ -90,9 +90,12 @@ def frames_of(records: list[dict]) -> dict[int, dict]:
 def source_runs(h1_media):
     """The renderer's agent, and agents on the PNG sequence and on the lossless video with its camera_info."""
     folder, _, video, info = h1_media
-    runs = {"render-h1": ("--frames", str(FRAMES)), "seq-h1": ("--source", str(folder / "seq" / "h1_%02d.png"))}
+    # the renderer's drawings played back: the same front-end as the renderer's agent (auto takes a source for a
+    # camera's images and would find the marks by their contrast)
+    runs = {"render-h1": ("--frames", str(FRAMES)),
+            "seq-h1": ("--source", str(folder / "seq" / "h1_%02d.png"), "--features", "marks")}
     if video is not None:
-        runs["video-h1"] = ("--source", str(video), "--camera-info", str(info))
+        runs["video-h1"] = ("--source", str(video), "--camera-info", str(info), "--features", "marks")
     return run_agents(runs)
 
 
