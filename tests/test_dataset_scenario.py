@@ -52,10 +52,18 @@ def test_a_fleet_scenario_runs_on_a_dataset(datasets):
     assert "dataset" not in run["agents"]["pioneer"]  # the target publishes its true pose from the world
     rows = {r["vehicle"]: r for r in result["rows"]}
     assert set(rows) == {"H1", "H2"} and all(math.isfinite(r["x"]) and r["good_fraction"] > 0 for r in rows.values())
-    # features: both search both images, so both publish the same pose on the frames they pair
+    # features: both search both images, so both publish the same pose on the frames they pair, up to where each
+    # one's search stopped in its own time slices: the default front-end on these camera-model images is the
+    # contrast one (--features auto), slower than the hue bands, so the two searches no longer end on the same
+    # generation and bit-equal poses (4 of 10 frames in one of four runs); the same pose within 1 cm and 0.5 deg,
+    # as the Cycles pair test asks
+    from geometry import pose_error
+
     h1 = {row.frame: row.pose for row in pose_rows(run["agents"]["H1"])}
     h2 = {row.frame: row.pose for row in pose_rows(run["agents"]["H2"])}
-    assert sum(h1[k] == h2[k] for k in h1.keys() & h2.keys()) >= FRAMES // 2
+    same = [k for k in h1.keys() & h2.keys() if (lambda e: e["position"] <= 0.01 and max(
+        e[a] for a in ("roll", "pitch", "yaw")) <= 0.5)(pose_error(np.array(h1[k]), np.array(h2[k])))]
+    assert len(same) >= FRAMES // 2, sorted(same)
 
 
 def run_error(capfd, *args: str) -> str:
