@@ -43,7 +43,7 @@ from dataclasses import dataclass, replace
 import cv2
 import numpy as np
 
-from .body_paint import body_paint, body_region, paint_around
+from .body_paint import body_paint, body_region, body_silhouette, paint_around
 from .camera_look import Look, estimate_look, to_reference_look
 from .features import MarkDetections, _to_bgr
 from .mark_prior import MarkPrior, mark_prior
@@ -88,7 +88,7 @@ MIN_PAINT_AROUND = 0.2
 #: more than this share of its radius: a mark lies on a face; a speck on the ground beside the outline does not.
 #: Through random looks (telephoto g1-low, g3-overcast): no rule 0.744 / 0.820 (recall / precision), inside 0.733 /
 #: 0.835, half a radius in 0.716 / 0.833 (an odd look frays the paint mask at the silhouette); the committed Husky
-#: telephoto frames 0.16 -> 0.23 precision, the Pioneer's unchanged.
+#: telephoto frames 0.16 -> 0.22 precision, the Pioneer's unchanged.
 INSIDE_SHARE = 0.0
 #: Least pixels beside the body for the response's spread to be taken there (else over the whole crop), and the
 #: least margin of ground kept around the body (the spread is the ground's texture, not the body's outline).
@@ -245,7 +245,8 @@ def detect_contrast_marks(image_bgr: np.ndarray, palette: Mapping[str, tuple[int
     # -> 0.569: benchmarks/bench_photoreal_features.py on datasets/photoreal/photoreal-paper-g*, either region),
     # and the spots the gloss adds are the body's shading that MIN_EXPLAINED drops
     sure, paint = body_paint(lin, body_linear)
-    region = body_region(paint, prior.radius_px[1], gap)
+    silhouette = body_silhouette(paint, prior.radius_px[1], gap)
+    region = body_region(silhouette, prior.radius_px[1])
     if not region.any():
         return _detect(bgr[:0, :0], lin[:0, :0], names, palette, prior, region[:0, :0], **settings)
     ys, xs = np.nonzero(region)
@@ -254,7 +255,8 @@ def detect_contrast_marks(image_bgr: np.ndarray, palette: Mapping[str, tuple[int
     y0, y1 = max(int(ys.min()) - margin, 0) // 2 * 2, min(int(ys.max()) + margin + 1, bgr.shape[0])
     x0, x1 = max(int(xs.min()) - margin, 0) // 2 * 2, min(int(xs.max()) + margin + 1, bgr.shape[1])
     found = _detect(bgr[y0:y1, x0:x1], lin[y0:y1, x0:x1], names, palette, prior, region[y0:y1, x0:x1], **settings,
-                    body=body, paint=paint[y0:y1, x0:x1], sure=sure[y0:y1, x0:x1])
+                    body=body, paint=paint[y0:y1, x0:x1], sure=sure[y0:y1, x0:x1],
+                    silhouette=silhouette[y0:y1, x0:x1])
     return replace(found, points=found.points + (x0, y0))
 
 
@@ -262,10 +264,10 @@ def _detect(bgr: np.ndarray, lin: np.ndarray, names: tuple[str, ...], palette: M
             prior: MarkPrior, region: np.ndarray | None, *, k_sigma: float, max_edge_ratio: float,
             max_misfit: float | None, max_marks: int, scorer: MarkScorer | str | None,
             body: tuple[int, int, int] | None = None, paint: np.ndarray | None = None,
-            sure: np.ndarray | None = None) -> ContrastMarks:
+            sure: np.ndarray | None = None, silhouette: np.ndarray | None = None) -> ContrastMarks:
     """:func:`detect_contrast_marks` in ``bgr`` (H, W, 3) uint8 (``lin`` the same in linear light, float32), the
     marks kept on ``region`` (H, W) bool when given (the body's paint ``body``, BGR, whose pixels are ``paint``
-    (H, W) bool, ``sure`` the sure ones)."""
+    (H, W) bool, ``sure`` the sure ones, ``silhouette`` its closed and filled paint, :func:`body_silhouette`)."""
     h, w = bgr.shape[:2]
     if h < 5 or w < 5:
         empty = np.zeros(0)
@@ -351,11 +353,10 @@ def _detect(bgr: np.ndarray, lin: np.ndarray, names: tuple[str, ...], palette: M
         if len(taken) >= max_marks:
             break
     sel = np.array(sorted(taken), int)
-    if paint is not None and len(sel) and prior.radius_px[1] >= SMALL_SPOT_PX:   # a mark's centre is on the body
-        inside = body_region(paint, prior.radius_px[1], BODY_GAP * (prior.extent_px or 0.0), grow=False)
-        depth = cv2.distanceTransform(inside.astype(np.uint8), cv2.DIST_L2, 3)
+    if silhouette is not None and len(sel) and prior.radius_px[1] >= SMALL_SPOT_PX:   # a mark's centre is on the body
+        depth = cv2.distanceTransform(silhouette.astype(np.uint8), cv2.DIST_L2, 3)
         cu, cv = np.rint(pts[sel]).astype(int).T
-        ok = (cu >= 0) & (cv >= 0) & (cu < inside.shape[1]) & (cv < inside.shape[0])
+        ok = (cu >= 0) & (cv >= 0) & (cu < depth.shape[1]) & (cv < depth.shape[0])
         sel = sel[ok][depth[cv[ok], cu[ok]] > INSIDE_SHARE * radius[sel[ok]]]
     if paint is not None and len(sel):  # a mark on a face is ringed by the body's paint
         sel = sel[paint_around(paint, pts[sel], radius[sel]) >= (CANDIDATE_PAINT_AROUND if scoring

@@ -104,24 +104,21 @@ def paint_around(paint: np.ndarray, points: np.ndarray, radius: np.ndarray) -> n
     return share
 
 
-def body_region(paint: np.ndarray, mark_px: float, gap_px: float = 0.0, grow: bool = True) -> np.ndarray:
-    """Where the target's marks can be (bool (H, W)): the body's ``paint`` (bool (H, W): :func:`body_paint`'s sure
-    pixels, or with the glossy faces) less single specks; closed with a disc of the largest mark's radius
-    ``mark_px`` and its holes filled (a mark inside a face is a hole in the paint, a mark on a face's outline a
-    notch), then grown by half that radius, at least 2 px (a mark on the outline of a face lies half outside its
-    paint; a 2-3 px mark's pixels are mixed with what lies beside the body). ``grow=False``: the closed, filled
-    paint alone (the body's silhouette: where a mark of 3 px and more has its centre)."""
+def body_silhouette(paint: np.ndarray, mark_px: float, gap_px: float = 0.0) -> np.ndarray:
+    """The body's silhouette (bool (H, W)): its ``paint`` (bool (H, W): :func:`body_paint`'s sure pixels, or with the
+    glossy faces) less single specks, closed with a disc of the largest mark's radius ``mark_px`` (or ``gap_px``, if
+    larger) and its holes filled (a mark inside a face is a hole in the paint, a mark on a face's outline a notch).
+    Where a mark of 3 px and more has its centre."""
     paint = cv2.morphologyEx(paint.astype(np.uint8), cv2.MORPH_OPEN,
                              np.ones((2, 2), np.uint8))
-    region = np.zeros(paint.shape, bool)
+    silhouette = np.zeros(paint.shape, bool)
     ys, xs = np.nonzero(paint)
     if not len(ys):
-        return region
+        return silhouette
     r = max(int(np.ceil(max(mark_px, gap_px))), 1)
-    g = max(2, int(np.ceil(mark_px / 2)))
-    # the rest runs on the paint's box with a margin the closing and growing cannot reach past (the same result,
-    # at a fraction of the cost: a telephoto body fills ~5 % of the frame)
-    m = 2 * r + g + 2
+    # the rest runs on the paint's box with a margin the closing cannot reach past (the same result, at a fraction
+    # of the cost: a telephoto body fills ~5 % of the frame)
+    m = 2 * r + 2
     y0, y1 = max(int(ys.min()) - m, 0), min(int(ys.max()) + m + 1, paint.shape[0])
     x0, x1 = max(int(xs.min()) - m, 0), min(int(xs.max()) + m + 1, paint.shape[1])
     disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * r + 1, 2 * r + 1))
@@ -130,11 +127,25 @@ def body_region(paint: np.ndarray, mark_px: float, gap_px: float = 0.0, grow: bo
     padded = cv2.copyMakeBorder(closed, 1, 1, 1, 1, cv2.BORDER_CONSTANT, value=0)
     outside = padded.copy()
     cv2.floodFill(outside, np.zeros((padded.shape[0] + 2, padded.shape[1] + 2), np.uint8), (0, 0), 2)
-    filled = (outside[1:-1, 1:-1] != 2).astype(np.uint8)
-    region[y0:y1, x0:x1] = (cv2.dilate(filled, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * g + 1, 2 * g + 1)))
-                            if grow else filled) > 0
+    silhouette[y0:y1, x0:x1] = outside[1:-1, 1:-1] != 2
+    return silhouette
+
+
+def body_region(silhouette: np.ndarray, mark_px: float) -> np.ndarray:
+    """Where the target's marks can be (bool (H, W)): its :func:`body_silhouette` (bool (H, W)) grown by half the
+    largest mark's radius ``mark_px``, at least 2 px (a mark on the outline of a face lies half outside its paint; a
+    2-3 px mark's pixels are mixed with what lies beside the body)."""
+    region = np.zeros(silhouette.shape, bool)
+    ys, xs = np.nonzero(silhouette)
+    if not len(ys):
+        return region
+    g = max(2, int(np.ceil(mark_px / 2)))
+    y0, y1 = max(int(ys.min()) - g, 0), min(int(ys.max()) + g + 1, silhouette.shape[0])
+    x0, x1 = max(int(xs.min()) - g, 0), min(int(xs.max()) + g + 1, silhouette.shape[1])
+    disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * g + 1, 2 * g + 1))
+    region[y0:y1, x0:x1] = cv2.dilate(silhouette[y0:y1, x0:x1].astype(np.uint8), disc) > 0
     return region
 
 
-__all__ = ["PAINT_SHARE", "PAINT_SHARE_CONNECTED", "body_paint", "body_region", "connected_paint", "paint_around",
-           "paint_pixels", "paint_share"]
+__all__ = ["PAINT_SHARE", "PAINT_SHARE_CONNECTED", "body_paint", "body_region", "body_silhouette", "connected_paint",
+           "paint_around", "paint_pixels", "paint_share"]

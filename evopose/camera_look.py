@@ -85,10 +85,10 @@ class Look:
 
     @property
     def is_reference(self) -> bool:
-        """Whether the look lies within :data:`DEAD_BAND` of the reference look (nothing to undo)."""
-        shift = float(np.hypot(*(np.subtract(self.neutral, REFERENCE_NEUTRAL))))
-        return (shift <= DEAD_BAND[0] and abs(np.log(self.saturation)) <= DEAD_BAND[1]
-                and abs(np.degrees(self.turn_rad)) <= DEAD_BAND[2])
+        """Whether the look lies within :data:`DEAD_BAND` of the reference look: nothing of it lies beyond
+        (:func:`beyond_band`), so nothing is undone."""
+        shift, gain, turn = beyond_band(self)
+        return not shift.any() and gain == 1.0 and turn == 0.0
 
 
 def chroma_of(bgr: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
