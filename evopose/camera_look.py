@@ -67,8 +67,9 @@ DEAD_BAND = (0.06, 0.3, 8.0)
 #: but a picture without grey (a close-up of one paint): the reference neutral is kept.
 MAX_NEUTRAL_SHIFT = 0.3
 #: The correction is bounded: a saturation gain within this range, a turn within this many degrees. Above 1.6 the
-#: gain is a dark tone curve's (AgX Punchy: a dark red body's chroma over its small luma reads 2.5 on one camera,
-#: 1.3 on the other), not a saturation setting: taking it back further washes the marks out.
+#: gain is a dark tone curve's (AgX Punchy on telephoto-g1-high, a one-off analysis where the cap was chosen: a dark
+#: red body's chroma over its small luma read 2.5 on one camera, 1.3 on the other), not a saturation setting:
+#: taking it back further washes the marks out.
 SATURATION_RANGE, MAX_TURN_DEG = (0.25, 1.6), 30.0
 
 

@@ -12,7 +12,8 @@ import numpy as np
 #: Where marks are 3 px and more: least radius of a spot as a share of the marks' own scale (:func:`one_scale`).
 SCALE_CONSENSUS = 0.55
 #: ... and least contrast as a share of the strong spots' (the 80th percentile): a target's marks are painted
-#: alike, what a look or the ground's texture adds is weak (Cycles telephoto: marks 1.6-9, specks 1.0-2.7).
+#: alike, what a look or the ground's texture adds is weak (telephoto-g1-high through flat-cool and hable-faded, and
+#: the Husky's frames, a one-off analysis: marks 1.6-9, specks 1.0-2.7).
 RELATIVE_CONTRAST = 0.35
 
 
@@ -42,8 +43,9 @@ def one_scale(radius: np.ndarray, contrast: np.ndarray, share: float = SCALE_CON
     The prior's radius range spans the whole operating area and every facing (2.5-12 px at telephoto), while the
     marks of one target at one distance share a radius within their foreshortening (a disc at 70 deg keeps ~0.6
     of its scale). What a camera's look adds on the body (its paint's JPEG blocks, noise made visible by a
-    saturation gain, a grazing face's texture) peaks at the finest scales, weaker. Cycles telephoto frames
-    (benchmarks/bench_photoreal_looks.py): true marks 4.7-9.4 px, false spots on the body 2.3-4.7 px."""
+    saturation gain, a grazing face's texture) peaks at the finest scales, weaker. Telephoto-g1-high through
+    flat-cool (a one-off analysis, where 0.55 was chosen; that look is therefore not held out for this rule): true
+    marks 4.7-9.4 px, false spots on the body 2.3-4.7 px."""
     radius, contrast = np.asarray(radius, float), np.asarray(contrast, float)
     order = np.argsort(radius)
     weight = np.cumsum(contrast[order] ** 2)   # the median radius weighed by contrast squared

@@ -227,7 +227,8 @@ def _contrast_counts(name: str, look) -> dict:
 ])
 def test_through_looks_it_was_never_tuned_on_the_marks_are_found(name, recall, precision):
     # the Pioneer's g2 worlds (a geometry the committed reference-look frames do not have) developed through Blender's
-    # AgX view and a cold, flat, dark, JPEG-50 camera (scenarios/looks.py); nothing was fitted on either look. The
+    # AgX view (never looked at while developing) and a cold, flat, dark, JPEG-50 camera (scenarios/looks.py; seen on
+    # telephoto-g1-high, not this g2 world, when the telephoto spot rules were chosen). The
     # flat camera halves the chroma and casts it blue: taken as the reference look shows it, the front-end is
     # blind there (recall 0.25 and 0.03 measured), with the look estimated from the body it sees
     found = _contrast_counts(name, "auto")

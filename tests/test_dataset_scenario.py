@@ -96,7 +96,8 @@ def test_two_helicopters_on_the_committed_cycles_frames_agree_and_no_good_pose_i
     # at the paper's scale the 16-frame sequence: a search from scratch takes ~22 generations there, 4 a frame, and
     # may end in a wrong basin, unsure (3 of 10 seeds on its first frame, whose features mislead it), so the pair
     # needs a second search before it is good (frame 7 in process); 4 frames only showed whether the first won
-    # telephoto-agx and telephoto-flat-cool: the g2 world through two looks nothing was tuned on (scenarios/looks.py),
+    # telephoto-agx and telephoto-flat-cool: the g2 world (not the one the telephoto rules were chosen on) through
+    # AgX and a cold, flat, dark JPEG-50 camera (scenarios/looks.py; BENCHMARKS.md says which looks were seen),
     # with the agents' default front-end (--features auto: the contrast front-end on a dataset's camera images)
     folder = ROOT / "tests" / "data" / "photoreal" / ("paper-sequence" if scale == "paper" else scale)
     chosen = ["--features", "contrast"] if scale in ("paper", "telephoto") else []
