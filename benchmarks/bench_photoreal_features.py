@@ -39,8 +39,9 @@ FRONT_ENDS = ("marks", "contrast", "bars")
 FALSE_BANDS_PX = (3.0, 6.0, 10.0)
 
 
-def evaluate(directory: Path, scorer: str | MarkScorer = "shipped") -> list[dict]:
-    """One row per camera and front-end of the dataset in ``directory``; ``contrast`` with ``scorer``."""
+def evaluate(directory: Path, scorer: str | MarkScorer = "shipped", look: str | None = "auto") -> list[dict]:
+    """One row per camera and front-end of the dataset in ``directory``; ``contrast`` with ``scorer``; the contrast
+    front-ends with the camera's ``look`` estimated and undone (``"auto"``) or not (None: evopose.camera_look)."""
     dataset = open_dataset(directory)
     world = dataset.world()
     area = world.bounds()
@@ -63,7 +64,7 @@ def evaluate(directory: Path, scorer: str | MarkScorer = "shipped") -> list[dict
             for name in FRONT_ENDS:
                 det = (detect_colour_marks(image, colour_ranges(world.model.palette)) if name == "marks"
                        else detect_contrast_marks(image, world.model.palette, prior, body=world.model.body_colour,
-                                                  scorer=scorer if name == "contrast" else None))
+                                                  scorer=scorer if name == "contrast" else None, look=look))
                 found, _ = match_to_truth(det.points, uv[whole], match_px)
                 correct, _ = match_to_truth(det.points, uv, match_px)
                 labelled = sum(det.names[det.labels[i]] == colours[j] for i, j in correct)

@@ -196,29 +196,11 @@ def test_on_the_committed_photoreal_frames_the_contrast_front_end_with_the_body_
 
 
 def _contrast_counts(name: str, look) -> dict:
-    """Recall, precision and labels of the contrast front-end (``look``: "auto" or None) on a committed dataset,
-    matched as benchmarks/bench_photoreal_features.py matches."""
-    from evopose.blobs import SMALL_SPOT_PX
-    from evopose.features import match_to_truth
-    from scenarios.dataset import open_dataset
+    """Recall, precision and labels of the contrast front-end (``look``: "auto" or None) on a committed dataset, by
+    the benchmark's own evaluation."""
+    from benchmarks.bench_photoreal_features import evaluate, pooled
 
-    data = open_dataset(Path(__file__).parent / "data" / "photoreal" / name)
-    world, area = data.world(), data.world().bounds()
-    c = np.zeros(5)
-    for cam in data.cameras:
-        for k in range(data.frames):
-            image = cv2.imread(str(data.image_path(cam, k)), cv2.IMREAD_COLOR)
-            prior = mark_prior(data.camera(cam, k), world.model.mark_radius, world.model.size, area.lo[:3],
-                               area.hi[:3])
-            px = 1.5 if prior.radius_px[1] < SMALL_SPOT_PX else 3.0
-            found = detect_contrast_marks(image, world.model.palette, prior, body=world.model.body_colour, look=look)
-            marks = data.truth(k).cameras[cam].marks
-            uv, whole = np.array([m.uv for m in marks]), np.array([m.fully_visible for m in marks])
-            seen, _ = match_to_truth(found.points, uv[whole], px)
-            right, _ = match_to_truth(found.points, uv, px)
-            labelled = sum(found.names[found.labels[i]] == marks[j].colour for i, j in right)
-            c += [whole.sum(), len(seen), len(found), len(right), labelled]
-    return {"recall": c[1] / c[0], "precision": c[3] / max(c[2], 1), "labels": c[4] / max(c[3], 1)}
+    return pooled(evaluate(Path(__file__).parent / "data" / "photoreal" / name, look=look), "contrast")
 
 
 @pytest.mark.parametrize("name, recall, precision", [
