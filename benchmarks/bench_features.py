@@ -28,7 +28,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from evopose.features import colour_ranges, detect_colour_marks, match_to_truth
+from vision.features import colour_ranges, detect_colour_marks, match_to_truth
 from scenarios.render import render_frame
 from scenarios.world import load_scenario
 

@@ -7,7 +7,7 @@ Run from the repository root::
 For each helicopter of exp2 (telephoto: the Pioneer ~180 px wide) and of exp2-paper-scale (the paper's
 scale: ~25 px, with the world's clutter, blur and noise), every frame is rendered, its marks are found with
 the model's palette (what ``solve --image`` does) and the pose is searched in the box
-:func:`agents.problem.images.frustum_bounds` derives from the camera and the model's size. Side by side, on
+:func:`vision.images.frustum_bounds` derives from the camera and the model's size. Side by side, on
 the same frames and seeds, the box of the first version: its depth from the full spread of every detected
 point (clutter included). Right = rotation error < 5 deg and position error < 5 % of the range
 (``benchmarks.problems.is_success``); confident precision = right among those marked confident.
@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from agents.problem.images import detect_marks, frustum_bounds
+from vision.images import detect_marks, frustum_bounds
 from benchmarks.problems import is_success, pose_errors
 from benchmarks.report import md_table, provenance, write_section
 from evopose import Bounds, Camera, Model, PoseProblem, SearchOptions, View, solve
@@ -89,7 +89,7 @@ def main(argv: list[str] | None = None) -> int:
     body = "\n".join([
         f"`NUMBA_NUM_THREADS=1 python -m benchmarks.bench_image_only --frames {args.frames}` ({provenance()}).", "",
         "One camera, no search box given: the box comes from the camera and the model's size "
-        "(`agents/problem/images.py: frustum_bounds`), beside the first version's box on the same frames and seeds. "
+        "(`vision/images.py: frustum_bounds`), beside the first version's box on the same frames and seeds. "
         "Right: rotation < 5 deg and position < 5 % of the range.", "",
         *md_table(["world", "camera", "search box", "frames", "right", "confident", "right among confident"], rows)])
     write_section(args.out, "Image-only solve: the search box from one camera", body)

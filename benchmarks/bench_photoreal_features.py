@@ -5,8 +5,8 @@ Run from the repository root on one or more dataset directories (``evopose rende
     .venv/bin/python -m benchmarks.bench_photoreal_features datasets/first-paper datasets/first-telephoto
 
 For every camera of every dataset the colour front-ends run on every image: ``marks`` (preset hue bands,
-:func:`evopose.features.detect_colour_marks`), ``contrast`` (:func:`evopose.blobs.detect_contrast_marks`, sized
-by :func:`evopose.blobs.mark_prior` from the frame's camera and the world's operating area, with the shipped mark
+:func:`vision.features.detect_colour_marks`), ``contrast`` (:func:`vision.blobs.detect_contrast_marks`, sized
+by :func:`vision.blobs.mark_prior` from the frame's camera and the world's operating area, with the shipped mark
 scorer, or ``--scorer FILE``) and ``bars`` (the same without a scorer: the hand-set bars alone; for marks of 3 px
 and more the two are one front-end). A detection within the
 match radius of a visible mark's projected centre is a true positive (one-to-one, nearest first): 1.5 px when the
@@ -25,10 +25,10 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from evopose.blobs import SMALL_SPOT_PX, detect_contrast_marks, mark_prior
-from evopose.features import colour_ranges, detect_colour_marks, match_to_truth
-from evopose.mark_scorer import MarkScorer
-from evopose.mark_scorer import load as load_scorer
+from vision.blobs import SMALL_SPOT_PX, detect_contrast_marks, mark_prior
+from vision.features import colour_ranges, detect_colour_marks, match_to_truth
+from vision.mark_scorer import MarkScorer
+from vision.mark_scorer import load as load_scorer
 from scenarios.dataset import open_dataset
 
 from .report import provenance
@@ -41,7 +41,7 @@ FALSE_BANDS_PX = (3.0, 6.0, 10.0)
 
 def evaluate(directory: Path, scorer: str | MarkScorer = "shipped", look: str | None = "auto") -> list[dict]:
     """One row per camera and front-end of the dataset in ``directory``; ``contrast`` with ``scorer``; the contrast
-    front-ends with the camera's ``look`` estimated and undone (``"auto"``) or not (None: evopose.camera_look)."""
+    front-ends with the camera's ``look`` estimated and undone (``"auto"``) or not (None: vision.camera_look)."""
     dataset = open_dataset(directory)
     world = dataset.world()
     area = world.bounds()

@@ -28,7 +28,7 @@ import numpy as np
 from agents.experiments.results import frame_agreement
 from agents.experiments.runner import dataset_scenario, run_scenario
 from agents.runs import pose_rows
-from evopose.blobs import SMALL_SPOT_PX, mark_prior
+from vision.blobs import SMALL_SPOT_PX, mark_prior
 from geometry import pose_error
 from scenarios.dataset import open_dataset
 

@@ -6,8 +6,8 @@ Run from the repository root on Cycles datasets that kept their radiance (``raw/
 
 Each frame's radiance is developed again through every named look of :mod:`scenarios.looks` (the world's camera
 model with the look's fields over it, the same sensor seeds: docs/camera-model.md, "Looks"), in memory, and the
-front-ends run on the image: ``contrast`` (:func:`evopose.blobs.detect_contrast_marks` as the agents run it: the
-camera's look estimated per frame from the body and undone, :mod:`evopose.camera_look`), ``contrast-fixed`` (the
+front-ends run on the image: ``contrast`` (:func:`vision.blobs.detect_contrast_marks` as the agents run it: the
+camera's look estimated per frame from the body and undone, :mod:`vision.camera_look`), ``contrast-fixed`` (the
 same front-end taking every image as the reference look shows it: ``look=None``) and ``marks`` (the preset hue
 bands). Matching as benchmarks/bench_photoreal_features.py: 1.5 px at the paper's scale, 3 px at telephoto, one to
 one, recall over fully visible marks, precision over all detections, labels over matched detections.
@@ -16,7 +16,7 @@ What was and was not held out. The look estimate's two constants were measured o
 alone. While the front-end was developed, some looks were seen: ``vivid-warm``, ``flat-cool``, ``hable-faded`` and
 ``gamma-dark`` (their twins, once, on paper-g1-high, before the look estimate existed: nothing fitted), and
 ``flat-cool``, ``hable-faded`` and ``agx-punchy`` on telephoto-g1-high, where the telephoto spot rules
-(:mod:`evopose.mark_selection`: the 0.55 scale share, the 0.35 contrast share) and the look's saturation cap (1.6)
+(:mod:`vision.mark_selection`: the 0.55 scale share, the 0.35 contrast share) and the look's saturation cap (1.6)
 were chosen; later rules were chosen on random looks (:func:`scenarios.looks.random_look`). Never looked at while
 developing: ``agx`` and ``filmic``, the held-out looks in the strict sense. The second robot's reference look
 (its fixture frames and telephoto-g1-high) guided the body paint's hysteresis, the dark-paint and silhouette rules:
@@ -50,8 +50,8 @@ def evaluate(directory: Path, look: str, front_ends: tuple[str, ...] = FRONT_END
     through ``look`` (its first ``frames`` frames; None: all), with the dataset's world name, scale and the seconds
     per front-end."""
     from agents.tools.render_dataset import develop_exr
-    from evopose.blobs import SMALL_SPOT_PX, detect_contrast_marks, mark_prior
-    from evopose.features import colour_ranges, detect_colour_marks, match_to_truth
+    from vision.blobs import SMALL_SPOT_PX, detect_contrast_marks, mark_prior
+    from vision.features import colour_ranges, detect_colour_marks, match_to_truth
     from scenarios.dataset import open_dataset
     from scenarios.looks import look_spec
     from scenarios.photoreal.develop import camera_model_of

@@ -32,9 +32,9 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from agents.problem.extract import feature_extractor
+from vision.extract import feature_extractor
 from evopose import PoseObjective, PoseProblem, SearchOptions, View, pose_mismatch, solve, track
-from evopose.blobs import SMALL_SPOT_PX, mark_prior
+from vision.blobs import SMALL_SPOT_PX, mark_prior
 from evopose.covariance import mutual_matches
 from evopose.pose_filter import PoseFilter
 from evopose.uncertainty import rotation_sigma

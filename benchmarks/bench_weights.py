@@ -46,7 +46,7 @@ DEFAULT_OUT = Path(__file__).resolve().parent / "results" / "weights.md"
 
 @lru_cache(maxsize=4)
 def _world(name: str):
-    from evopose.features import colour_ranges
+    from vision.features import colour_ranges
     from scenarios.world import load_scenario
 
     scenario = load_scenario(name)
@@ -57,7 +57,7 @@ def _world(name: str):
 def frame_problem(world: str, frame: int):
     """The seeded two-view problem of ``frame`` in ``world`` with its truth (a :class:`SyntheticProblem`)."""
     from evopose import PoseProblem, View
-    from evopose.features import detect_colour_marks
+    from vision.features import detect_colour_marks
     from scenarios.render import render_frame
 
     from .problems import SyntheticProblem

@@ -54,7 +54,7 @@ LIGHTINGS = {
     "overcast": {"sun": (60.0, 53.0), "sun_strength": 4.0, "sky": "overcast"},
 }
 #: Geometries and lightings of the *training* worlds (``--set train``): other sides, heights and suns than the
-#: benchmark's, so that what is fitted on them (the mark scorer, evopose/mark_scorer.py) is measured on worlds
+#: benchmark's, so that what is fitted on them (the mark scorer, vision/mark_scorer.py) is measured on worlds
 #: it never saw.
 TRAIN_GEOMETRIES = {
     "t1": {"H1": (30.0, 20.0, 30.0), "H2": (20.0, 28.0, -150.0), "yaw": 0.0},

@@ -37,7 +37,7 @@ from .world import SCENARIOS_DIR, Scenario, load_scenario
 FLEET_DIR = SCENARIOS_DIR / "fleet"
 
 Share = Literal["none", "raw", "features", "hint"]
-#: The kinds of feature points (``--features``; agents.problem.extract): ``auto`` (the default: ``contrast`` on
+#: The kinds of feature points (``--features``; vision.extract): ``auto`` (the default: ``contrast`` on
 #: camera images, ``marks`` on the project's flat-coloured drawings), colour ``marks`` by preset hue bands, marks by
 #: ``contrast`` (camera images: photoreal renders, real cameras, any look), chessboard ``corners``.
 Features = Literal["auto", "marks", "contrast", "corners"]

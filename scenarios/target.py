@@ -204,7 +204,7 @@ class TargetModel:
     @property
     def body_colour(self) -> tuple[int, int, int] | None:
         """The colour (BGR) covering most of the body's surface, or None without a body: the paint a camera sees
-        around the marks (the contrast front-end's context, :func:`evopose.blobs.detect_contrast_marks`)."""
+        around the marks (the contrast front-end's context, :func:`vision.blobs.detect_contrast_marks`)."""
         if not len(self.body):
             return None
         area: dict[tuple[int, int, int], float] = {}

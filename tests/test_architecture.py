@@ -8,6 +8,7 @@ fresh interpreter.
 from __future__ import annotations
 
 import ast
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -22,22 +23,24 @@ ALLOWED = {
     "evopose": {"evopose", "geometry"},
     "protocol": {"protocol", "geometry"},
     "scenarios": {"scenarios", "evopose", "geometry"},
+    "vision": {"vision", "scenarios", "evopose", "geometry"},
     "agents.runs": {"agents.runs", "geometry"},
     "agents.transport": {"agents.transport", "agents.errors", "protocol", "geometry"},
     "agents.vehicle": {"agents.vehicle", "agents.transport", "agents.problem", "agents.errors", "agents.runs",
-                       "evopose", "protocol", "scenarios", "geometry"},
-    "agents.tools": {"agents.tools", "agents.transport", "agents.problem", "agents.errors", "evopose", "protocol",
-                     "scenarios", "geometry"},
+                       "vision", "evopose", "protocol", "scenarios", "geometry"},
+    "agents.tools": {"agents.tools", "agents.transport", "agents.problem", "agents.errors", "vision", "evopose",
+                     "protocol", "scenarios", "geometry"},
     "agents.experiments": {"agents.experiments", "agents.errors", "agents.runs", "scenarios", "geometry"},
-    "agents.problem": {"agents.problem", "agents.errors", "evopose", "scenarios", "geometry"},
+    "agents.problem": {"agents.problem", "agents.errors", "vision", "evopose", "scenarios", "geometry"},
     "agents.bridges": {"agents.bridges", "agents.transport", "agents.errors", "protocol", "scenarios", "geometry"},
     "agents.cli": {"agents.cli", "agents.errors", "agents.experiments", "agents.vehicle.config"},
 }
-PROJECT = ("geometry", "evopose", "protocol", "scenarios", "agents")
+PROJECT = ("geometry", "evopose", "vision", "protocol", "scenarios", "agents")
 #: third-party libraries a room may import at module level (the rest of the project may import any)
 THIRD_PARTY = {
     "geometry": {"numpy"},
-    "evopose": {"numpy", "scipy", "numba", "cv2"},
+    "evopose": {"numpy", "scipy", "numba"},   # the pose search: no image processing, no files (docs/design.md)
+    "vision": {"numpy", "scipy", "cv2"},
     "protocol": {"numpy", "pydantic", "msgpack"},
     "agents.cli": {"typer", "rich"},
 }
@@ -108,6 +111,14 @@ def test_the_cli_imports_nothing_heavy_to_print_help():
 def test_the_problem_file_contract_does_not_pull_in_the_renderer():
     loaded = _loaded_after("import agents.problem.problem_file, agents.problem.solve")
     assert "scenarios.render" not in loaded and "zenoh" not in loaded
+
+
+def test_the_pose_search_reads_and_writes_no_files():
+    """evopose/ is the search (eq. 1-4): images and files are vision's and the agents' (docs/architecture.md)."""
+    io = re.compile(r"\bopen\(|\bPath\(|read_text|write_text|read_bytes|np\.load|np\.save|json\.load")
+    found = [f"{p.relative_to(ROOT)}:{n}" for p in sorted((ROOT / "evopose").rglob("*.py"))
+             for n, line in enumerate(p.read_text(encoding="utf-8").splitlines(), 1) if io.search(line)]
+    assert not found
 
 
 def test_agents_keeps_at_most_four_modules_at_its_top_level():

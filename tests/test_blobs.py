@@ -1,4 +1,4 @@
-"""The contrast front-end (evopose.blobs): marks found by contrast at the scale the geometry allows, labelled by
+"""The contrast front-end (vision.blobs): marks found by contrast at the scale the geometry allows, labelled by
 fitting each paint colour on the line ring -> spot; judged against the renderer's truth and on made-up images."""
 
 from __future__ import annotations
@@ -9,8 +9,8 @@ import cv2
 import numpy as np
 import pytest
 
-from evopose.blobs import MarkPrior, detect_contrast_marks, label_colours, mark_prior
-from evopose.features import match_to_truth
+from vision.blobs import MarkPrior, detect_contrast_marks, label_colours, mark_prior
+from vision.features import match_to_truth
 from scenarios.render import render_frame
 from scenarios.world import load_scenario
 
@@ -44,7 +44,7 @@ def test_the_marks_of_rendered_frames_are_found_and_labelled(world, match_px):
 
 
 def test_paper_scale_marks_survive_jpeg_chroma_subsampling_better_than_hue_bands():
-    from evopose.features import colour_ranges, detect_colour_marks
+    from vision.features import colour_ranges, detect_colour_marks
 
     scenario = load_scenario("exp2-paper-scale")
     area = scenario.bounds()
@@ -123,8 +123,8 @@ def test_with_the_body_context_a_mark_coloured_ball_on_the_ground_is_dropped_and
 
 
 def test_paint_pixels_take_the_body_in_sun_in_shadow_and_under_gloss_but_not_grey_ground_or_marks():
-    from evopose.blobs import _srgb_to_linear
-    from evopose.body_paint import paint_pixels
+    from vision.blobs import _srgb_to_linear
+    from vision.body_paint import paint_pixels
 
     red = _srgb_to_linear(np.array([40, 40, 150], np.float32) / 255)
     pixels = np.array([[red, 0.2 * red, 0.4 * red + 0.06,                # sunlit, sky-lit shadow, gloss
@@ -135,13 +135,13 @@ def test_paint_pixels_take_the_body_in_sun_in_shadow_and_under_gloss_but_not_gre
 def test_a_glossy_face_is_paint_where_it_touches_the_surely_painted_body_and_grey_ground_never_is():
     # a low sun's sky gloss on a red top face seen at a grazing angle leaves the paint ~0.2 of its light (Cycles
     # telephoto g1-low: the face's five marks were outside the body and lost); ground up to ~0.16
-    from evopose.blobs import _srgb_to_linear
-    from evopose.body_paint import connected_paint, paint_pixels
+    from vision.blobs import _srgb_to_linear
+    from vision.body_paint import connected_paint, paint_pixels
 
     red = _srgb_to_linear(np.array([40, 40, 150], np.float32) / 255)
     glossy = 0.39 * red + 0.165                                   # share 0.21 (measured on the Cycles face)
     # grey ground, most of the picture as in a camera's (the hysteresis reads the ground's own share away from the
-    # body: a yellow body on beige ground raises it, evopose.body_paint.connected_share)
+    # body: a yellow body on beige ground raises it, vision.body_paint.connected_share)
     image = np.zeros((60, 80, 3), np.float32) + np.float32(0.2)
     image[2:18, 2:10] = red                                       # the sunlit side
     image[2:18, 10:18] = glossy                                   # the glossy top, touching it
@@ -153,7 +153,7 @@ def test_a_glossy_face_is_paint_where_it_touches_the_surely_painted_body_and_gre
 
 
 def test_a_mark_on_a_face_is_ringed_by_paint_and_a_spot_on_or_beside_the_outline_is_not():
-    from evopose.body_paint import paint_around
+    from vision.body_paint import paint_around
 
     paint = np.zeros((30, 40), bool)
     paint[5:25, 5:30] = True                   # a face, with a 2 px mark's hole in it
@@ -233,7 +233,7 @@ def test_on_a_second_robot_it_was_never_tuned_on():
 
 
 def test_one_per_disc_keeps_the_likeliest_of_a_mark_seen_twice_and_both_of_two_marks_apart():
-    from evopose.blobs import one_per_disc
+    from vision.blobs import one_per_disc
 
     # a mark peaking twice 1.2 px apart (its yellow at one pixel, its luminance at the next), a second mark 3.1 px
     # away (the closest two visible marks lie at the paper's scale), and a third candidate within its disc
@@ -247,7 +247,7 @@ def test_one_per_disc_keeps_the_likeliest_of_a_mark_seen_twice_and_both_of_two_m
 def test_on_the_committed_paper_sequence_no_mark_is_found_twice():
     # a 2-4 px mark peaks in several channels a pixel apart; the scorer alone keeps both copies (50 on these 32
     # frames), which count twice in eq. 1's sum. Visible marks' projections lie >= 3.0 px apart at this scale
-    from evopose.mark_scorer import shipped
+    from vision.mark_scorer import shipped
     from scenarios.dataset import open_dataset
 
     data = open_dataset(Path(__file__).parent / "data" / "photoreal" / "paper-sequence")

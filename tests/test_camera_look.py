@@ -1,4 +1,4 @@
-"""The camera look estimated from the target's body and undone (evopose/camera_look.py), tested by its effect."""
+"""The camera look estimated from the target's body and undone (vision/camera_look.py), tested by its effect."""
 
 from pathlib import Path
 
@@ -6,7 +6,7 @@ import cv2
 import numpy as np
 import pytest
 
-from evopose.camera_look import (DEAD_BAND, Look, LookTracker, chroma_of, estimate_look, neutral_chroma,
+from vision.camera_look import (DEAD_BAND, Look, LookTracker, chroma_of, estimate_look, neutral_chroma,
                                  to_reference_look)
 
 DATA = Path(__file__).parent / "data" / "photoreal"

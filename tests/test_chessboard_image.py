@@ -13,7 +13,7 @@ import pytest
 
 from benchmarks.problems import grid_model, is_success, pose_errors
 from evopose import Bounds, Camera, PoseProblem, View, solve
-from evopose.features import detect_corners, x_junctions
+from vision.features import detect_corners, x_junctions
 from geometry import matrix_from_pose
 
 SQUARE = 0.025

@@ -13,7 +13,7 @@ import pytest
 import yaml
 
 from benchmarks.problems import is_success, pose_errors
-from evopose.features import match_to_truth
+from vision.features import match_to_truth
 from geometry import PARAM_NAMES
 from scenarios.target import load_model
 

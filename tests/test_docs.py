@@ -1,6 +1,6 @@
 """The docs say what is true now: every ``evopose ...`` command line in README.md and docs/*.md is one the real CLI
 accepts (parsed down to its sub-command with every option converted and checked, as tests/test_compose.py parses the
-compose services, never run), and the module table of docs/architecture.md names exactly the modules of evopose/."""
+compose services, never run), and the module tables of docs/architecture.md name exactly the modules of evopose/ and vision/."""
 
 from __future__ import annotations
 
@@ -204,9 +204,9 @@ def module_table_rows(text: str) -> list[list[str]]:
 
 
 def test_module_tables_name_the_modules_that_exist_and_every_one():
-    """Every module table in README.md and docs/ names only modules that exist, and the one for evopose/ (in
+    """Every module table in README.md and docs/ names only modules that exist, and the ones for evopose/ and vision/ (in
     docs/architecture.md) names every module of the package."""
-    modules = {p.name for p in (ROOT / "evopose").glob("*.py") if p.name != "__init__.py"}
+    modules = {p.name for pkg in ("evopose", "vision") for p in (ROOT / pkg).glob("*.py") if p.name != "__init__.py"}
     named_in_architecture = set()
     for path in DOCS:
         for row in module_table_rows(path.read_text(encoding="utf-8")):

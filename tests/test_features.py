@@ -10,7 +10,7 @@ import pytest
 
 from benchmarks.problems import is_success, pose_errors
 from evopose import PoseProblem, View, solve
-from evopose.features import (any_hue_ranges, colour_ranges, detect_colour_marks, detect_corners,
+from vision.features import (any_hue_ranges, colour_ranges, detect_colour_marks, detect_corners,
                               hue_of, match_to_truth, named_hue_ranges)
 from geometry import angle_difference
 from scenarios.render import render_frame

@@ -1,4 +1,4 @@
-"""The front-end's mark scorer (evopose/mark_scorer.py): fitting, its file, and `evopose train-scorer`."""
+"""The front-end's mark scorer (vision/mark_scorer.py): fitting, its file, and `evopose train-scorer`."""
 
 from __future__ import annotations
 
@@ -10,8 +10,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from evopose import mark_scorer
-from evopose.mark_scorer import FEATURES, MarkScorer, fit, load, shipped
+from vision import mark_scorer
+from vision.mark_scorer import FEATURES, MarkScorer, fit, load, shipped
 from scenarios.target import load_model
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -105,7 +105,7 @@ def test_the_scorer_only_acts_on_spots_under_three_pixels():
     # at telephoto (marks of 3 px and more) the front-end with and without the scorer is the same front-end
     import cv2
 
-    from evopose.blobs import detect_contrast_marks, mark_prior
+    from vision.blobs import detect_contrast_marks, mark_prior
     from scenarios.dataset import open_dataset
 
     data = open_dataset(ROOT / "tests" / "data" / "photoreal" / "telephoto")
@@ -121,7 +121,7 @@ def test_the_scorer_only_acts_on_spots_under_three_pixels():
 
 
 def test_an_unknown_scorer_name_is_refused():
-    from evopose.blobs import detect_contrast_marks
+    from vision.blobs import detect_contrast_marks
 
     with pytest.raises(ValueError, match="scorer must be"):
         detect_contrast_marks(np.zeros((10, 10, 3), np.uint8), {"yellow": (0, 255, 255)}, scorer="best")
@@ -154,7 +154,7 @@ def test_with_groups_the_threshold_is_the_break_even_of_each_group_scored_by_a_m
 def test_the_extractor_takes_the_scorer_it_is_given():
     import cv2
 
-    from agents.problem.extract import feature_extractor
+    from vision.extract import feature_extractor
     from scenarios.dataset import open_dataset
 
     data = open_dataset(PAPER)
@@ -169,7 +169,7 @@ def test_the_extractor_takes_the_scorer_it_is_given():
 def test_a_palette_the_shipped_scorer_was_not_fitted_on_gets_the_hand_set_bars():
     import cv2
 
-    from evopose.blobs import detect_contrast_marks, mark_prior
+    from vision.blobs import detect_contrast_marks, mark_prior
     from scenarios.dataset import open_dataset
 
     data = open_dataset(PAPER)

@@ -7,7 +7,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from evopose.features import colour_ranges, detect_colour_marks, match_to_truth
+from vision.features import colour_ranges, detect_colour_marks, match_to_truth
 from geometry import matrix_from_pose
 from scenarios.render import render_frame
 from scenarios.world import OccluderSpec, load_scenario

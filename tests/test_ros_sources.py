@@ -299,7 +299,7 @@ class TicksReader:
 
 
 def test_a_skipped_tick_gives_a_frame_without_points_and_no_estimate():
-    from agents.problem.extract import feature_extractor
+    from vision.extract import feature_extractor
     from agents.vehicle.step import FrameInputs, VehicleState, share_policy, step
     from agents.vehicle.team_views import own_view
     from evopose.cooperative import Cooperation

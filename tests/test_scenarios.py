@@ -210,7 +210,7 @@ def test_features_override_sets_every_camera_vehicles_front_end_and_a_bad_kind_i
 
 
 def test_the_feature_kinds_are_one_list():
-    from agents.problem.extract import FEATURE_KINDS as extractors
+    from vision.extract import FEATURE_KINDS as extractors
     from agents.vehicle.config import FEATURES
     from scenarios.fleet import FEATURE_KINDS
 

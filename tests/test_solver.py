@@ -246,7 +246,7 @@ def test_tracking_follows_small_motion_and_reinitialises_when_lost():
 
 def test_tracking_the_right_pose_holds_on_cycles_frames_whose_clutter_leaves_half_the_fit_unexplained(monkeypatch):
     # Blender Cycles frames at the paper's scale (tests/data/photoreal/paper, the contrast front-end keeping the
-    # body's shading, as it did before evopose.spot_colour.MIN_EXPLAINED and the mark scorer: that front-end's
+    # body's shading, as it did before vision.spot_colour.MIN_EXPLAINED and the mark scorer: that front-end's
     # precision there is 0.49):
     # half the points are clutter, so the right pose leaves over half of eq. (4) unexplained (mismatch 0.56-0.61 on
     # 3 of the 4 frames) while half or more of its marks are matched. A fixed 0.5 mismatch lost it on those 3 frames;
@@ -255,14 +255,14 @@ def test_tracking_the_right_pose_holds_on_cycles_frames_whose_clutter_leaves_hal
 
     import cv2
 
-    import evopose.blobs
-    import evopose.spot_colour
-    from agents.problem.extract import feature_extractor
+    import vision.blobs
+    import vision.spot_colour
+    from vision.extract import feature_extractor
     from geometry import pose_error
     from scenarios.dataset import open_dataset
 
-    monkeypatch.setattr(evopose.spot_colour, "MIN_EXPLAINED", 0.0)
-    monkeypatch.setattr(evopose.blobs, "shipped", lambda: None)  # the hand-set bars, no mark scorer
+    monkeypatch.setattr(vision.spot_colour, "MIN_EXPLAINED", 0.0)
+    monkeypatch.setattr(vision.blobs, "shipped", lambda: None)  # the hand-set bars, no mark scorer
 
     data = open_dataset(Path(__file__).parent / "data" / "photoreal" / "paper")
     world = data.world()

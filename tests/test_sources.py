@@ -297,7 +297,7 @@ def test_bad_camera_files_and_wrong_sizes_are_one_line_and_exit_2(capfd, h1_medi
 def test_a_bad_mark_scorer_is_one_line_and_exit_2(capfd, h1_media, tmp_path):
     import json
 
-    from evopose.mark_scorer import shipped
+    from vision.mark_scorer import shipped
 
     folder, _, _, _ = h1_media
     seq = str(folder / "seq")

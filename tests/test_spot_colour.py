@@ -1,4 +1,4 @@
-"""The label of a 2-4 px mark through the encoder's 4:2:0 chroma (evopose.spot_colour), judged by its effect: a
+"""The label of a 2-4 px mark through the encoder's 4:2:0 chroma (vision.spot_colour), judged by its effect: a
 real JPEG encoder's output, the truth's colours, and the committed Cycles frames."""
 
 from __future__ import annotations
@@ -8,8 +8,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from evopose.blobs import _srgb_to_linear, label_colours
-from evopose.spot_colour import chroma_420, label_small_spots
+from vision.blobs import _srgb_to_linear, label_colours
+from vision.spot_colour import chroma_420, label_small_spots
 
 PALETTE = {"yellow": (20, 220, 240), "cyan": (220, 210, 20), "green": (40, 190, 40), "magenta": (200, 40, 210)}
 BODY = (40, 40, 150)
@@ -33,7 +33,7 @@ def _body_with_marks(quality: int = 90, spots: tuple = ()) -> np.ndarray:
 
 
 def _rgb_labels(image: np.ndarray) -> list[str]:
-    """The linear-RGB blend fit (evopose.blobs.label_colours) at the same centres: spot pixel and ring median."""
+    """The linear-RGB blend fit (vision.blobs.label_colours) at the same centres: spot pixel and ring median."""
     lin = _srgb_to_linear(image.astype(np.float32) / 255).astype(float)
     yy, xx = np.mgrid[:image.shape[0], :image.shape[1]]
     spots, rings = [], []

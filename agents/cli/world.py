@@ -171,7 +171,7 @@ def train_scorer_command(
     as_json: Annotated[bool, typer.Option("--json", help="Print the summary as JSON.")] = False,
 ) -> None:
     """Fit the contrast front-end's mark scorer (2-4 px marks) on rendered datasets with truth."""
-    from agents.tools.train_scorer import train
+    from vision.train_scorer import train
 
     console = Console(stderr=True)
     summary = train(datasets, out, l2=l2, progress=None if as_json else console.print)

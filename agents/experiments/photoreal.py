@@ -26,7 +26,7 @@ DEFAULT_DATASETS = (Path("datasets/photoreal-report"), Path("tests/data/photorea
 #: Experiment 2's fleet scenarios the section runs.
 SCENARIOS = ("exp2-solo", "exp2a-features", "exp2b-hints")
 #: The camera vehicles' feature front-end on a dataset's images: by contrast, with the body as context
-#: (evopose.blobs), not the preset hue bands made for the project's own flat-coloured drawings.
+#: (vision.blobs), not the preset hue bands made for the project's own flat-coloured drawings.
 FEATURES = "contrast"
 #: Feature sets: "the same pose" on at least this share of the frames both published (as the report's other check).
 SAME_POSE_SHARE = 0.95

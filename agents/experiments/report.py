@@ -302,7 +302,7 @@ def write_report(out: Path, *, runs: int, frames: int | None, seed: int, endpoin
               "The same experiments on the project's renderer with Lambert and specular shading and its camera model "
               "(auto exposure, Bayer mosaic demosaiced bilinearly, shot and read noise, 12-bit ADC, sRGB, JPEG 85 "
               "with 4:2:0 chroma; docs/camera-model.md), the marks found by their contrast on the body "
-              "(`evopose/blobs.py`).", ""]
+              "(`vision/blobs.py`).", ""]
     for world, title in CAMERA_WORLDS:
         above = above_paper(result_rows, world)
         lines += [f"### {title}: `{world}`", "", *_table_ii(result_rows, world), "",

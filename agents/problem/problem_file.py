@@ -25,7 +25,7 @@ from scenarios.errors import WorldError
 from scenarios.target import TargetModel, load_model, resolve_model_path
 from scenarios.documents import FullPoseSpec, Spec, describe, read_mapping, validation_message
 
-from agents.problem.images import detect_marks, read_image
+from vision.images import detect_marks, read_image
 
 #: Problem-size limits (docs/security.md, "Untrusted input"): each breach is one line naming the field.
 MAX_MODEL_POINTS = 4096

@@ -11,7 +11,7 @@ from evopose import PoseProblem, SearchOptions, View, solve
 from evopose.fitness import FitnessKind
 
 from agents.problem.camera_info import read_camera_file
-from agents.problem.extract import FEATURE_KINDS, feature_extractor, resolve_features
+from vision.extract import FEATURE_KINDS, feature_extractor, resolve_features
 from agents.problem.problem_file import ProblemFileError, ProblemInputs, read_problem, solution_to_dict
 
 
@@ -38,13 +38,13 @@ def solve_image(image: str | Path, model: str | Path, camera: str | Path, *, see
 
     ``camera`` is a YAML/JSON file with the problem file's camera fields (intrinsics, optional distortion
     and ``world_from_camera``) or a ROS ``camera_info`` YAML (:mod:`agents.problem.camera_info`). ``features``:
-    the model's colour ``marks`` or a chessboard's inner ``corners`` (:mod:`agents.problem.extract`). The search
+    the model's colour ``marks`` or a chessboard's inner ``corners`` (:mod:`vision.extract`). The search
     box is the camera's view at the depth the points' spread gives.
     """
     from scenarios.errors import WorldError
     from scenarios.target import load_model
 
-    from agents.problem.images import frustum_bounds, read_image
+    from vision.images import frustum_bounds, read_image
 
     cam = read_camera_file(camera)
     target = load_model(model)
@@ -71,7 +71,7 @@ def _solve_inputs(inputs: ProblemInputs, seed, time_budget, fitness, overlay) ->
     solution = solve(inputs.problem, options, seed=inputs.seed if seed is None else seed)
     result = solution_to_dict(solution)
     if overlay is not None:
-        from agents.problem.images import draw_overlay, write_image
+        from vision.images import draw_overlay, write_image
 
         view = inputs.problem.views[0]
         canvas = draw_overlay(inputs.images[0], view.camera, inputs.problem.model, np.asarray(solution.pose),

@@ -9,13 +9,13 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from evopose.features import detect_corners
+from vision.features import detect_corners
 from scenarios.errors import ImageError
 from scenarios.render import render_frame
 from scenarios.target import load_model
 from scenarios.world import load_scenario
 
-from agents.problem.images import detect_marks, read_image, write_image
+from vision.images import detect_marks, read_image, write_image
 
 
 def render_to_files(scenario: str | Path, frame: int, out: str | Path, *, vehicle: str | None = None,

@@ -32,7 +32,7 @@ from geometry import matrix_from_pose, pose_from_matrix
 from scenarios.dataset import Dataset, locate_dataset, open_dataset
 from scenarios.world import Scenario
 
-from agents.problem.extract import FeatureExtractor
+from vision.extract import FeatureExtractor
 from agents.vehicle.frames import Frame, FrameClock
 from agents.vehicle.sources import FileListReader, SourceCamera, SourceError
 

@@ -19,7 +19,7 @@ import numpy as np
 from evopose import Camera
 from scenarios.render import render_frame
 
-from agents.problem.extract import feature_extractor, resolve_features
+from vision.extract import feature_extractor, resolve_features
 from scenarios.world import Scenario
 
 NS = 1_000_000_000
@@ -123,7 +123,7 @@ def default_extractor(scenario: Scenario) -> Callable[..., tuple[np.ndarray, np.
 class SimulatedCamera:
     """A vehicle's camera in a scenario: renders the frame, extracts the target's marks with their colours with
     ``extract`` (``image (H, W, 3), camera -> (points (N, 2), labels (N,) or None)``,
-    :class:`agents.problem.extract.FeatureExtractor`)."""
+    :class:`vision.extract.FeatureExtractor`)."""
 
     def __init__(self, scenario: Scenario, vehicle: str,
                  extract: Callable[..., tuple[np.ndarray, np.ndarray | None]] | None = None) -> None:

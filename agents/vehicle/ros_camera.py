@@ -33,7 +33,7 @@ from geometry import matrix_from_pose
 from scenarios.world import Scenario
 
 from agents.problem.camera_info import camera_from_camera_info_message
-from agents.problem.extract import FeatureExtractor
+from vision.extract import FeatureExtractor
 from agents.transport.bus import FleetBus
 from agents.vehicle.config import AgentConfig
 from agents.vehicle.sources import (FIRST_FRAME_TIMEOUT_S, ROS_SCHEME, FrameSkipped, SourceCamera, SourceError,

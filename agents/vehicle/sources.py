@@ -49,8 +49,8 @@ from scenarios.world import Scenario
 
 from agents.errors import FleetError
 from agents.problem.camera_info import read_camera_info, read_camera_pose
-from agents.problem.extract import FeatureExtractor, feature_extractor, resolve_features
-from agents.problem.images import read_image
+from vision.extract import FeatureExtractor, feature_extractor, resolve_features
+from vision.images import read_image
 from agents.transport.bus import FleetBus
 from agents.vehicle.config import AgentConfig
 from agents.vehicle.frames import Frame, SimulatedCamera, fleet_clock
@@ -309,7 +309,7 @@ def _mark_scorer(config: AgentConfig):
     """``--mark-scorer``'s scorer, read now (None: the shipped one); a bad file is one :class:`FleetError`."""
     if config.mark_scorer is None:
         return None
-    from evopose.mark_scorer import load
+    from vision.mark_scorer import load
 
     try:
         return load(Path(config.mark_scorer))

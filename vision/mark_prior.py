@@ -1,5 +1,5 @@
 """What a camera's geometry says about the marks in its image: their radius range and the target's extent in pixels
-(the contrast front-end's scale space and context, :mod:`evopose.blobs`)."""
+(the contrast front-end's scale space and context, :mod:`vision.blobs`)."""
 
 from __future__ import annotations
 

@@ -83,7 +83,7 @@ def any_hue_ranges(image_bgr: np.ndarray, *, tol: int = ANY_HUE_TOLERANCE, separ
     the next, at most ``tol`` away. Modes are over ``separation`` apart, a weaker maximum nearer is a blend's bump
     (12 admits mark-body blends; 20 loses blurred yellow marks on the Pioneer's red body at paper scale).
     Labels: :data:`HUE_NAMES` sectors, ``"<name>-h<hue>"`` for a second mode in one sector."""
-    hsv = cv2.cvtColor(_to_bgr(image_bgr), cv2.COLOR_BGR2HSV)
+    hsv = cv2.cvtColor(to_bgr(image_bgr), cv2.COLOR_BGR2HSV)
     hist = np.bincount(hsv[..., 0][(hsv[..., 1] >= MIN_SATURATION) & (hsv[..., 2] >= MIN_VALUE)], minlength=180) * 1.0
     smooth = sum(np.exp(-0.5 * (o / 2.0) ** 2) * np.roll(hist, -o) for o in range(-6, 7))
     mass = np.convolve(np.concatenate([hist[-tol:], hist, hist[:tol]]), np.ones(2 * tol + 1), "valid")
@@ -127,7 +127,7 @@ class MarkDetections:
         return [self.names[i] for i in self.labels]
 
 
-def _to_bgr(image: np.ndarray) -> np.ndarray:
+def to_bgr(image: np.ndarray) -> np.ndarray:
     image = np.asarray(image)
     if image.dtype != np.uint8:
         raise ValueError(f"image must be uint8, got {image.dtype}")
@@ -151,7 +151,7 @@ def detect_colour_marks(image_bgr: np.ndarray, ranges: Colours = None, *, min_ar
     stripes); ``drop_border``: drop cut components; ``split_touching``: split a one-colour component at separate
     peaks. Points come sorted by colour then row. Dropped: a painted surface enclosing 3+ marks (the Pioneer's red
     body when any hue is searched), then a smaller neighbour's blend with the backgrounds (its fringe)."""
-    bgr = _to_bgr(image_bgr)
+    bgr = to_bgr(image_bgr)
     if ranges is None:
         ranges = any_hue_ranges(bgr)
     elif isinstance(ranges, Mapping):
@@ -278,7 +278,7 @@ def _encloses(ids: np.ndarray, i: int, nbrs: set[int], sizes: np.ndarray) -> boo
 def _region_stats(img: np.ndarray, ids: np.ndarray, n: int) -> dict:
     """End-members, neighbours, weighted moments of all candidates (rows 1..n of (n + 1, 3) arrays): ``b`` background,
     median of the free ring 2 px out (0 if none: crowded marks); ``cb`` = ``c - b``, ``c`` the mean of pixels within
-    80 % of the farthest from ``b``; ``sums`` ``(sum a, sum a u, sum a v)`` of :func:`_coverage` over pixels and 1 px
+    80 % of the farthest from ``b``; ``sums`` ``(sum a, sum a u, sum a v)`` of :func:`mark_coverage` over pixels and 1 px
     fringe; ``pairs`` the 8-adjacent ids of each; ``maxima`` (n + 1,) local maxima of the smoothed coverage.
     img (h, w, 3) float32, ids (h, w) int32 (index + 1; 0 free; -1 out)."""
     def owners(mask: np.ndarray, hi: np.ndarray, lo: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -310,7 +310,7 @@ def _region_stats(img: np.ndarray, ids: np.ndarray, n: int) -> dict:
         pairs[code // (n + 2)].add(code % (n + 2))
     f_pix, f_id = owners((ids == 0) & (near_hi > 0), near_hi, near_lo)
     pix, own = np.concatenate([o_pix, f_pix]), np.concatenate([o_id, f_id])
-    a, w = _coverage(flat[pix] - b[own], cb[own]), img.shape[1]
+    a, w = mark_coverage(flat[pix] - b[own], cb[own]), img.shape[1]
     sums = np.stack([np.bincount(own, a, n + 1), np.bincount(own, a * (pix % w), n + 1),
                      np.bincount(own, a * (pix // w), n + 1)], axis=1)
     # local maxima of the smoothed coverage: where two marks may touch
@@ -319,7 +319,7 @@ def _region_stats(img: np.ndarray, ids: np.ndarray, n: int) -> dict:
     return {"b": b, "cb": cb, "sums": sums, "pairs": pairs, "maxima": maxima}
 
 
-def _coverage(d: np.ndarray, cb: np.ndarray, top: float = 1.0) -> np.ndarray:
+def mark_coverage(d: np.ndarray, cb: np.ndarray, top: float = 1.0) -> np.ndarray:
     """Fraction of a pixel its mark covers (at most ``top``), from ``d = p - b``, ``cb = c - b`` (shapes (..., 3)).
     Anti-aliasing and blur mix linearly, ``p = a c + (1 - a) b``, so ``a = d.cb / |cb|^2``: the a-weighted centroid
     is the covered area's, where 2-4 px binary moments are off by up to 1/3 px. Pixels off the line ``b`` -> ``c``
@@ -358,8 +358,8 @@ def _split(patch: np.ndarray, ids: np.ndarray, me: int, b: np.ndarray, cb: np.nd
         if cv2.contourArea(outline) >= 0.9 * cv2.contourArea(cv2.convexHull(outline)):
             return []
     support = cv2.dilate(own.view(np.uint8), _K3).view(bool) & ((ids == 0) | own)
-    alpha = (_coverage(patch - b, cb) * support).astype(np.float32)
-    peak = (_coverage(patch - b, cb, np.inf) * support).astype(np.float32)   # unclipped: peaks stay peaks
+    alpha = (mark_coverage(patch - b, cb) * support).astype(np.float32)
+    peak = (mark_coverage(patch - b, cb, np.inf) * support).astype(np.float32)   # unclipped: peaks stay peaks
     sigma = max(0.6, 0.25 * float(np.sqrt(own.sum() / np.pi)))   # mask density (necks) plus coverage (dips):
     score = cv2.GaussianBlur(own.astype(np.float32) * 0.3 + peak, (0, 0), sigma)
     rows, cols = np.nonzero((score >= cv2.dilate(score, _K3)) & own & (score >= 0.25 * score.max()))

@@ -1,4 +1,4 @@
-"""Where a 2-12 px spot lies, to a fraction of a pixel (the contrast front-end's positions, :mod:`evopose.blobs`):
+"""Where a 2-12 px spot lies, to a fraction of a pixel (the contrast front-end's positions, :mod:`vision.blobs`):
 the sub-pixel peak of its scale-space response, a spot and not an edge by the response's Hessian, and the centroid
 of its coverage (the share of each pixel the spot's colour covers, on the line from its ring through it)."""
 
@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .features import _coverage
+from .features import mark_coverage
 
 #: Spots under this radius (px) are the paper's scale: one centroid step, spots of one radius together.
 SMALL_SPOT_PX = 3.0
@@ -45,7 +45,7 @@ def round_peaks(dog: np.ndarray, lvl: np.ndarray, ys: np.ndarray, xs: np.ndarray
 
 def coverage_centroids(lin: np.ndarray, pts: np.ndarray, radius: np.ndarray, spot: np.ndarray,
                         ring: np.ndarray) -> np.ndarray:
-    """Each spot's position as the centroid of its coverage (:func:`evopose.features._coverage`: a pixel's share
+    """Each spot's position as the centroid of its coverage (:func:`vision.features.mark_coverage`: a pixel's share
     of the spot's colour on the line ring -> spot, in linear light) within its radius + 1.5 px: the covered
     area's centre, to a tenth of a pixel for 2-4 px marks where a peak's quadratic is coarser. The window is
     re-centred on the centroid (mean shift, :data:`CENTROID_STEPS` at most, within the radius of the peak): a
@@ -66,7 +66,7 @@ def coverage_centroids(lin: np.ndarray, pts: np.ndarray, radius: np.ndarray, spo
         inside = ((xs < w)[:, None, :] & (ys < h)[:, :, None]
                   & (np.hypot(xs[:, None, :] - u[:, None, None], ys[:, :, None] - v[:, None, None]) <= reach))
         window = lin[np.minimum(ys, h - 1)[:, :, None], np.minimum(xs, w - 1)[:, None, :]]   # (N, span, span, 3)
-        a = _coverage(window - ring[at, None, None, :], (spot[at] - ring[at])[:, None, None, :]) * inside
+        a = mark_coverage(window - ring[at, None, None, :], (spot[at] - ring[at])[:, None, None, :]) * inside
         total = a.sum(axis=(1, 2))
         some = total > 1e-6
         cx = (a * xs[:, None, :]).sum(axis=(1, 2)) / np.where(some, total, 1.0)
@@ -84,7 +84,7 @@ def coverage_centroids(lin: np.ndarray, pts: np.ndarray, radius: np.ndarray, spo
             y0, y1 = max(int(np.floor(v - reach)), 0), min(int(np.ceil(v + reach)) + 1, h)
             yy, xx = np.mgrid[y0:y1, x0:x1]
             inside = np.hypot(xx - u, yy - v) <= reach
-            a = _coverage(lin[y0:y1, x0:x1] - ring[i], (spot[i] - ring[i])[None, None, :]) * inside
+            a = mark_coverage(lin[y0:y1, x0:x1] - ring[i], (spot[i] - ring[i])[None, None, :]) * inside
             if a.sum() <= 1e-6:
                 break
             moved = np.array([(a * xx).sum() / a.sum(), (a * yy).sum() / a.sum()])

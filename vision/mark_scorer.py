@@ -36,7 +36,7 @@ from .spot_colour import ring_colours, to_ycrcb
 #: palette colour, in the palette's order).
 FEATURES = (
     "log_contrast",        # log of the response over the level's threshold (blobs: k_sigma robust spreads)
-    "label_confidence",    # 1 - best colour's misfit over the second's (evopose.spot_colour)
+    "label_confidence",    # 1 - best colour's misfit over the second's (vision.spot_colour)
     "radius_px",           # the scale's mark radius
     "explained",           # share of the spot's deviation from its ring its colour explains (spot_colour)
     "explained_second",    # the same for the second-best colour
@@ -70,7 +70,7 @@ def candidate_features(bgr: np.ndarray, lab: np.ndarray, points: np.ndarray, rad
 
     ``bgr`` (H, W, 3) uint8 and ``lab`` (H, W, 3) float32 L*a*b* of the same crop; ``points`` (K, 2) (u, v) px,
     ``radius`` (K,) px, ``contrast`` (K,) over the threshold; ``labels`` (K,) in [0, C), ``confidence`` (K,);
-    ``misfit`` and ``explained`` (K, C) of :func:`evopose.spot_colour.spot_misfits`; ``paint`` and ``sure``
+    ``misfit`` and ``explained`` (K, C) of :func:`vision.spot_colour.spot_misfits`; ``paint`` and ``sure``
     (H, W) bool: the body's paint with its glossy faces and the sure paint; ``extent_px`` the target's extent."""
     k, c = misfit.shape
     rows = np.arange(k)

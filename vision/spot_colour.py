@@ -43,7 +43,7 @@ BRIGHTNESS_STEPS, MAX_COVERAGE = 16, 1.2
 #: weighed by the spot's profile): a mark is a patch of one paint; the body's own shading, a highlight on its gloss
 #: or its outline blended with the ground changes the pixels in a way no paint colour over the ring accounts for.
 #: Cycles paper-scale sweep (nine datasets): at 0.1 precision 0.487 -> 0.595, recall 0.695 -> 0.680. Since a weak mark
-#: beside a stronger one is a candidate too (:func:`evopose.blobs._detect`, maxima in position), more of the body's
+#: beside a stronger one is a candidate too (:func:`vision.blobs._detect`, maxima in position), more of the body's
 #: shading is: 0.1 -> 0.2 gives precision 0.514 -> 0.606, recall 0.789 -> 0.772, and on the nine 20-frame sequences
 #: tracked in process (benchmarks/bench_photoreal_tracking.py) 165 -> 158 good frames, 4 -> 3 of them > 5 deg off.
 MIN_EXPLAINED = 0.2
@@ -70,7 +70,7 @@ def chroma_420(field: np.ndarray, x0: int, y0: int) -> np.ndarray:
 
 def ring_colours(image: np.ndarray, points: np.ndarray, radius: np.ndarray) -> np.ndarray:
     """The median colour (K, C) of each spot's ring in ``image`` (H, W, C), ``radius + 1.5`` to ``radius + 3`` px
-    from ``points`` (K, 2): the surroundings a spot is blended with (here in Y Cr Cb; :mod:`evopose.blobs` in
+    from ``points`` (K, 2): the surroundings a spot is blended with (here in Y Cr Cb; :mod:`vision.blobs` in
     linear light). Spots of one radius are taken together (a window of pixels around each, outside the ring or the
     image left out of the median)."""
     h, w = image.shape[:2]

@@ -21,10 +21,10 @@ scale a mark has at the target's distance. So (docs/design.md, "The feature fron
    lies on the line from the background through the observed spot (a blend ``p = a c + (1 - a) b``), in
    linear light; a confidence from the margin to the second colour. A spot that fits no paint colour (a
    body corner, a shadow) is dropped. Spots under :data:`SMALL_SPOT_PX` on a body take their label from
-   :mod:`evopose.spot_colour` instead, which models the encoder's 4:2:0 chroma, and drop a spot whose colour
+   :mod:`vision.spot_colour` instead, which models the encoder's 4:2:0 chroma, and drop a spot whose colour
    explains too little of it (the body's own shading).
 5. **Context**: the marks lie on the target's body. Given the body's paint colour (the model's), a candidate
-   must lie on or inside a patch of that paint seen under any light (:mod:`evopose.body_paint`: the dichromatic
+   must lie on or inside a patch of that paint seen under any light (:mod:`vision.body_paint`: the dichromatic
    reflection model, paint plus the light's own colour, and glossy faces touching it); clutter in the marks' own
    hues lies on the ground and is dropped, and so is a spot on the body's outline, which paint does not ring
    (:data:`MIN_PAINT_AROUND`). The scale space is then built only around the body (2.8-3.4x faster on a
@@ -45,7 +45,7 @@ import numpy as np
 
 from .body_paint import body_paint, body_region, body_silhouette, paint_around
 from .camera_look import Look, estimate_look, to_reference_look
-from .features import MarkDetections, _to_bgr
+from .features import MarkDetections, to_bgr
 from .mark_prior import MarkPrior, mark_prior
 from .mark_scorer import MarkScorer, candidate_features, feature_names, shipped
 from .mark_selection import densest_cluster, one_per_disc, one_scale, same_spots
@@ -77,7 +77,7 @@ CHROMA_WEIGHT = 1.0
 #: 3-5 px apart break a face's paint into pieces).
 BODY_GAP = 0.12
 #: Least share of the ring 1-2 px outside a spot that is the body's paint, glossy faces included
-#: (:func:`evopose.body_paint.paint_around`): a mark on a face is ringed by paint, about half of it on the face's
+#: (:func:`vision.body_paint.paint_around`): a mark on a face is ringed by paint, about half of it on the face's
 #: outline; a spot on the body's outline, or on the ground beside it, is not. Cycles sweeps: precision 0.456 ->
 #: 0.486 at the paper's scale (recall 0.697 -> 0.695; without the glossy faces 0.517 but 0.685, and low-sun top faces
 #: lost), 0.484 -> 0.547 at telephoto (recall 0.972 -> 0.966); 0.3 took telephoto recall to 0.956. Through six random
@@ -97,9 +97,9 @@ MIN_BACKGROUND_PX, MIN_MARGIN_PX = 200, 48
 #: its label this much: the encoder's 4:2:0 chroma (2 x 2 px blocks) leaves such a mark's colour far off its
 #: paint's line, and the body, not the label, rejects the clutter.
 MAX_LABEL_MISFIT_ON_BODY = 1.0
-#: With a :class:`evopose.mark_scorer.MarkScorer` (spots under :data:`SMALL_SPOT_PX` on a body) the candidates'
+#: With a :class:`vision.mark_scorer.MarkScorer` (spots under :data:`SMALL_SPOT_PX` on a body) the candidates'
 #: bars: response, paint around, share explained by the colour (instead of K_SIGMA, MIN_PAINT_AROUND and
-#: evopose.spot_colour.MIN_EXPLAINED); the scorer then decides. Cycles paper-scale sweep: recall of the candidates
+#: vision.spot_colour.MIN_EXPLAINED); the scorer then decides. Cycles paper-scale sweep: recall of the candidates
 #: 0.857 (0.808 with the bars), 2629 candidates against 1479 detections.
 CANDIDATE_K_SIGMA, CANDIDATE_PAINT_AROUND, CANDIDATE_EXPLAINED = 4.0, 0.05, 0.05
 CHANNEL_PEAKS = True
@@ -186,7 +186,7 @@ class ContrastMarks(MarkDetections):
     label_confidence: np.ndarray = None  # type: ignore[assignment]
     radius: np.ndarray = None  # type: ignore[assignment]
     contrast: np.ndarray = None  # type: ignore[assignment]
-    #: (K, F) the scorer's features (evopose.mark_scorer.candidate_features), or None: no scorer ran
+    #: (K, F) the scorer's features (vision.mark_scorer.candidate_features), or None: no scorer ran
     features: np.ndarray | None = None
 
 
@@ -204,18 +204,18 @@ def detect_contrast_marks(image_bgr: np.ndarray, palette: Mapping[str, tuple[int
     when every mark is under :data:`SMALL_SPOT_PX`. Returns the marks sorted by label then row.
 
     ``scorer``, for marks under :data:`SMALL_SPOT_PX` on a body: which candidates are marks
-    (:mod:`evopose.mark_scorer`): ``"shipped"`` the shipped model (for a palette of other colours than the one it
+    (:mod:`vision.mark_scorer`): ``"shipped"`` the shipped model (for a palette of other colours than the one it
     was fitted on: the hand-set bars), or a :class:`MarkScorer`; the candidates are
     then taken with the lenient :data:`CANDIDATE_K_SIGMA` bars (``k_sigma`` is not used). ``"all"``: every
     such candidate, with its features (to fit a scorer); None: the hand-set bars alone.
 
-    ``look``: what the camera's look did to the colours (:mod:`evopose.camera_look`), undone before anything is
+    ``look``: what the camera's look did to the colours (:mod:`vision.camera_look`), undone before anything is
     compared with the paint colours: ``"auto"`` estimated from this image and the body's paint, a :class:`Look`
     (e.g. a track's), or None (the image is taken as the reference look shows it).
 
     With a body the scale space is built only around it: the box of :func:`body_region` grown by three of the
     largest blur sigmas, at least :data:`MIN_MARGIN_PX` (no paint in the image: no marks)."""
-    bgr = _to_bgr(image_bgr)
+    bgr = to_bgr(image_bgr)
     names = tuple(palette)
     if not names:
         raise ValueError("the palette names no colour")
@@ -251,7 +251,7 @@ def detect_contrast_marks(image_bgr: np.ndarray, palette: Mapping[str, tuple[int
         return _detect(bgr[:0, :0], lin[:0, :0], names, palette, prior, region[:0, :0], **settings)
     ys, xs = np.nonzero(region)
     margin = max(int(np.ceil(3 * scales(prior)[-1])) + 2, MIN_MARGIN_PX)
-    # the crop starts on even coordinates: the encoder's 2 x 2 chroma blocks stay aligned (evopose.spot_colour)
+    # the crop starts on even coordinates: the encoder's 2 x 2 chroma blocks stay aligned (vision.spot_colour)
     y0, y1 = max(int(ys.min()) - margin, 0) // 2 * 2, min(int(ys.max()) + margin + 1, bgr.shape[0])
     x0, x1 = max(int(xs.min()) - margin, 0) // 2 * 2, min(int(xs.max()) + margin + 1, bgr.shape[1])
     found = _detect(bgr[y0:y1, x0:x1], lin[y0:y1, x0:x1], names, palette, prior, region[y0:y1, x0:x1], **settings,
@@ -370,7 +370,7 @@ def _detect(bgr: np.ndarray, lin: np.ndarray, names: tuple[str, ...], palette: M
         pts, labels, conf, radius, contrast = pts[keep], labels[keep], conf[keep], radius[keep], contrast[keep]
     features = None
     if body is not None and prior.radius_px[1] < SMALL_SPOT_PX and len(pts):
-        # 2-4 px spots: the label through the encoder's 4:2:0 chroma (evopose.spot_colour); the crop is even-aligned
+        # 2-4 px spots: the label through the encoder's 4:2:0 chroma (vision.spot_colour); the crop is even-aligned
         palette_bgr = np.array([palette[n] for n in names], np.uint8)
         if not scoring:
             labels, conf = label_small_spots(bgr, pts, radius, palette_bgr, body)
@@ -379,7 +379,7 @@ def _detect(bgr: np.ndarray, lin: np.ndarray, names: tuple[str, ...], palette: M
             labels, conf = labels_of(misfit, explained, CANDIDATE_EXPLAINED)
         kept = labels >= 0
         pts, labels, conf, radius, contrast = pts[kept], labels[kept], conf[kept], radius[kept], contrast[kept]
-        if scoring:  # the scorer decides which candidates are marks (evopose.mark_scorer)
+        if scoring:  # the scorer decides which candidates are marks (vision.mark_scorer)
             features = candidate_features(bgr, lab, pts, radius, contrast, labels, conf, misfit[kept],
                                           explained[kept], paint, sure, prior.extent_px or float(max(h, w)))
             if isinstance(scorer, MarkScorer):

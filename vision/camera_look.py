@@ -1,6 +1,6 @@
 """What a camera's look did to the target's colours, estimated per frame from the target itself, and undone.
 
-The contrast front-end (:mod:`evopose.blobs`, :mod:`evopose.body_paint`, :mod:`evopose.spot_colour`) compares
+The contrast front-end (:mod:`vision.blobs`, :mod:`vision.body_paint`, :mod:`vision.spot_colour`) compares
 what it sees with the model's paint colours. Those comparisons hold in the look it was tuned on, the *reference
 look* (the project's camera model: sRGB tone, true white balance, default saturation). A lab's camera has its own:
 a white-balance error of tens of percent per channel, a saturation setting, a film-like tone curve that compresses
@@ -20,7 +20,7 @@ relative to the neutral, against what the reference look makes of that paint (:d
 :data:`REFERENCE_BODY_TURN_DEG`: Cycles' sunlit and shaded faces with their gloss keep ~0.6 of the paint file's
 chroma, turned ~9 deg, at both scales). :func:`to_reference_look` then maps every pixel back,
 ``q' = R(-turn) (q - neutral) / gain + neutral - shift``, a linear map of (Cr, Cb) per pixel given Y, so the
-encoder's 4:2:0 chroma blocks keep their shape (:mod:`evopose.spot_colour` models them), with only what lies
+encoder's 4:2:0 chroma blocks keep their shape (:mod:`vision.spot_colour` models them), with only what lies
 beyond the reference look's own spread over scenes undone (:data:`DEAD_BAND`, :func:`beyond_band`): the
 reference look is not re-coloured.
 

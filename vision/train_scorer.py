@@ -1,9 +1,9 @@
-"""``evopose train-scorer``: fit the contrast front-end's mark scorer (:mod:`evopose.mark_scorer`) on datasets.
+"""``evopose train-scorer``: fit the contrast front-end's mark scorer (:mod:`vision.mark_scorer`) on datasets.
 
 Every camera image of every dataset (docs/datasets.md) goes through the contrast front-end with ``scorer="all"``:
 the lenient candidates and their features. A candidate within ``match_px`` of a mark's projected centre (seen or
 hidden: the dataset's truth, one to one, nearest first) is a mark. The scorer fitted on them is written as JSON;
-the front-end takes it with ``detect_contrast_marks(..., scorer=evopose.mark_scorer.load(path))``.
+the front-end takes it with ``detect_contrast_marks(..., scorer=vision.mark_scorer.load(path))``.
 
 Its threshold keeps as many marks as the hand-set bars do on the same frames (``scorer=None``), judged with each
 geometry held out: the scorer is as sensitive as the bars and drops more of the rest. Fewer marks cost the search
@@ -20,9 +20,9 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from evopose import mark_scorer
-from evopose.blobs import SMALL_SPOT_PX, detect_contrast_marks, mark_prior
-from evopose.features import match_to_truth
+from vision import mark_scorer
+from vision.blobs import SMALL_SPOT_PX, detect_contrast_marks, mark_prior
+from vision.features import match_to_truth
 from scenarios.dataset import open_dataset
 from scenarios.errors import WorldError
 
@@ -35,7 +35,7 @@ def candidates(directories: Sequence[Path], match_px: float = MATCH_PX,
                ) -> tuple[np.ndarray, np.ndarray, np.ndarray, tuple[str, ...], float]:
     """The features (K, F) of every small-spot candidate in the datasets, whether each is a mark (K,) bool, its
     group (K,): the datasets whose cameras start at the same places (:func:`_place`) are one group, and the feature
-    names (:func:`evopose.mark_scorer.feature_names`), and the share of the candidates' marks the hand-set bars find.
+    names (:func:`vision.mark_scorer.feature_names`), and the share of the candidates' marks the hand-set bars find.
     """
     rows, marks, groups, names, places = [], [], [], None, {}
     by_bars = 0
@@ -92,7 +92,7 @@ def train(directories: Sequence[Path], out: Path, *, l2: float = 30.0, match_px:
           progress: Callable[[str], None] | None = None) -> dict:
     """Fit a scorer on ``directories`` and write it to ``out``; a summary (candidates, marks, threshold, and the
     fitting data's recall and precision of marks among the candidates it keeps). The threshold keeps the share of
-    marks the bars find (:func:`evopose.mark_scorer.fit` with ``keep``), each geometry (:func:`_place`) scored by
+    marks the bars find (:func:`vision.mark_scorer.fit` with ``keep``), each geometry (:func:`_place`) scored by
     a model fitted on the others."""
     features, is_mark, groups, names, by_bars = candidates(directories, match_px, progress)
     fitted_on = "evopose train-scorer " + " ".join(Path(d).name for d in directories)

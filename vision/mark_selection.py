@@ -1,4 +1,4 @@
-"""Which of a front-end's spots are the target's marks (:mod:`evopose.blobs`): one per mark's disc, one scale, one
+"""Which of a front-end's spots are the target's marks (:mod:`vision.blobs`): one per mark's disc, one scale, one
 cluster. A target's marks do not overlap, share a scale and a paint at one distance, and lie within its extent;
 what a camera's look, the ground's texture or the body's shading adds does not.
 
@@ -23,7 +23,7 @@ def one_per_disc(pts: np.ndarray, score: np.ndarray, disc_radius_px: float) -> n
 
     Two marks of the model do not overlap, so two candidates within one mark's radius of each other are one
     mark seen twice: a 2-4 px mark peaks in several channels and scales a pixel or two apart (the channel peaks
-    of :func:`evopose.blobs._detect`), and the copy counts once more in eq. 1's sum, pulling the pose towards its offset
+    of :func:`vision.blobs._detect`), and the copy counts once more in eq. 1's sum, pulling the pose towards its offset
     centre. Cycles paper-scale sweep (benchmarks/bench_photoreal_features.py, 9 worlds): visible marks'
     projections lie 3.0 px or more apart, while 70 of 234 false detections lay within 2 px of another
     detection."""

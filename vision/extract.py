@@ -2,11 +2,11 @@
 
 ``--features auto`` (the default of ``evopose agent`` and ``evopose solve --image``) is ``contrast`` on camera images
 and ``marks`` on drawn worlds (:func:`resolve_features`). ``--features marks`` finds the model's colour
-marks by preset hue bands (:func:`evopose.features.detect_colour_marks`, the paper's Section IV: flat-coloured
-drawings); ``--features contrast`` by their contrast (:func:`evopose.blobs.detect_contrast_marks`: camera images);
+marks by preset hue bands (:func:`vision.features.detect_colour_marks`, the paper's Section IV: flat-coloured
+drawings); ``--features contrast`` by their contrast (:func:`vision.blobs.detect_contrast_marks`: camera images);
 ``--features corners`` finds
-Shi-Tomasi corners (:func:`evopose.features.detect_corners`) and keeps the X-junctions
-(:func:`evopose.features.x_junctions`), the inner corners of a chessboard: a board's outline and the corners
+Shi-Tomasi corners (:func:`vision.features.detect_corners`) and keeps the X-junctions
+(:func:`vision.features.x_junctions`), the inner corners of a chessboard: a board's outline and the corners
 of boxes are L-corners and would let a grid shifted by one square fit as well as the true one. Either way the
 points are unordered: EvoPose needs no correspondences (eq. 1). Marks come with their colour's index in the
 model's palette (:func:`feature_extractor`), the label a point is matched by (our extension of eq. 1,
@@ -21,10 +21,10 @@ from typing import Protocol
 import numpy as np
 
 from evopose import Bounds, Camera
-from evopose.blobs import MarkPrior, detect_contrast_marks, mark_prior
-from evopose.camera_look import LookTracker, estimate_look
-from evopose.features import colour_ranges, detect_colour_marks, detect_corners, x_junctions
-from evopose.mark_scorer import MarkScorer, feature_names
+from vision.blobs import MarkPrior, detect_contrast_marks, mark_prior
+from vision.camera_look import LookTracker, estimate_look
+from vision.features import colour_ranges, detect_colour_marks, detect_corners, x_junctions
+from vision.mark_scorer import MarkScorer, feature_names
 from scenarios.fleet import FEATURE_KINDS
 from scenarios.target import TargetModel
 
@@ -36,7 +36,7 @@ MAX_CORNERS, CORNER_QUALITY, CORNER_SPACING_PX = 150, 0.05, 8.0
 class FeatureExtractor(Protocol):
     """``extract(image (H, W, 3) uint8, camera or None) -> (points (N, 2), labels (N,) or None)``: every detector
     behind one call. ``camera`` (with its ``world_from_camera``) lets a detector know how large the target's marks
-    can be in this image (:func:`evopose.blobs.mark_prior`); without it a generic range is searched."""
+    can be in this image (:func:`vision.blobs.mark_prior`); without it a generic range is searched."""
 
     def __call__(self, image: np.ndarray, camera: Camera | None = None) -> tuple[np.ndarray, np.ndarray | None]:
         ...
@@ -53,7 +53,7 @@ def chessboard_corners(image: np.ndarray) -> np.ndarray:
 
 def resolve_features(kind: str, camera_images: bool) -> str:
     """The front-end ``kind`` names: ``auto`` is ``contrast`` on camera images (a real camera, a dataset, a world
-    with a camera model: any tone curve, white balance or saturation, :mod:`evopose.camera_look`) and ``marks`` on
+    with a camera model: any tone curve, white balance or saturation, :mod:`vision.camera_look`) and ``marks`` on
     the project's flat-coloured drawings, where the preset hue bands find every mark (BENCHMARKS.md, "Mark
     front-ends through camera looks"); any other kind is itself."""
     if kind != "auto":
@@ -67,7 +67,7 @@ def feature_extractor(kind: str, target: TargetModel, area: Bounds | None = None
     ``contrast`` label each mark with its colour's index in the model's palette (the order of
     :meth:`scenarios.target.TargetModel.colour_labels`); ``area`` is the operating area (world x, y, z bounds of
     the target) from which ``contrast`` derives the marks' size in each camera's image. ``scorer``: the mark scorer
-    ``contrast`` takes for 2-4 px marks (default: the shipped one, :mod:`evopose.mark_scorer`); ValueError when it
+    ``contrast`` takes for 2-4 px marks (default: the shipped one, :mod:`vision.mark_scorer`); ValueError when it
     was fitted on another palette's features."""
     if kind == "auto":
         raise ValueError("resolve 'auto' first (resolve_features): whether the images come from a camera")

@@ -13,7 +13,7 @@ import cv2
 import numpy as np
 
 from evopose import Bounds, Camera, Model
-from evopose.features import MarkDetections, detect_colour_marks
+from vision.features import MarkDetections, detect_colour_marks
 from geometry import matrix_from_pose
 from scenarios.errors import ImageError, WorldError
 from scenarios.target import TargetModel
