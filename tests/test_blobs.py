@@ -205,7 +205,7 @@ def _contrast_counts(name: str, look) -> dict:
 
 @pytest.mark.parametrize("name, recall, precision", [
     ("paper-agx", 0.8, 0.75), ("telephoto-agx", 0.98, 0.95),          # measured 0.86 / 0.80, 1.00 / 1.00
-    ("paper-flat-cool", 0.6, 0.75), ("telephoto-flat-cool", 0.85, 0.6),   # 0.66 / 0.82, 0.90 / 0.66
+    ("paper-flat-cool", 0.6, 0.75), ("telephoto-flat-cool", 0.85, 0.75),   # 0.66 / 0.82, 0.90 / 0.83
 ])
 def test_through_looks_it_was_never_tuned_on_the_marks_are_found(name, recall, precision):
     # the Pioneer's g2 worlds (a geometry the committed reference-look frames do not have) developed through Blender's
@@ -223,11 +223,12 @@ def test_through_looks_it_was_never_tuned_on_the_marks_are_found(name, recall, p
 def test_on_a_second_robot_it_was_never_tuned_on():
     # the Husky-like UGV (scenarios/models/husky.yaml): yellow body, red, blue, violet and black marks. Found: 0.90 of
     # its marks at telephoto (black ones too: a dark paint escapes the lit-paint rule; 0.69 without), labels all
-    # right. Its precision is the front-end's open gap (0.16 here: spots on the body's outline, the yellow clutter's
-    # and the black plate's edges), said so in BENCHMARKS.md; at the paper's scale recall 0.54, precision 0.19 (the
-    # shipped scorer serves the Pioneer's palette only)
+    # right, precision 0.90 (0.16 before a mark had to be ringed by one paint, vision.mark_selection.surrounded, a
+    # rule chosen on the Pioneer: dark specks on the tyres, the plate's and the shadows' edges). At the paper's scale
+    # recall 0.54, precision 0.19: the front-end's open gap, said so in BENCHMARKS.md (the shipped scorer serves the
+    # Pioneer's palette only)
     tele = _contrast_counts("husky-telephoto", "auto")
-    assert tele["recall"] >= 0.85 and tele["labels"] >= 0.95, tele
+    assert tele["recall"] >= 0.85 and tele["precision"] >= 0.8 and tele["labels"] >= 0.95, tele
     paper = _contrast_counts("husky-paper", "auto")
     assert paper["recall"] >= 0.5, paper
 

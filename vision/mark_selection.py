@@ -54,6 +54,33 @@ def one_scale(radius: np.ndarray, contrast: np.ndarray, share: float = SCALE_CON
     return np.nonzero((radius >= share * scale) & (contrast >= RELATIVE_CONTRAST * strong))[0]
 
 
+def surrounded(lab: np.ndarray, pts: np.ndarray, radius: np.ndarray, directions: int = 16) -> np.ndarray:
+    """The share of directions (float (K,)) in which what lies just outside each spot at ``pts`` (K, 2) of
+    ``radius`` (K,) px, ``radius`` + 2 px away, is its surroundings' usual colour: within half the spot's contrast
+    to them (the median over the directions) in ``lab`` (H, W, 3) float CIE Lab. A mark is ringed by one paint
+    that it stands out from; a speck on a face's outline, a shadow's or in a textured patch is not."""
+    pts, radius = np.asarray(pts, float).reshape(-1, 2), np.asarray(radius, float).reshape(-1)
+    if not len(pts):
+        return np.zeros(0)
+    angle = np.linspace(0.0, 2 * np.pi, directions, endpoint=False)
+    reach = radius[:, None] + 2.0
+    around = _bilinear(lab, pts[:, 0:1] + reach * np.cos(angle)[None, :],
+                       pts[:, 1:2] + reach * np.sin(angle)[None, :])                # (K, D, 3)
+    centre = _bilinear(lab, pts[:, 0:1], pts[:, 1:2])                              # (K, 1, 3)
+    usual = np.median(around, axis=1, keepdims=True)                               # (K, 1, 3)
+    contrast = np.linalg.norm(centre - usual, axis=2)                              # (K, 1)
+    return np.mean(np.linalg.norm(around - usual, axis=2) <= 0.5 * contrast, axis=1)
+
+
+def _bilinear(image: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    h, w = image.shape[:2]
+    u, v = np.clip(u, 0, w - 1.001), np.clip(v, 0, h - 1.001)
+    x0, y0 = np.floor(u).astype(int), np.floor(v).astype(int)
+    fx, fy = (u - x0)[..., None], (v - y0)[..., None]
+    return ((1 - fx) * (1 - fy) * image[y0, x0] + fx * (1 - fy) * image[y0, x0 + 1]
+            + (1 - fx) * fy * image[y0 + 1, x0] + fx * fy * image[y0 + 1, x0 + 1])
+
+
 def same_spots(pts: np.ndarray, radius: np.ndarray) -> np.ndarray:
     """Whether each two peaks ``pts`` (K, 2) of ``radius`` (K,) are one spot, bool (K, K): within the larger radius
     (two scales of one disc), or a small peak on the rim of a much larger one (an oblique disc's ends, its
