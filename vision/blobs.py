@@ -71,6 +71,8 @@ MIN_RELATIVE_BRIGHTNESS = 0.2
 #: A paint colour whose linear channel sum is under this is a dark paint (black: 0.04): the lit-paint rule of
 #: MIN_RELATIVE_BRIGHTNESS does not apply to it.
 DARK_PAINT = 0.15
+#: Least difference sigma (px) a scale-space level is blurred from the one below by (:func:`contrast_responses`).
+INCREMENTAL_SIGMA = 1.5
 #: Weight of the chroma axes against lightness in the response (CIE Lab units).
 CHROMA_WEIGHT = 1.0
 #: The body's paint is closed over gaps up to this share of the target's extent too (at the paper's scale marks
@@ -102,6 +104,8 @@ MIN_SURROUND = 0.5
 #: Least pixels beside the body for the response's spread to be taken there (else over the whole crop), and the
 #: least margin of ground kept around the body (the spread is the ground's texture, not the body's outline).
 MIN_BACKGROUND_PX, MIN_MARGIN_PX = 200, 48
+#: At most about this many pixels beside the body are sampled for the response's spread (a robust statistic).
+MAX_SPREAD_SAMPLES = 20000
 #: With the body context, where the prior's largest mark radius is under :data:`SMALL_SPOT_PX`, a spot may misfit
 #: its label this much: the encoder's 4:2:0 chroma (2 x 2 px blocks) leaves such a mark's colour far off its
 #: paint's line, and the body, not the label, rejects the clutter.
@@ -135,7 +139,14 @@ def contrast_responses(lab: np.ndarray, sigmas: np.ndarray) -> np.ndarray:
     """Difference-of-Gaussian stack of an L*a*b* image (H, W, 3) float32, shape (S - 1, H, W, 3): the
     scale-normalised Laplacian per channel between the blurs at ``sigmas[i]`` and ``sigmas[i + 1]`` (divided by
     ``k - 1``)."""
-    levels = np.stack([cv2.GaussianBlur(lab, (0, 0), float(s)) for s in sigmas])
+    # a coarse level blurred from the one before by the difference sigma (Gaussians compose: s_i+1^2 = s_i^2 + d^2),
+    # a kernel 0.6 the size of blurring the image at s_i+1 itself; where d is under INCREMENTAL_SIGMA px a sampled
+    # kernel is no Gaussian, and the image is blurred directly
+    levels = np.empty((len(sigmas), *lab.shape), np.float32)
+    for i, s in enumerate(sigmas):
+        d = float(np.sqrt(s ** 2 - sigmas[i - 1] ** 2)) if i else 0.0
+        levels[i] = cv2.GaussianBlur(levels[i - 1], (0, 0), d) if d >= INCREMENTAL_SIGMA \
+            else cv2.GaussianBlur(lab, (0, 0), float(s))
     k = sigmas[1] / sigmas[0]
     dog = (levels[1:] - levels[:-1]) / np.float32(k - 1)
     return dog
@@ -294,7 +305,8 @@ def _detect(bgr: np.ndarray, lin: np.ndarray, names: tuple[str, ...], palette: M
     # what lies beside it (the ground's texture, as over a whole image, not the marks and edges of the body)
     beside = None if region is None else ~cv2.dilate(region.astype(np.uint8), np.ones((7, 7), np.uint8)).astype(bool)
     if beside is not None and np.count_nonzero(beside) >= MIN_BACKGROUND_PX:
-        sample = mag[:, beside]
+        at = np.flatnonzero(beside)
+        sample = mag.reshape(len(mag), -1)[:, at[::max(1, len(at) // MAX_SPREAD_SAMPLES)]]
     else:
         sample = mag[:, ::3, ::3].reshape(len(mag), -1)
     med = np.median(sample, axis=1)
