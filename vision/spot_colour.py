@@ -91,10 +91,20 @@ def ring_colours(image: np.ndarray, points: np.ndarray, radius: np.ndarray) -> n
         flat = values.reshape(len(at), -1, image.shape[2])
         some = sel.reshape(len(at), -1).any(axis=1)
         if some.any():
-            out[at[some]] = np.nanmedian(flat[some], axis=1)
+            out[at[some]] = _median_of_numbers(flat[some])
         for i in at[~some]:
             out[i] = image[int(round(points[i, 1])), int(round(points[i, 0]))]
     return out
+
+
+def _median_of_numbers(values: np.ndarray) -> np.ndarray:
+    """``np.nanmedian(values, axis=1)`` of (N, M, C) values with at least one number per row (N, C), by one sort
+    (NaN sorts last) instead of a masked median per row."""
+    ordered = np.sort(values, axis=1)
+    count = np.count_nonzero(~np.isnan(values), axis=1)                      # (N, C)
+    lo = np.take_along_axis(ordered, ((count - 1) // 2)[:, None, :], axis=1)[:, 0]
+    hi = np.take_along_axis(ordered, (count // 2)[:, None, :], axis=1)[:, 0]
+    return (lo + hi) / 2
 
 
 def spot_misfits(image_bgr: np.ndarray, points: np.ndarray, radius: np.ndarray, palette_bgr: np.ndarray,
