@@ -104,7 +104,8 @@ def chroma_of(bgr: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 def neutral_chroma(q: np.ndarray, usable: np.ndarray) -> tuple[np.ndarray, float]:
     """The image's neutral (2,) and the spread of chroma about it (1.4826 MAD of the distance, float): the median
     of the :data:`NEUTRAL_SHARE` of usable pixels nearest the estimate, three times from the median of all."""
-    pts = q[usable][::max(1, int(usable.sum()) // 40000)]
+    at = np.flatnonzero(usable)
+    pts = q.reshape(-1, 2)[at[::max(1, len(at) // 40000)]]
     if not len(pts):
         return np.array(REFERENCE_NEUTRAL, np.float32), 0.02
     n = np.median(pts, axis=0)
@@ -127,8 +128,11 @@ def body_chroma(q: np.ndarray, usable: np.ndarray, neutral: np.ndarray, spread: 
     r = np.hypot(rel[..., 0], rel[..., 1])
     turn = np.radians(REFERENCE_BODY_TURN_DEG)
     expect = np.arctan2(paint_q[1], paint_q[0]) + turn
-    off = np.abs(angle_difference(np.arctan2(rel[..., 1], rel[..., 0]), expect))
-    mask = usable & (off <= np.radians(BODY_TURN_DEG)) & (r >= max(BODY_NOISE_SPREADS * spread, BODY_MIN_CHROMA))
+    mask = usable & (r >= max(BODY_NOISE_SPREADS * spread, BODY_MIN_CHROMA))
+    at = np.flatnonzero(mask)                       # the direction only where the chroma is clear of the noise
+    flat = rel.reshape(-1, 2)[at]
+    off = np.abs(angle_difference(np.arctan2(flat[:, 1], flat[:, 0]), expect))
+    mask.reshape(-1)[at[off > np.radians(BODY_TURN_DEG)]] = False
     if mask.sum() < MIN_BODY_PIXELS:
         return None, 0
     closed = cv2.morphologyEx(mask.astype(np.uint8), cv2.MORPH_CLOSE, np.ones((3, 3), np.uint8))

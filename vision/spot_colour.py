@@ -91,10 +91,20 @@ def ring_colours(image: np.ndarray, points: np.ndarray, radius: np.ndarray) -> n
         flat = values.reshape(len(at), -1, image.shape[2])
         some = sel.reshape(len(at), -1).any(axis=1)
         if some.any():
-            out[at[some]] = np.nanmedian(flat[some], axis=1)
+            out[at[some]] = _median_of_numbers(flat[some])
         for i in at[~some]:
             out[i] = image[int(round(points[i, 1])), int(round(points[i, 0]))]
     return out
+
+
+def _median_of_numbers(values: np.ndarray) -> np.ndarray:
+    """``np.nanmedian(values, axis=1)`` of (N, M, C) values with at least one number per row (N, C), by one sort
+    (NaN sorts last) instead of a masked median per row."""
+    ordered = np.sort(values, axis=1)
+    count = np.count_nonzero(~np.isnan(values), axis=1)                      # (N, C)
+    lo = np.take_along_axis(ordered, ((count - 1) // 2)[:, None, :], axis=1)[:, 0]
+    hi = np.take_along_axis(ordered, (count // 2)[:, None, :], axis=1)[:, 0]
+    return (lo + hi) / 2
 
 
 def spot_misfits(image_bgr: np.ndarray, points: np.ndarray, radius: np.ndarray, palette_bgr: np.ndarray,
@@ -134,24 +144,24 @@ def spot_misfits(image_bgr: np.ndarray, points: np.ndarray, radius: np.ndarray, 
         obs = np.concatenate([d[:, 0], d[:, 1], d[:, 2]])                              # (3N,)
         weight = np.sqrt(np.concatenate([gi, si, si]))                                 # (3N,)
         deviation = float(np.sum((obs * weight) ** 2))
-        for j in range(len(palette)):
-            # the unit-coverage model at each brightness, (G, 3N): [g (k Y_c - Y_r), S[g] (k C_c - C_r)]
-            model = np.concatenate([gi[None, :] * (ks[:, None] * pal_y[j] - ring_y),
-                                    si[None, :] * (ks[:, None] * pal_c[j, 0] - ring_c[0]),
-                                    si[None, :] * (ks[:, None] * pal_c[j, 1] - ring_c[1])], axis=1)
-            out[i, j] = float(np.sqrt(_least_residual(model, obs)))
-            if deviation > 0:
-                explained[i, j] = 1.0 - _least_residual(model * weight, obs * weight) / deviation
+        # each colour's unit-coverage model at each brightness, (C, G, 3N): [g (k Y_c - Y_r), S[g] (k C_c - C_r)]
+        level = ks[None, :, None]
+        model = np.concatenate([gi * (level * pal_y[:, None, None] - ring_y),
+                                si * (level * pal_c[:, 0, None, None] - ring_c[0]),
+                                si * (level * pal_c[:, 1, None, None] - ring_c[1])], axis=2)
+        out[i] = np.sqrt(_least_residual(model, obs))
+        if deviation > 0:
+            explained[i] = 1.0 - _least_residual(model * weight, obs * weight) / deviation
     return out, explained
 
 
-def _least_residual(model: np.ndarray, obs: np.ndarray) -> float:
-    """The least squared residual of ``obs`` (N,) as ``a model[g]`` over the rows (G, N) of ``model``, the coverage
-    ``a`` in [0, MAX_COVERAGE] (closed form per row)."""
-    norm = np.einsum("gn,gn->g", model, model)
+def _least_residual(model: np.ndarray, obs: np.ndarray) -> np.ndarray:
+    """The least squared residual (C,) of ``obs`` (N,) as ``a model[c, g]`` over the rows g of each colour's
+    ``model`` (C, G, N), the coverage ``a`` in [0, MAX_COVERAGE] (closed form per row)."""
+    norm = np.einsum("cgn,cgn->cg", model, model)
     a = np.clip(model @ obs / np.maximum(norm, 1e-12), 0.0, MAX_COVERAGE)
-    resid = obs[None, :] - a[:, None] * model
-    return float(np.min(np.einsum("gn,gn->g", resid, resid)))
+    resid = obs - a[..., None] * model
+    return np.min(np.einsum("cgn,cgn->cg", resid, resid), axis=1)
 
 
 def label_small_spots(image_bgr: np.ndarray, points: np.ndarray, radius: np.ndarray, palette_bgr: np.ndarray,
