@@ -41,12 +41,9 @@ from .problem import Bounds, Model, PoseProblem, View
 from .refine import TRACK_SCHEDULE
 from .search import EvoPose, Told
 from .solver import Solution, solution_of, track
-from .estimator_state import (Estimate, EstimatorState, Verdict, _injected, _remember_motion, _Search,
-                              verdict)
-from .uncertainty import assess, deviation, mahalanobis
+from .estimator_state import Estimate, EstimatorState, SearchInProgress
+from .trust import assess, confirms
 
-#: A confirming search's confident pose within this many sigmas (its covariance) of the tracked one confirms it.
-CONFIRM_SIGMAS = 4.0
 #: Fitness values kept in a solution's history by :meth:`CooperativeEstimator.generation` (bounded memory).
 HISTORY_KEPT = 256
 #: Children of the best per :meth:`CooperativeEstimator.generation`.
@@ -62,8 +59,8 @@ class Cooperation:
 
     Real time: :meth:`estimate` and :meth:`generation` take a time budget. A search from scratch that does not
     finish within it is kept in the state and resumed by the next call (on the views it started with, as the
-    paper's Experiment 1 searches one snapshot); meanwhile each call returns the best so far, not good. Once the
-    search finishes with a good pose, that pose is tracked (eq. 2) onto the newest views.
+    paper's Experiment 1 searches one snapshot); meanwhile each call returns the best so far (searching). Once the
+    search converges, that pose is tracked (eq. 2) onto the newest views.
 
     Attributes
     ----------
@@ -151,9 +148,9 @@ class Cooperation:
             optimiser = EvoPose(problem, self.options, np.random.default_rng([self.seed, frame]))
             run = Run(optimiser.start(), Told(0, np.inf, False, None), Evaluator.for_search(problem, self.options),
                       0.0)
-            st = replace(st, search=_Search(optimiser, run, problem, frame, time.perf_counter()))
+            st = replace(st, search=SearchInProgress(optimiser, run, problem, frame, time.perf_counter()))
         else:
-            st = replace(st, search=_injected(st.search, hints))
+            st = replace(st, search=st.search.with_hints(hints))
         return self._advance(st, deadline, problem, generations)
 
     def _confirmed(self, st: EstimatorState, solution: Solution, problem: PoseProblem, frame: int,
@@ -167,7 +164,7 @@ class Cooperation:
         if search is None:
             optimiser = EvoPose(problem, self.options, np.random.default_rng([self.seed, frame, 2]))
             evaluator = Evaluator.for_search(problem, self.options)
-            search = _Search(optimiser, Run(optimiser.start(), Told(0, np.inf, False, None), evaluator, 0.0),
+            search = SearchInProgress(optimiser, Run(optimiser.start(), Told(0, np.inf, False, None), evaluator, 0.0),
                              problem, frame, time.perf_counter(), anchor=np.array(solution.pose))
         until = None if generations is None else search.run.told.generation + generations
         run = evolve(search.optimiser, search.run.state, search.run.evaluator, deadline=deadline,
@@ -178,8 +175,7 @@ class Cooperation:
         found = solution_of(search.problem, self.options, run, run.seconds)
         if not (found.converged and found.confident):
             return st, solution
-        distance = mahalanobis(deviation(found.pose, search.anchor), found.covariance)[0]
-        if distance <= CONFIRM_SIGMAS:  # the search's confident answer is the pose tracked then: confident again
+        if confirms(found.pose, found.covariance, search.anchor):  # the pose tracked then: confident again
             return st, solution.with_(confident=True, confidence=found.confidence, track_reference=None)
         moved = pose_difference(solution.pose, search.anchor)  # the target's motion since the search began
         relocated = track(found.with_(pose=found.pose + moved), list(problem.views), problem=problem,
@@ -190,7 +186,7 @@ class Cooperation:
 
     @staticmethod
     def _predicted(st: EstimatorState, frame: int, start: np.ndarray) -> np.ndarray | None:
-        """Eq. (2) with a constant-velocity guess: ``start`` moved on by the motion between the last two good
+        """Eq. (2) with a constant-velocity guess: ``start`` moved on by the motion between the last two converged
         estimates, for a target that moves between frames (None without two of them)."""
         if st.motion is None or frame <= st.motion[0]:
             return None
@@ -249,15 +245,15 @@ class Cooperation:
 
     def _advance(self, st: EstimatorState, deadline: float | None, current: PoseProblem | None,
                  generations: int | None = None) -> tuple[EstimatorState, Estimate]:
-        """Resume the search in progress until ``deadline`` (or for ``generations``); a finished good search is
+        """Resume the search in progress until ``deadline`` (or for ``generations``); a finished converged search is
         tracked onto ``current``."""
         search = st.search
-        good_at = search.good_at
+        close_at = search.close_at
 
         def watch(state) -> None:
-            nonlocal good_at
-            if good_at is None and self.options.is_confident(state.best_match):
-                good_at = time.perf_counter()
+            nonlocal close_at
+            if close_at is None and self.options.is_close(state.best_match):
+                close_at = time.perf_counter()
 
         until = None if generations is None else search.run.told.generation + generations
         run = evolve(search.optimiser, search.run.state, search.run.evaluator, on_generation=watch,
@@ -265,7 +261,7 @@ class Cooperation:
                      time_budget=self.options.time_budget)
         solution = solution_of(search.problem, self.options, run, run.seconds)
         if not run.finished:
-            st = replace(st, search=replace(search, run=run, good_at=good_at))
+            st = replace(st, search=replace(search, run=run, close_at=close_at))
             return st, Estimate(solution, self._mismatch_in(solution), False, None)
         st = replace(st, search=None)
         if not solution.converged:
@@ -277,7 +273,7 @@ class Cooperation:
             if tracked.converged:
                 solution = tracked.with_(generations=solution.generations, history=solution.history,
                                          from_hint=solution.from_hint)
-        return self._keep(st, solution, current or search.problem, True, good_at)
+        return self._keep(st, solution, current or search.problem, True, close_at)
 
     def generation(self, st: EstimatorState, hints: np.ndarray | None = None,
                    budget_s: float | None = None) -> tuple[EstimatorState, Estimate | None]:
@@ -288,7 +284,7 @@ class Cooperation:
         refined; the fittest becomes the best if it is better.
         """
         if st.search is not None:
-            st = replace(st, search=_injected(st.search, hints))
+            st = replace(st, search=st.search.with_hints(hints))
             deadline = time.perf_counter() + (budget_s if budget_s is not None else 0.0)
             return self._advance(st, deadline, None)
         if st.last is None or st.evaluator is None:
@@ -317,19 +313,19 @@ class Cooperation:
         return 1.0 if mismatch is None else float(np.clip(mismatch, 0.0, 1.0))
 
     def _keep(self, st: EstimatorState, solution: Solution, problem: PoseProblem, solved: bool,
-              good_at: float | None) -> tuple[EstimatorState, Estimate]:
+              close_at: float | None) -> tuple[EstimatorState, Estimate]:
         objective = PoseObjective(solution.problem or problem, self.options.fitness, self.options.tau)
         if len(solution.view_weights) == objective.n_views and np.any(solution.view_weights > 0):
             objective = objective.with_weights(solution.view_weights)  # the step rule's (eq. 4)
         st = replace(st, evaluator=Evaluator(objective, exploit=(TRACK_SCHEDULE,)),
                      best_fitness=float(objective(np.atleast_2d(solution.pose))[0]))
         mismatch = self._mismatch(st, solution.pose)
-        st = _remember_motion(st, solution if solution.converged else None)
+        st = st.with_motion(solution if solution.converged else None)
         if solution.converged:
             st = replace(st, last=solution)
         else:
             st = replace(st, last=None, evaluator=None)
-        return st, Estimate(solution, mismatch, solved, good_at)
+        return st, Estimate(solution, mismatch, solved, close_at)
 
     @staticmethod
     def _mismatch(st: EstimatorState, pose: np.ndarray) -> float:
@@ -383,5 +379,4 @@ class CooperativeEstimator:
         return self.rules.start(self.state, problem, candidates, margin)
 
 
-__all__ = ["Cooperation", "CooperativeEstimator", "Estimate", "EstimatorState", "Knowledge", "Verdict",
-           "constrained_bounds", "verdict"]
+__all__ = ["Cooperation", "CooperativeEstimator", "Estimate", "EstimatorState", "Knowledge", "constrained_bounds"]

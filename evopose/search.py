@@ -349,11 +349,11 @@ class EvoPose:
         supporters = state.best_supporters
         hinted = any(x < 0 for x in supporters)
         if (state.generation >= o.min_generations and hinted and o.consensus
-                and len(supporters) >= o.consensus and o.is_good(state.best_match)):
+                and len(supporters) >= o.consensus and o.is_acceptable(state.best_match)):
             return "consensus"  # a team-mate's hint confirmed by the own search: no need for more starts
-        needed = (o.min_starts if o.is_confident(state.best_match) else o.min_starts_unsure) * self.start_factor
+        needed = (o.min_starts if o.is_close(state.best_match) else o.min_starts_loose) * self.start_factor
         if state.generation >= o.min_generations and state.starts >= needed:
-            if o.consensus and len(supporters) >= o.consensus and o.is_good(state.best_match):
+            if o.consensus and len(supporters) >= o.consensus and o.is_acceptable(state.best_match):
                 return "consensus"
             if state.generation - state.improved_at >= o.patience:
                 return "stalled"

@@ -64,9 +64,9 @@ def test_a_driving_pioneer_is_tracked_and_both_helicopters_agree(world):
             states[v], messages, events[v] = step(states[v], FrameInputs(
                 n, own[v], (mate_view(mate, sent[mate], None),), truth=frames[v].truth, budget_s=1.0))
             published[v] = messages[0].pose
-        good += events["H1"].estimate.good and events["H2"].estimate.good
+        good += events["H1"].estimate.converged and events["H2"].estimate.converged
         agreed += published["H1"] == published["H2"]
-        if events["H1"].estimate.good:
+        if events["H1"].estimate.converged:
             errors.append(events["H1"].error["position"])
     assert good >= 18 and agreed >= 19
     assert np.median(errors) < 0.02  # metres, while the robot drove 1 m
@@ -82,9 +82,9 @@ def test_a_team_mates_hint_pulls_a_vehicle_out_of_a_wrong_basin():
     wrong = frame.truth + np.array([0.0, 0.0, 0.0, 0.0, 0.0, np.pi])
     first = estimator.estimate(views, frame=0, candidates=wrong[None], candidate_margin=0.0)
     hinted = estimator.estimate(views, frame=1, candidates=frame.truth[None], candidate_margin=0.1)
-    assert first.good
+    assert first.converged
     yaw_error = abs(angle_difference(hinted.pose[5], frame.truth[5]))
-    assert hinted.good and yaw_error < np.radians(2.0)
+    assert hinted.converged and yaw_error < np.radians(2.0)
 
 
 def test_two_agents_at_paper_scale_publish_the_same_pose():
@@ -105,7 +105,7 @@ def test_a_hint_that_fits_about_as_well_wins_only_with_the_margin():
     frame = SimulatedCamera(scenario, "H2").acquire(0, 0)
     views, _ = build_views([own_view("H2", 0, frame.camera, frame.points)])
     estimator = CooperativeEstimator(scenario.model.evopose_model(), scenario.bounds(), seed=3)
-    assert estimator.estimate(views, frame=0).good
+    assert estimator.estimate(views, frame=0).converged
     problem = estimator.problem(views)
     own = estimator.current_best
     nearby = own + np.array([0.02, 0.0, 0.0, 0.0, 0.0, 0.0])  # a slightly worse fit (mismatch 0.166 -> 0.181)

@@ -46,12 +46,12 @@ def test_step_publishes_the_pose_and_in_hint_mode_a_hint(paper_scale):
     after, messages, event = step(before, inputs)
     assert [m.TOPIC for m in messages] == [Topic.POSE, Topic.HINT]
     pose = messages[0]
-    assert isinstance(pose, PoseEstimate) and pose.converged and pose.confident == event.verdict.good
+    assert isinstance(pose, PoseEstimate) and pose.converged and pose.good == event.trust.good
     assert pose.target == "pioneer" and pose.inputs == () and isinstance(messages[1], Hint)
     # one helicopter at the paper's scale: the right basin (so a hint), but its range known only to tens of cm,
     # so not a good pose to act on (Solution.precise)
-    assert messages[1].pose == pose.pose and event.verdict.in_right_basin and event.error["position"] < 0.5
-    assert not event.verdict.precise and not event.verdict.good and not pose.confident
+    assert messages[1].pose == pose.pose and event.trust.in_right_basin and event.error["position"] < 0.5
+    assert not event.trust.precise and not event.trust.good and not pose.good
     assert before.estimator.last is None and after.estimator.last is not None  # a new state; the old one intact
     assert event.to_json()["event"] == "frame" and not event.to_json()["good"]
     _, alone, _ = step(_state(scenario, "H1", "none"), inputs)
@@ -87,7 +87,7 @@ def test_between_frames_a_best_in_the_right_basin_goes_out_as_a_hint_only_in_hin
     inputs = FrameInputs(0, _own(frames, "H1", 0))
     for mode, expected in (("hint", [Topic.HINT]), ("none", [])):
         state, _, event = step(_state(scenario, "H1", mode), inputs)
-        assert event.verdict.in_right_basin and not event.verdict.precise
+        assert event.trust.in_right_basin and not event.trust.precise
         state, messages, estimate = idle(state, None, None)
         assert [m.TOPIC for m in messages] == expected and estimate is not None
     empty_state, messages, estimate = idle(_state(scenario, "H1", "hint"), None, None)
@@ -134,13 +134,13 @@ def test_a_search_in_slices_ends_where_the_whole_search_ends(paper_scale):
     whole = _estimator(scenario).estimate(views, frame=0)
     sliced = _estimator(scenario)
     first = sliced.estimate(views, frame=0, budget_s=0.0)
-    assert not first.good and sliced.searching  # one generation, then the best so far
+    assert not first.converged and sliced.searching  # one generation, then the best so far
     estimate = first
     for _ in range(10_000):
         if not sliced.searching:
             break
         estimate = sliced.generation(budget_s=0.0)
-    assert not sliced.searching and estimate.good == whole.good
+    assert not sliced.searching and estimate.converged == whole.converged
     np.testing.assert_array_equal(estimate.pose, whole.pose)
 
 

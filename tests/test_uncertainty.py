@@ -15,7 +15,8 @@ from evopose import PoseObjective, PoseProblem, SearchOptions, View, refine, sol
 from geometry import euler_from_rotation, rotation_from_euler
 from evopose.solver import POLISH_SCHEDULE
 from evopose.covariance import fixed_axis_jacobian
-from evopose.uncertainty import (ConfidenceRules, TrackReference, assess, covariance, deviation, in_box_second_moment, mutual_matches,
+from evopose.trust import ConfidenceRules, assess
+from evopose.uncertainty import (TrackReference, covariance, deviation, in_box_second_moment, mutual_matches,
                                  same_image, sum_of_squares, untruncated_variance)
 
 
@@ -293,7 +294,7 @@ def test_one_camera_at_paper_scale_finds_the_basin_but_not_the_range_two_cameras
     """The paper's Table II: H1 alone is metres off in range, H1 + H2 centimetres. Confident (the right basin) is
     not enough to act on: ``precise`` needs the covariance within the target's own size (3 sigma), and the
     errors it rules out are real ones."""
-    from evopose.uncertainty import imprecise
+    from evopose.trust import imprecise
 
     alone, both = _paper(1), _paper(1, cameras=("H1", "H2"))
     one, two = solve(alone.problem, seed=0), solve(both.problem, seed=0)

@@ -2,8 +2,8 @@
 
 No Zenoh, no clock, no threads, as the search is ask/tell (docs/architecture.md, "A frame's path"). The state is
 frozen (:class:`VehicleState`: the vehicle's constant rules and its :class:`evopose.cooperative.EstimatorState`);
-every rule that depends on ``--share`` is one :class:`SharePolicy` value; the verdict (good = converged and
-confident) is :class:`evopose.cooperative.Verdict`'s. The runtime (:mod:`agents.vehicle.roles`) acquires the
+every rule that depends on ``--share`` is one :class:`SharePolicy` value; whether to trust the estimate is
+:func:`evopose.trust.judge`'s (one :class:`evopose.trust.Trust`). The runtime (:mod:`agents.vehicle.roles`) acquires the
 frame, publishes :func:`share`'s message, pairs team-mates' views, calls :func:`step` and publishes what it returns;
 between frames it calls :func:`idle`. Tests call all three directly.
 """
@@ -16,8 +16,9 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from evopose.cooperative import Cooperation, Estimate, EstimatorState, Knowledge, verdict
+from evopose.cooperative import Cooperation, Estimate, EstimatorState, Knowledge
 from evopose.pose_filter import PoseFilter
+from evopose.trust import judge
 from geometry import canonical_pose, pose_error
 from protocol import FeatureSet, ImageFrame, Message, PoseEstimate, Topic
 from protocol.hint import Hint
@@ -28,7 +29,7 @@ from agents.vehicle.team_views import MateView, build_views, encode_image
 
 #: When team-mates share the same views, a search from scratch runs a fixed number of generations per frame (so
 #: their bests agree): as many as POINTS_PER_FRAME image points in all allow, 1 to MAX_GENERATIONS_PER_FRAME. A
-#: search from scratch makes 256-1024 fresh starts (SearchOptions.min_starts, _unsure; up to 4x on a small problem),
+#: search from scratch makes 256-1024 fresh starts (SearchOptions.min_starts, _loose; up to 4x on a small problem),
 #: ~51 a generation: 20-80 generations, which at one a frame outlast a 2 s sequence. Four on two paper-scale views
 #: take 24-36 ms of a 100 ms frame (benchmarks/bench_photoreal_fleet.py, "frame ms").
 POINTS_PER_FRAME, MAX_GENERATIONS_PER_FRAME = 160, 4
@@ -184,8 +185,8 @@ def _covariance(cov: np.ndarray) -> tuple[float, ...] | None:
 def step(state: VehicleState, inputs: FrameInputs) -> tuple[VehicleState, list[Message | Hint], FrameEvent]:
     """One frame of a camera vehicle: eq. (1)-(4) on the own and team-mates' views, with knowledge and hints.
 
-    The estimate is published as a ``pose`` (``confident`` = the verdict good); with ``sends_hints`` a good
-    estimate also goes out as a hint. Team-mates' ``best`` poses (sent with their feature sets) are weighed
+    The estimate is published as a ``pose`` (``good``: the :class:`evopose.trust.Trust` is good); with
+    ``sends_hints`` an estimate in the right basin also goes out as a hint. Team-mates' ``best`` poses (sent with their feature sets) are weighed
     against the own best on this frame's eq. (4): the fitter one is tracked, so that vehicles with the same views
     publish the same pose. ``inputs.budget_s`` bounds a search from scratch in this frame: an unfinished search is
     resumed later and its best so far is published, not good.
@@ -204,29 +205,29 @@ def step(state: VehicleState, inputs: FrameInputs) -> tuple[VehicleState, list[M
         budget_s=inputs.budget_s, candidates=np.array(candidates) if candidates else None, candidate_margin=margin,
         generations=policy.generations_per_frame(sum(len(view.points) for view in views)))
     seconds = time.perf_counter() - t0
-    sol, alone = estimate.solution, verdict(estimate)
+    sol = estimate.solution
     # what goes out is the track's fused pose (evopose/pose_filter.py): a good frame that jumped off it is set aside
     published = state.published or PoseFilter.of_rules(state.cooperation.options.confidence)
     taken = inputs.index if state.frame_period_s is None else own.stamp_ns / (state.frame_period_s * 1e9)
-    published, out = published.step(taken, sol.pose, sol.covariance, alone.good)
+    published, out = published.step(taken, sol.pose, sol.covariance, judge(sol).good)
     state = replace(state, estimator=estimator, published=published)
-    judged = replace(alone, on_track=out.on_track or not alone.good, settled=out.settled or not out.on_track)
+    trust = judge(sol, searching=estimator.searching, published=out)
     pose = canonical_pose(out.pose)  # pitch within +-90 deg
     mates = tuple(v for v in used if v != state.vehicle)
     messages: list[Message | Hint] = [PoseEstimate(
         **_header(state, own.stamp_ns), target=state.target, pose=tuple(float(v) for v in pose),
-        fitness=float(sol.fitness), mismatch=estimate.mismatch, converged=judged.converged,
+        fitness=float(sol.fitness), mismatch=estimate.mismatch, converged=trust.converged,
         generations=int(sol.generations), seconds=seconds, from_hint=bool(sol.from_hint), inputs=mates,
-        confident=judged.good, covariance=_covariance(out.covariance))]
-    if policy.sends_hints and judged.in_right_basin:  # a hint need not be precise: the mate's selection judges it
+        good=trust.good, covariance=_covariance(out.covariance))]
+    if policy.sends_hints and trust.in_right_basin:  # a hint need not be precise: the mate's selection judges it
         messages.append(Hint(tuple(float(v) for v in pose)))
     event = FrameEvent(
         vehicle=state.vehicle, frame=inputs.index, points=len(own.points), stamp_ns=own.stamp_ns, views=tuple(used),
         # a team-mate's view of an earlier instant (it was late) differs from the one its owner used
         views_of_this_instant=all(m.stamp_ns == own.stamp_ns for m in inputs.mates if m.vehicle in used),
         knowledge=tuple(k.name for k in inputs.knowledge), pose=tuple(float(v) for v in pose),
-        fitness=float(sol.fitness), mismatch=estimate.mismatch, verdict=judged, solved=estimate.solved,
-        searching=estimator.searching, from_hint=bool(sol.from_hint), seconds=seconds,
+        fitness=float(sol.fitness), mismatch=estimate.mismatch, trust=trust, solved=estimate.solved,
+        from_hint=bool(sol.from_hint), seconds=seconds,
         error=None if inputs.truth is None else pose_error(pose, inputs.truth), estimate=estimate)
     return state, messages, event
 
@@ -238,7 +239,7 @@ def idle(state: VehicleState, hints: np.ndarray | None, budget_s: float | None
     search's best so far, or an unsure pose, is no hint)."""
     estimator, estimate = state.cooperation.generation(state.estimator, hints, budget_s)
     state = replace(state, estimator=estimator)
-    if estimate is not None and state.policy.sends_hints and verdict(estimate).in_right_basin:
+    if estimate is not None and state.policy.sends_hints and judge(estimate.solution).in_right_basin:
         return state, [Hint(tuple(float(v) for v in estimate.pose))], estimate
     return state, [], estimate
 
