@@ -121,7 +121,7 @@ def test_an_absent_target_dataset_has_no_errors_and_counts_false_positives(runs)
 
 def test_the_camera_of_each_frame_is_the_datasets_or_the_files_given(datasets, tmp_path):
     from agents.vehicle.config import AgentConfig
-    from agents.vehicle.sources import open_camera
+    from agents.vehicle.cameras import open_camera
     from scenarios.world import load_scenario
 
     exp2, _ = datasets
@@ -153,7 +153,7 @@ def test_a_datasets_frame_is_stamped_with_the_tick_it_was_taken_at_however_late_
     # when one of them processes it ticks later than the other
     from agents.vehicle.config import AgentConfig
     from agents.vehicle.frames import FrameClock
-    from agents.vehicle.sources import open_camera
+    from agents.vehicle.cameras import open_camera
     from scenarios.world import load_scenario
 
     exp2, _ = datasets

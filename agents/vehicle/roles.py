@@ -35,7 +35,8 @@ from agents.vehicle.hints import HintInbox
 from agents.vehicle.memory import release_free_memory
 from agents.vehicle.plausibility import Plausibility
 from agents.vehicle.records import RunRecord
-from agents.vehicle.sources import SourceEnded, SourceError, open_camera
+from agents.vehicle.cameras import open_camera
+from agents.vehicle.sources import SourceEnded, SourceError
 from agents.vehicle.step import FrameInputs, VehicleState, idle, share, share_policy, step
 from agents.vehicle.team_views import (Staleness, TeamViews, attitude_knowledge, build_views, mate_view, own_view,
                                        wait_until)
