@@ -28,6 +28,7 @@ import yaml
 from pydantic import BaseModel, ConfigDict, ValidationError, model_validator
 
 from geometry import PARAM_NAMES, pose_from_matrix
+from evopose_errors import EvoPoseError
 
 T = TypeVar("T", bound=BaseModel)
 
@@ -41,7 +42,7 @@ MAX_EXPANDED_NODES = 2_000_000
 MAX_QUOTE = 40
 
 
-class DocumentError(ValueError):
+class DocumentError(EvoPoseError, ValueError):
     """A document that cannot be read or does not have the expected shape; the message is one line."""
 
 

@@ -21,6 +21,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 #: room (a package or sub-package) -> project packages its modules may import at module level
 ALLOWED = {
+    "evopose_errors": set(),
     "geometry": {"geometry"},
     "evopose": {"evopose", "geometry"},
     "protocol": {"protocol", "geometry"},
@@ -37,9 +38,12 @@ ALLOWED = {
     "agents.bridges": {"agents.bridges", "agents.transport", "agents.errors", "protocol", "scenarios", "geometry"},
     "agents.cli": {"agents.cli", "agents.errors", "agents.experiments", "agents.vehicle.config"},
 }
-PROJECT = ("geometry", "evopose", "vision", "protocol", "scenarios", "agents")
+PROJECT = ("evopose_errors", "geometry", "evopose", "vision", "protocol", "scenarios", "agents")
+#: the project's root exception (docs/design.md §2, "Errors"): every room may import it
+EVERYWHERE = {"evopose_errors"}
 #: third-party libraries a room may import at module level (the rest of the project may import any)
 THIRD_PARTY = {
+    "evopose_errors": set(),
     "geometry": {"numpy"},
     "evopose": {"numpy", "scipy", "numba"},   # the pose search: no image processing, no files (docs/design.md)
     "vision": {"numpy", "scipy", "cv2"},
@@ -96,7 +100,7 @@ def test_each_room_imports_only_what_it_may(path):
     room = _room(module)
     if room is None:
         return
-    allowed = ALLOWED[room]
+    allowed = ALLOWED[room] | EVERYWHERE
     for name in _top_level_imports(path):
         top = name.split(".")[0]
         if top in PROJECT:
@@ -240,3 +244,18 @@ def test_the_vehicle_runtime_holds_no_lock_and_dispatches_on_no_share_mode_strin
     compared = [n for n in names if f'== "{n}"' in source or f'"{n}" in' in source or f'== "{n}"'.replace('"', "'")
                 in source]
     assert not compared, compared
+
+
+def test_every_error_class_of_the_project_derives_from_the_one_root():
+    """The CLI's error edge catches one type (agents/cli/main.py): every package's ``...Error`` is an EvoPoseError."""
+    import importlib
+
+    from evopose_errors import EvoPoseError
+
+    errors = [(_module_name(path), node.name) for path in _modules()
+              for node in ast.walk(ast.parse(path.read_text(encoding="utf-8")))
+              if isinstance(node, ast.ClassDef) and node.name.endswith("Error")]
+    assert len(errors) >= 20  # the check is not vacuous
+    outside = [f"{module}.{name}" for module, name in errors
+               if not issubclass(getattr(importlib.import_module(module), name), EvoPoseError)]
+    assert not outside
