@@ -25,7 +25,7 @@ want an object. Pure numpy: no I/O, no Zenoh.
 from __future__ import annotations
 
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -41,7 +41,7 @@ from .problem import Bounds, Model, PoseProblem, View
 from .refine import TRACK_SCHEDULE
 from .search import EvoPose, Told
 from .solver import Solution, solution_of, track
-from .estimator_state import Estimate, EstimatorState, SearchInProgress
+from .estimator_state import Estimate, EstimatorState, SearchInProgress, generator, random_key
 from .trust import assess, confirms
 
 #: Fitness values kept in a solution's history by :meth:`CooperativeEstimator.generation` (bounded memory).
@@ -93,7 +93,8 @@ class Cooperation:
     def estimate(self, st: EstimatorState, views: Sequence[View], *, knowledge: Sequence[Knowledge] = (),
                  hints: np.ndarray | None = None, frame: int = 0, budget_s: float | None = None,
                  candidates: np.ndarray | None = None, candidate_margin: float = 0.0,
-                 generations: int | None = None) -> tuple[EstimatorState, Estimate]:
+                 generations: int | None = None, clock: Callable[[], float] = time.perf_counter
+                 ) -> tuple[EstimatorState, Estimate]:
         """The next state and the pose at one frame from ``views`` (own and team-mates'), ``knowledge``, ``hints``.
 
         Parameters
@@ -121,11 +122,15 @@ class Cooperation:
         generations : int, optional
             A search from scratch runs this many generations in this call (``budget_s`` still caps it): slices
             that team-mates with the same views run alike, so their best so far agree too.
+        clock : callable () -> float
+            The clock, seconds (``time.perf_counter``): deadlines, the search's seconds and the instants a search
+            started and first matched closely are read on it. The random streams are the state's (each search's
+            ``key``), so the same state, inputs and clock readings give the same estimate and state.
         """
         if not views:
             raise ValueError("estimate needs at least one view")
         problem = self.problem(views, knowledge, hints)
-        deadline = None if budget_s is None else time.perf_counter() + budget_s
+        deadline = None if budget_s is None else clock() + budget_s
         st = replace(st, frame=frame)
         start = self.start(st, problem, candidates, candidate_margin)
         if start is not None:
@@ -139,22 +144,24 @@ class Cooperation:
                              hints=extra if len(extra) else None, search_when_lost=False)
             if solution.converged:
                 st, solution = self._confirmed(replace(st, search=None), solution, problem, frame, deadline,
-                                               generations)
-                return self._keep(st, solution, problem, False, time.perf_counter())
+                                               generations, clock)
+                return self._keep(st, solution, problem, False, clock())
             if st.search is None:  # lost: search again, with the lost pose as a hint
                 st = replace(st, last=None)
                 problem = problem.with_hints(np.concatenate([problem.hints, solution.pose[None]]))
         if st.search is None:
-            optimiser = EvoPose(problem, self.options, np.random.default_rng([self.seed, frame]))
+            optimiser = EvoPose(problem, self.options)
             run = Run(optimiser.start(), Told(0, np.inf, False, None), Evaluator.for_search(problem, self.options),
                       0.0)
-            st = replace(st, search=SearchInProgress(optimiser, run, problem, frame, time.perf_counter()))
+            st = replace(st, search=SearchInProgress(optimiser, run, problem, frame, clock(),
+                                                     key=random_key(self.seed, frame)))
         else:
             st = replace(st, search=st.search.with_hints(hints))
-        return self._advance(st, deadline, problem, generations)
+        return self._advance(st, deadline, problem, generations, clock)
 
     def _confirmed(self, st: EstimatorState, solution: Solution, problem: PoseProblem, frame: int,
-                   deadline: float | None, generations: int | None) -> tuple[EstimatorState, Solution]:
+                   deadline: float | None, generations: int | None, clock: Callable[[], float]
+                   ) -> tuple[EstimatorState, Solution]:
         """A tracked pose that is not confident (its chain of warm starts broke, or began at a team-mate's best)
         is confirmed by a global search in slices beside the tracking: confident when that search, which sees
         every basin, finds this pose confidently; replaced when it finds another basin confidently."""
@@ -162,15 +169,18 @@ class Cooperation:
             return replace(st, confirm=None), solution
         search = st.confirm
         if search is None:
-            optimiser = EvoPose(problem, self.options, np.random.default_rng([self.seed, frame, 2]))
+            optimiser = EvoPose(problem, self.options)
             evaluator = Evaluator.for_search(problem, self.options)
             search = SearchInProgress(optimiser, Run(optimiser.start(), Told(0, np.inf, False, None), evaluator, 0.0),
-                             problem, frame, time.perf_counter(), anchor=np.array(solution.pose))
+                                      problem, frame, clock(), anchor=np.array(solution.pose),
+                                      key=random_key(self.seed, frame, 2))
         until = None if generations is None else search.run.told.generation + generations
+        rng = generator(search.key)
         run = evolve(search.optimiser, search.run.state, search.run.evaluator, deadline=deadline,
-                     elapsed_before=search.run.seconds, until_generation=until, time_budget=self.options.time_budget)
+                     elapsed_before=search.run.seconds, until_generation=until, time_budget=self.options.time_budget,
+                     rng=rng, clock=clock)
         if not run.finished:
-            return replace(st, confirm=replace(search, run=run)), solution
+            return replace(st, confirm=replace(search, run=run, key=rng.bit_generator.state)), solution
         st = replace(st, confirm=None)
         found = solution_of(search.problem, self.options, run, run.seconds)
         if not (found.converged and found.confident):
@@ -244,7 +254,8 @@ class Cooperation:
         return pool[np.any(np.abs(pool - start) > 1e-9, axis=1)]
 
     def _advance(self, st: EstimatorState, deadline: float | None, current: PoseProblem | None,
-                 generations: int | None = None) -> tuple[EstimatorState, Estimate]:
+                 generations: int | None = None, clock: Callable[[], float] = time.perf_counter
+                 ) -> tuple[EstimatorState, Estimate]:
         """Resume the search in progress until ``deadline`` (or for ``generations``); a finished converged search is
         tracked onto ``current``."""
         search = st.search
@@ -253,15 +264,16 @@ class Cooperation:
         def watch(state) -> None:
             nonlocal close_at
             if close_at is None and self.options.is_close(state.best_match):
-                close_at = time.perf_counter()
+                close_at = clock()
 
         until = None if generations is None else search.run.told.generation + generations
+        rng = generator(search.key)
         run = evolve(search.optimiser, search.run.state, search.run.evaluator, on_generation=watch,
                      deadline=deadline, elapsed_before=search.run.seconds, until_generation=until,
-                     time_budget=self.options.time_budget)
+                     time_budget=self.options.time_budget, rng=rng, clock=clock)
         solution = solution_of(search.problem, self.options, run, run.seconds)
         if not run.finished:
-            st = replace(st, search=replace(search, run=run, close_at=close_at))
+            st = replace(st, search=replace(search, run=run, close_at=close_at, key=rng.bit_generator.state))
             return st, Estimate(solution, self._mismatch_in(solution), False, None)
         st = replace(st, search=None)
         if not solution.converged:
@@ -275,8 +287,8 @@ class Cooperation:
                                          from_hint=solution.from_hint)
         return self._keep(st, solution, current or search.problem, True, close_at)
 
-    def generation(self, st: EstimatorState, hints: np.ndarray | None = None,
-                   budget_s: float | None = None) -> tuple[EstimatorState, Estimate | None]:
+    def generation(self, st: EstimatorState, hints: np.ndarray | None = None, budget_s: float | None = None,
+                   clock: Callable[[], float] = time.perf_counter) -> tuple[EstimatorState, Estimate | None]:
         """Improve the estimate between frames; no estimate before the first one.
 
         With a search from scratch in progress: resume it for up to ``budget_s`` (hints join its population).
@@ -285,17 +297,16 @@ class Cooperation:
         """
         if st.search is not None:
             st = replace(st, search=st.search.with_hints(hints))
-            deadline = time.perf_counter() + (budget_s if budget_s is not None else 0.0)
-            return self._advance(st, deadline, None)
+            deadline = clock() + (budget_s if budget_s is not None else 0.0)
+            return self._advance(st, deadline, None, clock=clock)
         if st.last is None or st.evaluator is None:
             return st, None
         bounds = st.last.problem.bounds if st.last.problem is not None else self.bounds
-        local = LocalSearch(bounds, np.random.default_rng([self.seed, 1, st.idle]), children=GENERATION_CHILDREN,
-                            child_step=(CHILD_STEP_POSITION, CHILD_STEP_ANGLE))
+        local = LocalSearch(bounds, children=GENERATION_CHILDREN, child_step=(CHILD_STEP_POSITION, CHILD_STEP_ANGLE))
         state = local.start(st.last.pose, st.best_fitness)
         if hints is not None and np.size(hints):
             state = local.inject(state, hints)
-        run = evolve(local, state, st.evaluator)
+        run = evolve(local, state, st.evaluator, rng=np.random.default_rng([self.seed, 1, st.idle]))
         st = replace(st, idle=st.idle + 1)
         if run.told.improved:
             best = run.state

@@ -50,20 +50,37 @@ class Estimate:
         return bool(self.solution.converged)
 
 
+def random_key(*seed: int) -> dict:
+    """The random stream seeded by ``seed`` as a value: the state of numpy's default bit generator (PCG64), which
+    :func:`generator` turns back into a generator at that point of the stream."""
+    return np.random.default_rng(list(seed)).bit_generator.state
+
+
+def generator(key: dict) -> np.random.Generator:
+    """A new generator at the point of the stream ``key`` (:func:`random_key`, or a generator's
+    ``bit_generator.state`` after it drew): the same key gives the same draws, however often it is used."""
+    rng = np.random.Generator(np.random.PCG64())
+    rng.bit_generator.state = key
+    return rng
+
+
 @dataclass(frozen=True, eq=False)
 class SearchInProgress:
     """A global search in progress (the first pose, after tracking was lost, or confirming a tracked pose), resumed
-    slice by slice."""
+    slice by slice. A value: the optimiser holds constant rules only, and the search's random stream is ``key``
+    (its point after the last slice), so resuming the same value twice gives the same result."""
 
     optimiser: EvoPose
     run: Run
     problem: PoseProblem
     frame: int
-    #: perf_counter when it started, and when its best first matched closely (or None)
+    #: the clock's instant when it started, and when its best first matched closely (or None)
     started: float
     close_at: float | None = None
     #: a confirming search: the tracked pose at the frame it started (its answer is compared with this)
     anchor: np.ndarray | None = None
+    #: where its random stream stands (:func:`random_key`): each slice draws from :func:`generator` of it
+    key: dict | None = None
 
     def with_hints(self, hints: np.ndarray | None) -> "SearchInProgress":
         """The search with team-mates' poses ``hints`` (H, 6) queued for its next generation."""
@@ -130,4 +147,4 @@ class EstimatorState:
         return None if self.last is None else np.array(self.last.pose)
 
 
-__all__ = ["Estimate", "EstimatorState", "SearchInProgress"]
+__all__ = ["Estimate", "EstimatorState", "SearchInProgress", "generator", "random_key"]

@@ -150,9 +150,9 @@ def solve(problem: PoseProblem, options: SearchOptions | None = None,
     """
     t0 = time.perf_counter()
     options = options or SearchOptions()
-    evo = EvoPose(problem, options, _rng(seed))
+    evo = EvoPose(problem, options)
     run = evolve(evo, evo.start(initial), Evaluator.for_search(problem, options), hint_source=hint_source,
-                 on_generation=on_generation, time_budget=options.time_budget)
+                 on_generation=on_generation, time_budget=options.time_budget, rng=_rng(seed))
     return solution_of(problem, options, run, time.perf_counter() - t0)
 
 

@@ -102,11 +102,11 @@ def test_fixed_parameter_never_moves():
 
 def test_good_hint_enters_and_wins_bad_hint_dies():
     sp = make_problem("box", np.random.default_rng(31), noise=1.0, clutter=0.2, missing=0.1)
-    evo = EvoPose(sp.problem, SearchOptions(), np.random.default_rng(0))
+    evo, rng = EvoPose(sp.problem, SearchOptions()), np.random.default_rng(0)
     objective = PoseObjective(sp.problem)
 
     def generation(state):
-        state, asked = evo.ask(state)
+        state, asked = evo.ask(state, rng)
         return asked, *evo.tell(state, asked, asked.candidates, objective(asked.candidates), judge=objective.match)
 
     asked, state, told = generation(evo.start())
@@ -129,10 +129,10 @@ def test_good_hint_enters_and_wins_bad_hint_dies():
 def test_ask_tell_state_is_immutable():
     """Only EvoPose makes states, and every call returns a new one: the old state stays as it was."""
     sp = make_problem("box", np.random.default_rng(12), noise=1.0, clutter=0.1, missing=0.0)
-    evo = EvoPose(sp.problem, SearchOptions(), np.random.default_rng(0))
+    evo, rng = EvoPose(sp.problem, SearchOptions()), np.random.default_rng(0)
     objective = PoseObjective(sp.problem)
     start = evo.start()
-    state, asked = evo.ask(start)
+    state, asked = evo.ask(start, rng)
     assert start.next_origin == 0 and state.next_origin == len(asked.candidates) and asked.fresh.all()
     told_state, told = evo.tell(state, asked, asked.candidates, objective(asked.candidates))
     assert len(state.population) == 0 and state.generation == 0 and state.history == ()
@@ -155,11 +155,11 @@ def test_a_user_written_ask_tell_loop_reaches_solve_s_result(kind, seed, n_views
         junk = np.random.default_rng(1).uniform([100, 100], [540, 380], (15, 2))
         sp = replace(sp, problem=sp.problem.with_views([sp.problem.views[0], View(sp.problem.views[1].camera, junk)]))
     options = SearchOptions()
-    evo = EvoPose(sp.problem, options, np.random.default_rng(5))
+    evo, rng = EvoPose(sp.problem, options), np.random.default_rng(5)
     evaluator = Evaluator.for_search(sp.problem, options)
     state, told = evo.start(), None
     while told is None or told.stop_reason is None:
-        state, asked = evo.ask(state)
+        state, asked = evo.ask(state, rng)
         asked = evaluator.screen(asked)
         poses, fitness = evaluator(asked)
         state, told = evo.tell(state, asked, poses, fitness, judge=evaluator.objective.match,

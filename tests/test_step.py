@@ -3,6 +3,7 @@ and candidate exchange at the paper's image scale (exp2-paper-scale: the Pioneer
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import replace
 
 import numpy as np
@@ -12,6 +13,7 @@ from agents.vehicle.frames import SimulatedCamera
 from agents.vehicle.hints import HintInbox
 from agents.vehicle.step import POLICIES, FrameInputs, VehicleState, idle, share, share_policy, step
 from agents.vehicle.team_views import Staleness, TeamViews, build_views, mate_view, own_view
+from evopose import SearchOptions
 from evopose.cooperative import Cooperation, CooperativeEstimator
 from protocol import PoseEstimate, Topic, decode, encode
 from protocol.hint import Hint
@@ -142,6 +144,45 @@ def test_a_search_in_slices_ends_where_the_whole_search_ends(paper_scale):
         estimate = sliced.generation(budget_s=0.0)
     assert not sliced.searching and estimate.converged == whole.converged
     np.testing.assert_array_equal(estimate.pose, whole.pose)
+
+
+def _ticking():
+    """A clock for one call: 1 ms per reading from 0 (a fresh one gives the same readings)."""
+    readings = itertools.count()
+    return lambda: next(readings) * 1e-3
+
+
+def test_the_same_state_and_inputs_give_the_same_frame(paper_scale):
+    """State that is a value: the random streams are in the state (a search's ``key``), the time is an input
+    (``FrameInputs.clock``); a search from scratch left unfinished by frame 0 is resumed twice from the same state,
+    and both frames, their messages and the states they leave are the same."""
+    scenario, frames = paper_scale
+    state, _, _ = step(_state(scenario, "H1", "features"), FrameInputs(0, _own(frames, "H1", 0), clock=_ticking()))
+    assert state.estimator.searching  # a few generations a frame: the search goes on at frame 1
+    key = dict(state.estimator.search.key)
+    outcomes = [step(state, FrameInputs(1, _own(frames, "H1", 1), clock=_ticking())) for _ in range(2)]
+    (one, sent_one, event_one), (two, sent_two, event_two) = outcomes
+    assert state.estimator.search.key == key  # resuming did not change the state it started from
+    assert [m.model_dump() for m in sent_one] == [m.model_dump() for m in sent_two]
+    assert (event_one.pose, event_one.trust, event_one.seconds) == (event_two.pose, event_two.trust, event_two.seconds)
+    assert np.array_equal(one.estimator.current_best, two.estimator.current_best)
+    assert one.estimator.searching == two.estimator.searching
+    assert one.estimator.search is None or one.estimator.search.key == two.estimator.search.key
+
+
+def test_ask_draws_from_the_generator_it_is_given():
+    from evopose.search import EvoPose
+
+    from benchmarks.problems import make_paper_scale_problem
+
+    problem = make_paper_scale_problem(np.random.default_rng(1)).problem
+    evo = EvoPose(problem, SearchOptions())
+    start = evo.start()
+    _, first = evo.ask(start, np.random.default_rng(7))
+    _, again = evo.ask(start, np.random.default_rng(7))
+    _, other = evo.ask(start, np.random.default_rng(8))
+    assert np.array_equal(first.candidates, again.candidates) and not np.array_equal(first.candidates,
+                                                                                      other.candidates)
 
 
 def test_feature_sets_carry_the_best_and_team_mates_agree(paper_scale):

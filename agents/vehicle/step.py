@@ -1,6 +1,8 @@
 """A camera vehicle's frame as one transition, pure: ``step(state, inputs) -> (state', messages, FrameEvent)``.
 
-No Zenoh, no clock, no threads, as the search is ask/tell (docs/architecture.md, "A frame's path"). The state is
+No Zenoh, no threads, and no clock of its own: the time is an input (:attr:`FrameInputs.clock`), and so is every
+random stream (the estimator state's), so the same state and inputs give the same result, as the search is ask/tell
+(docs/architecture.md, "A frame's path"). The state is
 frozen (:class:`VehicleState`: the vehicle's constant rules and its :class:`evopose.cooperative.EstimatorState`);
 every rule that depends on ``--share`` is one :class:`SharePolicy` value; whether to trust the estimate is
 :func:`evopose.trust.judge`'s (one :class:`evopose.trust.Trust`). The runtime (:mod:`agents.vehicle.roles`) acquires the
@@ -11,7 +13,7 @@ between frames it calls :func:`idle`. Tests call all three directly.
 from __future__ import annotations
 
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -141,6 +143,9 @@ class FrameInputs:
         The newest hint of a team-mate (hint mode), weighed against the own best with :data:`HINT_MARGIN`.
     budget_s : float or None
         Seconds a search from scratch may take in this frame (None: until it stops).
+    clock : callable () -> float
+        The time, seconds (``time.perf_counter`` at run time): the frame's seconds, the search's deadline and the
+        instants it records are read on it, never on a clock of the step's own.
     """
 
     index: int
@@ -151,6 +156,7 @@ class FrameInputs:
     truth: np.ndarray | None = None
     latest_hint: np.ndarray | None = None
     budget_s: float | None = None
+    clock: Callable[[], float] = time.perf_counter
 
 
 def _header(state: VehicleState, stamp_ns: int) -> dict:
@@ -195,7 +201,7 @@ def step(state: VehicleState, inputs: FrameInputs) -> tuple[VehicleState, list[M
     views, used = build_views([own, *inputs.mates])
     if not views:
         return state, [], FrameEvent.none(state.vehicle, inputs.index, len(own.points), "too few image points")
-    t0 = time.perf_counter()
+    t0 = inputs.clock()
     candidates = [m.best for m in inputs.mates if m.best is not None]
     margin = 0.0
     if inputs.latest_hint is not None:  # hints: a team-mate's pose that fits the own views about as well wins
@@ -203,8 +209,8 @@ def step(state: VehicleState, inputs: FrameInputs) -> tuple[VehicleState, list[M
     estimator, estimate = state.cooperation.estimate(
         state.estimator, views, knowledge=inputs.knowledge, hints=inputs.hints, frame=inputs.index,
         budget_s=inputs.budget_s, candidates=np.array(candidates) if candidates else None, candidate_margin=margin,
-        generations=policy.generations_per_frame(sum(len(view.points) for view in views)))
-    seconds = time.perf_counter() - t0
+        generations=policy.generations_per_frame(sum(len(view.points) for view in views)), clock=inputs.clock)
+    seconds = inputs.clock() - t0
     sol = estimate.solution
     # what goes out is the track's fused pose (evopose/pose_filter.py): a good frame that jumped off it is set aside
     published = state.published or PoseFilter.of_rules(state.cooperation.options.confidence)
@@ -232,12 +238,12 @@ def step(state: VehicleState, inputs: FrameInputs) -> tuple[VehicleState, list[M
     return state, messages, event
 
 
-def idle(state: VehicleState, hints: np.ndarray | None, budget_s: float | None
-         ) -> tuple[VehicleState, list[Hint], Estimate | None]:
+def idle(state: VehicleState, hints: np.ndarray | None, budget_s: float | None,
+         clock: Callable[[], float] = time.perf_counter) -> tuple[VehicleState, list[Hint], Estimate | None]:
     """One generation between frames (:meth:`Cooperation.generation`) with the hints that arrived; a best in the
     right basin (converged and confident, precise or not) goes out as a hint when the policy sends hints (a
     search's best so far, or an unsure pose, is no hint)."""
-    estimator, estimate = state.cooperation.generation(state.estimator, hints, budget_s)
+    estimator, estimate = state.cooperation.generation(state.estimator, hints, budget_s, clock)
     state = replace(state, estimator=estimator)
     if estimate is not None and state.policy.sends_hints and judge(estimate.solution).in_right_basin:
         return state, [Hint(tuple(float(v) for v in estimate.pose))], estimate
