@@ -73,16 +73,22 @@ def test_a_driving_pioneer_is_tracked_and_both_helicopters_agree(world):
 
 
 def test_a_team_mates_hint_pulls_a_vehicle_out_of_a_wrong_basin():
-    """Exp. 2(b) at paper scale: H2 is put in a wrong basin (the Pioneer turned half a turn); H1's pose, sent as a
-    hint, fits H2's own image about as well or better, so H2's estimate takes it."""
+    """Exp. 2(b) at paper scale: H2 is put in a wrong basin (the Pioneer turned half a turn) and stays there; H1's
+    own estimate from its own image, sent as a hint, fits H2's image about as well or better, so H2's estimate
+    takes it."""
     scenario = load_scenario("exp2-paper-scale")
     frame = SimulatedCamera(scenario, "H2").acquire(0, 0)
     views, _ = build_views([own_view("H2", 0, frame.camera, frame.points)])
+    mate = SimulatedCamera(scenario, "H1").acquire(0, 0)
+    mate_views, _ = build_views([own_view("H1", 0, mate.camera, mate.points)])
+    hint = CooperativeEstimator(scenario.model.evopose_model(), scenario.bounds(), seed=3).estimate(mate_views,
+                                                                                                    frame=0).pose
     estimator = CooperativeEstimator(scenario.model.evopose_model(), scenario.bounds(), seed=3)
     wrong = frame.truth + np.array([0.0, 0.0, 0.0, 0.0, 0.0, np.pi])
     first = estimator.estimate(views, frame=0, candidates=wrong[None], candidate_margin=0.0)
-    hinted = estimator.estimate(views, frame=1, candidates=frame.truth[None], candidate_margin=0.1)
-    assert first.converged
+    hinted = estimator.estimate(views, frame=1, candidates=hint[None], candidate_margin=0.1)
+    assert first.converged and abs(angle_difference(first.pose[5], frame.truth[5])) > np.radians(90.0)  # wrong
+    assert not np.array_equal(hint, frame.truth)  # the team-mate's estimate, not the truth
     yaw_error = abs(angle_difference(hinted.pose[5], frame.truth[5]))
     assert hinted.converged and yaw_error < np.radians(2.0)
 
