@@ -355,8 +355,8 @@ def track(previous: Solution, new_views: list[View] | tuple[View, ...], *, probl
         reference = previous.track_reference or TrackReference.of(previous.pose, previous.covariance)
         expected = None if reference is None else reference.predicted(
             np.asarray(options.confidence.track_motion, float))  # this frame's: a frame's motion on
-        on_track = (previous.confident or chained is not None) and tracked
-        confidence = track_confidence(expected, on_track, current, basin, options.confidence)
+        chain_holds = (previous.confident or chained is not None) and tracked
+        confidence = track_confidence(expected, chain_holds, current, basin, options.confidence)
         pose, confidence = published(objective, basin, confidence)
         if confidence.confident:  # this frame joins the track's pose
             reference = expected.fused(pose, confidence.covariance.matrix)

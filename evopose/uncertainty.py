@@ -114,8 +114,8 @@ class TrackReference:
     """Eq. (2)'s chain of confident tracked frames as one estimate of the target's pose, for the tracking gate.
 
     Each confident frame's pose is fused in by its covariance (a Kalman update), and between frames the fused
-    pose's covariance grows by the motion allowance (``evopose.trust.ConfidenceRules.track_motion``: a random walk). A single
-    frame at the paper's scale knows its rotation to 2-5 deg (marks 3-5 px apart), so a frame that takes a
+    pose's covariance grows by the motion allowance (``ConfidenceRules.track_motion``, :mod:`evopose.trust`: a random
+    walk). A single frame at the paper's scale knows its rotation to 2-5 deg (marks 3-5 px apart), so a frame that takes a
     neighbouring basin (its points paired with the marks beside their own) can move 10 deg and still lie within
     4 sigma of the last frame; the chain's pose, known to a fraction of that when the target moves little, shows it.
 

@@ -10,7 +10,8 @@ from .keys import (ALIVE, ROOT, Topic, TopicKey, alive_key, alive_selector, chec
                    parse_alive_key, parse_key, topic_key, topic_selector)
 from .limits import HINT_SIZE, MAX_FEATURE_POINTS, SIZE_LIMITS, size_limit
 from .messages import (MESSAGE_TYPES, PREVIOUS_SCHEMA_VERSION, SCHEMA_VERSION, Attitude, CameraInfo, FeatureSet, Hint,
-                       ImageFrame, Message, Payload, PoseEstimate, Stats, pack_points, quaternion_from_euler, unpack_points)
+                       ImageFrame, Message, Payload, PoseEstimate, Stats, pack_points, quaternion_from_euler,
+                       unpack_points)
 from .qos import QOS, TopicQoS
 
 __all__ = [

@@ -20,7 +20,7 @@ from .limits import FEATURE_POINT_SIZE, MAX_FEATURE_POINTS
 
 #: Version of the message schema; a receiver rejects any other (SchemaMismatch) but the previous one.
 SCHEMA_VERSION = 3
-#: The previous version, still decoded (:func:`protocol.codec.decode` upgrades it) for one version: docs/protocol.md §6.
+#: The previous version, still decoded for one version (:func:`protocol.codec.upgraded`): docs/protocol.md §6.
 PREVIOUS_SCHEMA_VERSION = 2
 
 Float = Annotated[float, Field(allow_inf_nan=False)]

@@ -181,7 +181,7 @@ def test_a_datasets_frame_is_stamped_with_the_tick_it_was_taken_at_however_late_
 def test_a_team_playing_a_recording_behind_the_wall_clock_still_pairs_its_views(datasets):
     # H1 and H2 play the recording at 1000 frames/s, faster than they can process it: every frame is played (none
     # skipped), so the team falls further behind the wall clock each frame, past --max-age 0.1 s. Staleness is
-    # judged at the instant played (FleetBus.set_playback_lag), so a team-mate's view of that very instant is not
+    # judged at the instant played (FleetBus.playback), so a team-mate's view of that very instant is not
     # refused as stale (on the wall clock it was, and each then solved a problem of its own)
     exp2, _ = datasets
     epoch, port = time.time_ns() + int(3e9), free_port()

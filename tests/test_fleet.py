@@ -101,7 +101,8 @@ def test_meter_matches_what_was_sent(fleet):
                                                  (("ugv1", "image"), 10, 0.2)):
         published = sent[f"evopose/{fleet.fleet}/{vehicle}/{topic}"]
         expected = rate_hz * published["bytes"] / published["sent"]
-        assert keys[f"evopose/{fleet.fleet}/{vehicle}/{topic}"]["bandwidth_Bps"] == pytest.approx(expected, rel=tolerance)
+        measured = keys[f"evopose/{fleet.fleet}/{vehicle}/{topic}"]["bandwidth_Bps"]
+        assert measured == pytest.approx(expected, rel=tolerance)
     assert hint["bandwidth_Bps"] == pytest.approx(4800, rel=0.15)
     # the agents' own counts, from their Stats
     agents = summary["agents"]

@@ -7,7 +7,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from benchmarks.problems import in_right_basin, is_success, make_paper_scale_problem, make_problem, pose_errors
+from benchmarks.problems import in_true_basin, is_success, make_paper_scale_problem, make_problem, pose_errors
 from evopose import Bounds, Evaluator, EvoPose, PoseObjective, PoseProblem, SearchOptions, View, refine, solve, track
 from evopose.fitness import TAU_MIN_PX
 from geometry import PARAM_NAMES
@@ -304,7 +304,7 @@ def test_mutual_fitness_keeps_the_right_basin_where_the_chamfer_sum_prefers_a_fl
     sp = make_paper_scale_problem(np.random.default_rng([13, seed]), cameras=("H1",), noise=1.3, clutter=0.2)
     mutual = solve(sp.problem, seed=0)
     robust = solve(sp.problem, SearchOptions(fitness="robust", view_reject=0.6), seed=0)
-    assert in_right_basin(sp, mutual.pose) and not in_right_basin(sp, robust.pose)
+    assert in_true_basin(sp, mutual.pose) and not in_true_basin(sp, robust.pose)
     both = np.stack([mutual.pose, robust.pose])
     assert PoseObjective(sp.problem, "robust")(both)[1] < PoseObjective(sp.problem, "robust")(both)[0]
     assert PoseObjective(sp.problem, "mutual")(both)[0] < PoseObjective(sp.problem, "mutual")(both)[1]
@@ -318,7 +318,7 @@ def test_paper_scale_in_the_issue_s_setting():
                                       noise=1.0, clutter=0.25)
         assert PoseObjective(sp.problem).taus[0] == TAU_MIN_PX  # marks closer than 8 px: the 4-sigma floor
         solution = solve(sp.problem, seed=0)
-        assert in_right_basin(sp, solution.pose), i
+        assert in_true_basin(sp, solution.pose), i
         assert np.all(np.isfinite(solution.covariance))
 
 

@@ -298,7 +298,7 @@ class CameraVehicle(Vehicle):
         frame = self.camera.acquire(n, self.clock.stamp_ns(n))
         stamp = frame.stamp_ns  # when the image was taken: tick n's, or a recording's own instant (dataset_source)
         # the instant this vehicle is at: a recording played behind the wall clock judges team-mates' data there
-        self.bus.set_playback_lag(time.time_ns() - stamp)
+        self.bus.playback.play_behind(time.time_ns() - stamp)
         self.record.render_cpu_s += frame.render_cpu_s
         if self._image_ready is None:
             self._image_ready = t_acquire + frame.render_s

@@ -192,9 +192,9 @@ def step(state: VehicleState, inputs: FrameInputs) -> tuple[VehicleState, list[M
     """One frame of a camera vehicle: eq. (1)-(4) on the own and team-mates' views, with knowledge and hints.
 
     The estimate is published as a ``pose`` (``good``: the :class:`evopose.trust.Trust` is good); with
-    ``sends_hints`` an estimate in the right basin also goes out as a hint. Team-mates' ``best`` poses (sent with their feature sets) are weighed
-    against the own best on this frame's eq. (4): the fitter one is tracked, so that vehicles with the same views
-    publish the same pose. ``inputs.budget_s`` bounds a search from scratch in this frame: an unfinished search is
+    ``sends_hints`` an estimate in the right basin also goes out as a hint. Team-mates' ``best`` poses (sent with
+    their feature sets) are weighed against the own best on this frame's eq. (4): the fitter one is tracked, so that
+    vehicles with the same views publish the same pose. ``inputs.budget_s`` bounds a search from scratch in this frame: an unfinished search is
     resumed later and its best so far is published, not good.
     """
     own, policy = inputs.own, state.policy
