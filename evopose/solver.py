@@ -190,7 +190,7 @@ def solution_of(problem: PoseProblem, options: SearchOptions, run: Run, seconds:
     # matches judged on every view with its own weight: a view the step rule dropped still counts against a pose
     # (a wrong basin that fits one view and gave up the other must not look sure)
     confidence = assess(objective, pose, rivals, options.confidence,
-                        judge=objective.with_weights(objective.base_weights))
+                        matches_on=objective.with_weights(objective.base_weights))
     confidence = checked_in_time(confidence, checked)  # the other basins not polished in time: not sure
     if options.refine_steps and in_time:
         pose, confidence = published(objective, pose, confidence)
@@ -351,7 +351,7 @@ def track(previous: Solution, new_views: list[View] | tuple[View, ...], *, probl
         basin = np.array(best.best_pose)
         # confident only while the fit holds inside the previous uncertainty (no population to find rivals in)
         current = assess(objective, basin, None, options.confidence,
-                         judge=objective.with_weights(objective.base_weights))
+                         matches_on=objective.with_weights(objective.base_weights))
         reference = previous.track_reference or TrackReference.of(previous.pose, previous.covariance)
         expected = None if reference is None else reference.predicted(
             np.asarray(options.confidence.track_motion, float))  # this frame's: a frame's motion on

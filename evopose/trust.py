@@ -135,9 +135,9 @@ class Confidence:
         That alternative.
     reason : str
         Why not confident ("" when confident): "no covariance", "few matches", "unmatched marks", "loose fit",
-        "ambiguous" (and for tracking "previous not confident", "jumped").
+        "ambiguous" (for tracking "previous not confident", "jumped"; for a search past its time "out of time").
     sum_of_squares, runner_up_sum_of_squares : float
-        :func:`sum_of_squares` of the estimate and of the runner-up (inf when there is none).
+        :func:`evopose.uncertainty.sum_of_squares` of the estimate and of the runner-up (inf when there is none).
     """
 
     confident: bool
@@ -152,20 +152,20 @@ class Confidence:
 
 
 def assess(objective: PoseObjective, pose: np.ndarray, alternatives: np.ndarray | None = None,
-           rules: ConfidenceRules = ConfidenceRules(), judge: PoseObjective | None = None) -> Confidence:
+           rules: ConfidenceRules = ConfidenceRules(), matches_on: PoseObjective | None = None) -> Confidence:
     """Covariance and confidence of ``pose`` (6,) given the search's other basins ``alternatives`` (K, 6).
 
     The alternatives should be local optima of the same objective (the search's final population, polished):
     the best of them outside ``rules.distinct_sigmas`` of the estimate's covariance is the runner-up. The
     covariance and the margin use ``objective`` (eq. 4 with the weights in force); the match rules (pairs,
-    unmatched marks) use ``judge`` (default ``objective``): with every view at its own weight, a view the
+    unmatched marks) use ``matches_on`` (default ``objective``): with every view at its own weight, a view the
     step rule dropped still counts its unmatched marks against the pose.
     """
     pose = np.asarray(pose, float).reshape(6)
     matches = mutual_matches(objective, pose)
     cov = covariance(objective, pose, matches)
     s_best = sum_of_squares(objective, pose, matches)
-    judged = matches if judge is None else mutual_matches(judge, pose)
+    judged = matches if matches_on is None else mutual_matches(matches_on, pose)
     n_pairs, unmatched = judged.n_pairs, judged.unmatched()
     s_alt, runner_up = np.inf, None
     if cov.ok and alternatives is not None and len(alternatives):
@@ -188,7 +188,6 @@ def assess(objective: PoseObjective, pose: np.ndarray, alternatives: np.ndarray 
     return Confidence(reason == "", cov, n_pairs, unmatched, float(margin), runner_up, reason, s_best, s_alt)
 
 
-
 def imprecise(marks: np.ndarray, cov: np.ndarray, rules: ConfidenceRules = ConfidenceRules()) -> bool:
     """Whether a pose with covariance ``cov`` (6, 6) is too uncertain to act on, though perhaps in the right basin:
     the worst direction's position sigma over ``rules.max_position_sigma`` of the target's extent (the diagonal of
@@ -201,7 +200,6 @@ def imprecise(marks: np.ndarray, cov: np.ndarray, rules: ConfidenceRules = Confi
     extent = float(np.linalg.norm(np.ptp(marks, axis=0))) if len(marks) else 0.0
     position = float(np.sqrt(max(np.linalg.eigvalsh(cov[:3, :3]).max(), 0.0)))
     return position > rules.max_position_sigma * extent or rotation_sigma(cov) > rules.max_rotation_sigma
-
 
 
 def track_confidence(expected: TrackReference | None, previous_confident: bool, current: Confidence,
@@ -225,7 +223,6 @@ def track_confidence(expected: TrackReference | None, previous_confident: bool, 
             reason = "jumped"
     return Confidence(reason == "", cov, current.n_pairs, current.unmatched, current.margin, current.runner_up,
                       reason, current.sum_of_squares, current.runner_up_sum_of_squares)
-
 
 
 def checked_in_time(confidence: Confidence, rivals_checked: bool) -> Confidence:
