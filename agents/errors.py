@@ -1,9 +1,12 @@
-"""Exceptions of the fleet plumbing; the CLI turns :class:`FleetError` into ``error: ...`` and exit 2."""
+"""Exceptions of the fleet plumbing; the CLI turns every :class:`evopose_errors.EvoPoseError` (these too) into
+``error: ...`` and exit 2."""
 
 from __future__ import annotations
 
+from evopose_errors import EvoPoseError
 
-class FleetError(Exception):
+
+class FleetError(EvoPoseError):
     """Root of the errors a fleet command reports to its user as one line."""
 
 

@@ -8,7 +8,7 @@ Groups: the paper's image scale (the Pioneer seen by exp2-paper-scale's H1, H2, 
 telephoto scale (the synthetic box, airship, random points and grid, 150-350 px wide), 0.5-2 px noise and 0-30 %
 clutter; plus absent targets at both scales (only false points: clutter where the target would be, or pure noise
 over the image). "Right basin" is scale-free: at least half of the true marks identified one to one
-(:func:`benchmarks.problems.in_right_basin`); "accurate" is rotation < 5 deg and position < 5 % of the distance.
+(:func:`benchmarks.problems.in_true_basin`); "accurate" is rotation < 5 deg and position < 5 % of the distance.
 The rules of :class:`evopose.uncertainty.ConfidenceRules` were calibrated with ``--seed 2026``; the default seed
 reports on other problems. Times are CPU times per solve (the machine is shared).
 """
@@ -85,7 +85,7 @@ def one(task: tuple[str, int, int]) -> dict:
     from evopose import solve
 
     from .peers import pnp_oracle_views
-    from .problems import in_right_basin, is_success, marks_identified, pose_errors
+    from .problems import in_true_basin, is_success, marks_identified, pose_errors
 
     group, seed, index = task
     sp = make(group, seed, index)
@@ -107,7 +107,7 @@ def one(task: tuple[str, int, int]) -> dict:
     if absent:
         return rec
     rot, pos = pose_errors(sol.pose, sp.true_pose, sp.symmetries, sp.problem.model.points.mean(axis=0))
-    rec.update(right=bool(in_right_basin(sp, sol.pose)), identified=float(marks_identified(sp, sol.pose)),
+    rec.update(right=bool(in_true_basin(sp, sol.pose)), identified=float(marks_identified(sp, sol.pose)),
                accurate=bool(is_success(rot, pos, sp.distance)), rot_deg=float(np.rad2deg(rot)), pos_m=float(pos),
                errors=[float(x) for x in parameter_errors(sp, sol.pose)],
                within_size=bool(np.rad2deg(rot) <= 5.0
@@ -115,7 +115,7 @@ def one(task: tuple[str, int, int]) -> dict:
     rec["truth_fits_best"] = rec["right"] or truth_fits_best(sp, sol.pose)
     oracle = pnp_oracle_views(sp)
     o_rot, o_pos = pose_errors(oracle.pose, sp.true_pose, sp.symmetries, sp.problem.model.points.mean(axis=0))
-    rec.update(oracle_right=bool(in_right_basin(sp, oracle.pose)),
+    rec.update(oracle_right=bool(in_true_basin(sp, oracle.pose)),
                oracle_accurate=bool(is_success(o_rot, o_pos, sp.distance)))
     return rec
 
@@ -130,12 +130,12 @@ def truth_fits_best(sp, pose: np.ndarray) -> bool:
     from evopose.refine import refine
     from evopose.solver import POLISH_SCHEDULE
 
-    from .problems import in_right_basin
+    from .problems import in_true_basin
 
     objective = PoseObjective(sp.problem)
     found = float(objective(np.asarray(pose, float)[None])[0])
     polished, fitness = refine(objective, sp.true_pose[None], None, POLISH_SCHEDULE)
-    return bool(in_right_basin(sp, polished[0]) and fitness[0] <= found + 1e-9)
+    return bool(in_true_basin(sp, polished[0]) and fitness[0] <= found + 1e-9)
 
 
 def _taus(sp) -> list[float]:

@@ -16,7 +16,7 @@ A third group is harder than the two worlds (whose robot stands still): the synt
 
 Per rule and condition: position and rotation errors (medians, and the share within 5 deg and 5 % of the distance:
 "accurate"), the right-basin rate (at least half of the visible true marks identified one to one,
-:func:`benchmarks.problems.in_right_basin`), the share called confident and the precision of confident (right
+:func:`benchmarks.problems.in_true_basin`), the share called confident and the precision of confident (right
 basin among the confident), and H2's final weight over H1's.
 """
 
@@ -120,7 +120,7 @@ def one(task: tuple[str, str, int, str]) -> dict:
     """Solve one frame of one world with one rule; what the benchmark needs of it."""
     from evopose import SearchOptions, solve
 
-    from .problems import in_right_basin, is_success, pose_errors
+    from .problems import in_true_basin, is_success, pose_errors
 
     scale, world, frame, rule = task
     sp = synthetic_problem(world, frame) if world.startswith("synthetic") else frame_problem(world, frame)
@@ -130,7 +130,7 @@ def one(task: tuple[str, str, int, str]) -> dict:
     rot, pos = pose_errors(sol.pose, sp.true_pose, sp.symmetries, sp.problem.model.points.mean(axis=0))
     w = np.asarray(sol.view_weights, float)
     return {"scale": scale, "world": world, "degraded": "degraded" in world, "frame": frame, "rule": rule,
-            "rot_deg": float(np.rad2deg(rot)), "pos_m": float(pos), "right": bool(in_right_basin(sp, sol.pose)),
+            "rot_deg": float(np.rad2deg(rot)), "pos_m": float(pos), "right": bool(in_true_basin(sp, sol.pose)),
             "accurate": bool(is_success(rot, pos, sp.distance)), "confident": bool(sol.confident),
             "w_ratio": float(w[1] / w[0]) if w[0] > 0 else float("inf"), "seconds": seconds,
             "points": sp.meta["points"]}

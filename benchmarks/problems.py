@@ -347,10 +347,10 @@ def marks_identified(sp: SyntheticProblem, pose: np.ndarray, tau: float | None =
     return best
 
 
-def in_right_basin(sp: SyntheticProblem, pose: np.ndarray, tau: float | None = None) -> bool:
+def in_true_basin(sp: SyntheticProblem, pose: np.ndarray, tau: float | None = None) -> bool:
     """The right basin: at least half of the true marks identified (:func:`marks_identified`)."""
     return marks_identified(sp, pose, tau) >= 0.5
 
 
-__all__ = ["KINDS", "SyntheticProblem", "absent_target", "euler_from_rotation", "in_right_basin", "is_success",
+__all__ = ["KINDS", "SyntheticProblem", "absent_target", "euler_from_rotation", "in_true_basin", "is_success",
            "make_paper_scale_problem", "make_problem", "marks_identified", "pose_errors"]

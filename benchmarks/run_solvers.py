@@ -8,7 +8,7 @@ group, by IPOP-CMA-ES on the same fitness with an evaluation budget; the machine
 shared and noisy, so ratios between solvers measured side by side are what to quote, and
 times are CPU times of the one process.
 Success is accuracy: rotation error < 5 deg and position error < 5 % of the distance. The right basin is
-scale-free: at least half of the true marks identified one to one (:func:`benchmarks.problems.in_right_basin`);
+scale-free: at least half of the true marks identified one to one (:func:`benchmarks.problems.in_true_basin`);
 at the paper's image scale (the Pioneer ~25 px wide) noise alone costs more than 5 deg.
 """
 
@@ -25,7 +25,7 @@ import numpy as np
 from evopose import SearchOptions, solve
 
 from .peers import cma_solve, pnp_oracle
-from .problems import (KINDS, SyntheticProblem, in_right_basin, is_success, make_paper_scale_problem, make_problem,
+from .problems import (KINDS, SyntheticProblem, in_true_basin, is_success, make_paper_scale_problem, make_problem,
                        pose_errors)
 from .report import md_table, provenance, write_section
 
@@ -71,7 +71,7 @@ class Run:
     def add(self, solver: str, problem: int, group: str, sp: SyntheticProblem, pose: np.ndarray, seconds: float,
             evaluations: int) -> Outcome:
         rot, pos = pose_errors(pose, sp.true_pose, sp.symmetries, sp.problem.model.points.mean(axis=0))
-        out = Outcome(solver, problem, group, sp.kind, is_success(rot, pos, sp.distance), in_right_basin(sp, pose),
+        out = Outcome(solver, problem, group, sp.kind, is_success(rot, pos, sp.distance), in_true_basin(sp, pose),
                       float(np.rad2deg(rot)), pos,
                       pos / sp.distance, seconds, evaluations, len(sp.problem.model.points),
                       sum(len(v.points) for v in sp.problem.views), min(len(c[0]) for c in sp.correspondences))

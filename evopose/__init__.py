@@ -12,12 +12,12 @@ from .problem import Bounds, Model, PoseProblem, View
 from .refine import refine
 from .search import Ask, EvoPose, EvoPoseState, Told
 from .solver import Solution, pose_mismatch, solve, track
-from .uncertainty import Confidence, ConfidenceRules, assess
+from .trust import Confidence, ConfidenceRules, Trust, assess, judge
 
 __all__ = [
     "Ask", "Bounds", "Camera", "Confidence", "ConfidenceRules", "Evaluator", "EvoPose", "EvoPoseState", "FilteredPose",
     "LocalSearch", "LocalState", "Match", "Model", "PARAM_NAMES", "PoseFilter", "PoseObjective", "PoseProblem",
-    "SearchOptions", "Solution", "Told",
+    "SearchOptions", "Solution", "Told", "Trust",
     "View", "assess", "evolve", "matrix_from_pose", "pose_from_matrix", "pose_mismatch", "quaternion_from_euler",
-    "refine", "rotation_from_euler", "solve", "step_weights", "track",
+    "judge", "refine", "rotation_from_euler", "solve", "step_weights", "track",
 ]

@@ -25,7 +25,7 @@ want an object. Pure numpy: no I/O, no Zenoh.
 from __future__ import annotations
 
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -41,12 +41,9 @@ from .problem import Bounds, Model, PoseProblem, View
 from .refine import TRACK_SCHEDULE
 from .search import EvoPose, Told
 from .solver import Solution, solution_of, track
-from .estimator_state import (Estimate, EstimatorState, Verdict, _injected, _remember_motion, _Search,
-                              verdict)
-from .uncertainty import assess, deviation, mahalanobis
+from .estimator_state import Estimate, EstimatorState, SearchInProgress, generator, random_key
+from .trust import assess, confirms
 
-#: A confirming search's confident pose within this many sigmas (its covariance) of the tracked one confirms it.
-CONFIRM_SIGMAS = 4.0
 #: Fitness values kept in a solution's history by :meth:`CooperativeEstimator.generation` (bounded memory).
 HISTORY_KEPT = 256
 #: Children of the best per :meth:`CooperativeEstimator.generation`.
@@ -62,8 +59,8 @@ class Cooperation:
 
     Real time: :meth:`estimate` and :meth:`generation` take a time budget. A search from scratch that does not
     finish within it is kept in the state and resumed by the next call (on the views it started with, as the
-    paper's Experiment 1 searches one snapshot); meanwhile each call returns the best so far, not good. Once the
-    search finishes with a good pose, that pose is tracked (eq. 2) onto the newest views.
+    paper's Experiment 1 searches one snapshot); meanwhile each call returns the best so far (searching). Once the
+    search converges, that pose is tracked (eq. 2) onto the newest views.
 
     Attributes
     ----------
@@ -96,7 +93,8 @@ class Cooperation:
     def estimate(self, st: EstimatorState, views: Sequence[View], *, knowledge: Sequence[Knowledge] = (),
                  hints: np.ndarray | None = None, frame: int = 0, budget_s: float | None = None,
                  candidates: np.ndarray | None = None, candidate_margin: float = 0.0,
-                 generations: int | None = None) -> tuple[EstimatorState, Estimate]:
+                 generations: int | None = None, clock: Callable[[], float] = time.perf_counter
+                 ) -> tuple[EstimatorState, Estimate]:
         """The next state and the pose at one frame from ``views`` (own and team-mates'), ``knowledge``, ``hints``.
 
         Parameters
@@ -124,11 +122,15 @@ class Cooperation:
         generations : int, optional
             A search from scratch runs this many generations in this call (``budget_s`` still caps it): slices
             that team-mates with the same views run alike, so their best so far agree too.
+        clock : callable () -> float
+            The clock, seconds (``time.perf_counter``): deadlines, the search's seconds and the instants a search
+            started and first matched closely are read on it. The random streams are the state's (each search's
+            ``key``), so the same state, inputs and clock readings give the same estimate and state.
         """
         if not views:
             raise ValueError("estimate needs at least one view")
         problem = self.problem(views, knowledge, hints)
-        deadline = None if budget_s is None else time.perf_counter() + budget_s
+        deadline = None if budget_s is None else clock() + budget_s
         st = replace(st, frame=frame)
         start = self.start(st, problem, candidates, candidate_margin)
         if start is not None:
@@ -142,22 +144,24 @@ class Cooperation:
                              hints=extra if len(extra) else None, search_when_lost=False)
             if solution.converged:
                 st, solution = self._confirmed(replace(st, search=None), solution, problem, frame, deadline,
-                                               generations)
-                return self._keep(st, solution, problem, False, time.perf_counter())
+                                               generations, clock)
+                return self._keep(st, solution, problem, False, clock())
             if st.search is None:  # lost: search again, with the lost pose as a hint
                 st = replace(st, last=None)
                 problem = problem.with_hints(np.concatenate([problem.hints, solution.pose[None]]))
         if st.search is None:
-            optimiser = EvoPose(problem, self.options, np.random.default_rng([self.seed, frame]))
+            optimiser = EvoPose(problem, self.options)
             run = Run(optimiser.start(), Told(0, np.inf, False, None), Evaluator.for_search(problem, self.options),
                       0.0)
-            st = replace(st, search=_Search(optimiser, run, problem, frame, time.perf_counter()))
+            st = replace(st, search=SearchInProgress(optimiser, run, problem, frame, clock(),
+                                                     key=random_key(self.seed, frame)))
         else:
-            st = replace(st, search=_injected(st.search, hints))
-        return self._advance(st, deadline, problem, generations)
+            st = replace(st, search=st.search.with_hints(hints))
+        return self._advance(st, deadline, problem, generations, clock)
 
     def _confirmed(self, st: EstimatorState, solution: Solution, problem: PoseProblem, frame: int,
-                   deadline: float | None, generations: int | None) -> tuple[EstimatorState, Solution]:
+                   deadline: float | None, generations: int | None, clock: Callable[[], float]
+                   ) -> tuple[EstimatorState, Solution]:
         """A tracked pose that is not confident (its chain of warm starts broke, or began at a team-mate's best)
         is confirmed by a global search in slices beside the tracking: confident when that search, which sees
         every basin, finds this pose confidently; replaced when it finds another basin confidently."""
@@ -165,21 +169,23 @@ class Cooperation:
             return replace(st, confirm=None), solution
         search = st.confirm
         if search is None:
-            optimiser = EvoPose(problem, self.options, np.random.default_rng([self.seed, frame, 2]))
+            optimiser = EvoPose(problem, self.options)
             evaluator = Evaluator.for_search(problem, self.options)
-            search = _Search(optimiser, Run(optimiser.start(), Told(0, np.inf, False, None), evaluator, 0.0),
-                             problem, frame, time.perf_counter(), anchor=np.array(solution.pose))
+            search = SearchInProgress(optimiser, Run(optimiser.start(), Told(0, np.inf, False, None), evaluator, 0.0),
+                                      problem, frame, clock(), anchor=np.array(solution.pose),
+                                      key=random_key(self.seed, frame, 2))
         until = None if generations is None else search.run.told.generation + generations
+        rng = generator(search.key)
         run = evolve(search.optimiser, search.run.state, search.run.evaluator, deadline=deadline,
-                     elapsed_before=search.run.seconds, until_generation=until, time_budget=self.options.time_budget)
+                     elapsed_before=search.run.seconds, until_generation=until, time_budget=self.options.time_budget,
+                     rng=rng, clock=clock)
         if not run.finished:
-            return replace(st, confirm=replace(search, run=run)), solution
+            return replace(st, confirm=replace(search, run=run, key=rng.bit_generator.state)), solution
         st = replace(st, confirm=None)
         found = solution_of(search.problem, self.options, run, run.seconds)
         if not (found.converged and found.confident):
             return st, solution
-        distance = mahalanobis(deviation(found.pose, search.anchor), found.covariance)[0]
-        if distance <= CONFIRM_SIGMAS:  # the search's confident answer is the pose tracked then: confident again
+        if confirms(found.pose, found.covariance, search.anchor):  # the pose tracked then: confident again
             return st, solution.with_(confident=True, confidence=found.confidence, track_reference=None)
         moved = pose_difference(solution.pose, search.anchor)  # the target's motion since the search began
         relocated = track(found.with_(pose=found.pose + moved), list(problem.views), problem=problem,
@@ -190,7 +196,7 @@ class Cooperation:
 
     @staticmethod
     def _predicted(st: EstimatorState, frame: int, start: np.ndarray) -> np.ndarray | None:
-        """Eq. (2) with a constant-velocity guess: ``start`` moved on by the motion between the last two good
+        """Eq. (2) with a constant-velocity guess: ``start`` moved on by the motion between the last two converged
         estimates, for a target that moves between frames (None without two of them)."""
         if st.motion is None or frame <= st.motion[0]:
             return None
@@ -248,24 +254,26 @@ class Cooperation:
         return pool[np.any(np.abs(pool - start) > 1e-9, axis=1)]
 
     def _advance(self, st: EstimatorState, deadline: float | None, current: PoseProblem | None,
-                 generations: int | None = None) -> tuple[EstimatorState, Estimate]:
-        """Resume the search in progress until ``deadline`` (or for ``generations``); a finished good search is
+                 generations: int | None = None, clock: Callable[[], float] = time.perf_counter
+                 ) -> tuple[EstimatorState, Estimate]:
+        """Resume the search in progress until ``deadline`` (or for ``generations``); a finished converged search is
         tracked onto ``current``."""
         search = st.search
-        good_at = search.good_at
+        close_at = search.close_at
 
         def watch(state) -> None:
-            nonlocal good_at
-            if good_at is None and self.options.is_confident(state.best_match):
-                good_at = time.perf_counter()
+            nonlocal close_at
+            if close_at is None and self.options.is_close(state.best_match):
+                close_at = clock()
 
         until = None if generations is None else search.run.told.generation + generations
+        rng = generator(search.key)
         run = evolve(search.optimiser, search.run.state, search.run.evaluator, on_generation=watch,
                      deadline=deadline, elapsed_before=search.run.seconds, until_generation=until,
-                     time_budget=self.options.time_budget)
+                     time_budget=self.options.time_budget, rng=rng, clock=clock)
         solution = solution_of(search.problem, self.options, run, run.seconds)
         if not run.finished:
-            st = replace(st, search=replace(search, run=run, good_at=good_at))
+            st = replace(st, search=replace(search, run=run, close_at=close_at, key=rng.bit_generator.state))
             return st, Estimate(solution, self._mismatch_in(solution), False, None)
         st = replace(st, search=None)
         if not solution.converged:
@@ -277,10 +285,10 @@ class Cooperation:
             if tracked.converged:
                 solution = tracked.with_(generations=solution.generations, history=solution.history,
                                          from_hint=solution.from_hint)
-        return self._keep(st, solution, current or search.problem, True, good_at)
+        return self._keep(st, solution, current or search.problem, True, close_at)
 
-    def generation(self, st: EstimatorState, hints: np.ndarray | None = None,
-                   budget_s: float | None = None) -> tuple[EstimatorState, Estimate | None]:
+    def generation(self, st: EstimatorState, hints: np.ndarray | None = None, budget_s: float | None = None,
+                   clock: Callable[[], float] = time.perf_counter) -> tuple[EstimatorState, Estimate | None]:
         """Improve the estimate between frames; no estimate before the first one.
 
         With a search from scratch in progress: resume it for up to ``budget_s`` (hints join its population).
@@ -288,18 +296,17 @@ class Cooperation:
         refined; the fittest becomes the best if it is better.
         """
         if st.search is not None:
-            st = replace(st, search=_injected(st.search, hints))
-            deadline = time.perf_counter() + (budget_s if budget_s is not None else 0.0)
-            return self._advance(st, deadline, None)
+            st = replace(st, search=st.search.with_hints(hints))
+            deadline = clock() + (budget_s if budget_s is not None else 0.0)
+            return self._advance(st, deadline, None, clock=clock)
         if st.last is None or st.evaluator is None:
             return st, None
         bounds = st.last.problem.bounds if st.last.problem is not None else self.bounds
-        local = LocalSearch(bounds, np.random.default_rng([self.seed, 1, st.idle]), children=GENERATION_CHILDREN,
-                            child_step=(CHILD_STEP_POSITION, CHILD_STEP_ANGLE))
+        local = LocalSearch(bounds, children=GENERATION_CHILDREN, child_step=(CHILD_STEP_POSITION, CHILD_STEP_ANGLE))
         state = local.start(st.last.pose, st.best_fitness)
         if hints is not None and np.size(hints):
             state = local.inject(state, hints)
-        run = evolve(local, state, st.evaluator)
+        run = evolve(local, state, st.evaluator, rng=np.random.default_rng([self.seed, 1, st.idle]))
         st = replace(st, idle=st.idle + 1)
         if run.told.improved:
             best = run.state
@@ -317,19 +324,19 @@ class Cooperation:
         return 1.0 if mismatch is None else float(np.clip(mismatch, 0.0, 1.0))
 
     def _keep(self, st: EstimatorState, solution: Solution, problem: PoseProblem, solved: bool,
-              good_at: float | None) -> tuple[EstimatorState, Estimate]:
+              close_at: float | None) -> tuple[EstimatorState, Estimate]:
         objective = PoseObjective(solution.problem or problem, self.options.fitness, self.options.tau)
         if len(solution.view_weights) == objective.n_views and np.any(solution.view_weights > 0):
             objective = objective.with_weights(solution.view_weights)  # the step rule's (eq. 4)
         st = replace(st, evaluator=Evaluator(objective, exploit=(TRACK_SCHEDULE,)),
                      best_fitness=float(objective(np.atleast_2d(solution.pose))[0]))
         mismatch = self._mismatch(st, solution.pose)
-        st = _remember_motion(st, solution if solution.converged else None)
+        st = st.with_motion(solution if solution.converged else None)
         if solution.converged:
             st = replace(st, last=solution)
         else:
             st = replace(st, last=None, evaluator=None)
-        return st, Estimate(solution, mismatch, solved, good_at)
+        return st, Estimate(solution, mismatch, solved, close_at)
 
     @staticmethod
     def _mismatch(st: EstimatorState, pose: np.ndarray) -> float:
@@ -383,5 +390,4 @@ class CooperativeEstimator:
         return self.rules.start(self.state, problem, candidates, margin)
 
 
-__all__ = ["Cooperation", "CooperativeEstimator", "Estimate", "EstimatorState", "Knowledge", "Verdict",
-           "constrained_bounds", "verdict"]
+__all__ = ["Cooperation", "CooperativeEstimator", "Estimate", "EstimatorState", "Knowledge", "constrained_bounds"]

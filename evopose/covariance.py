@@ -7,7 +7,7 @@ eq. (3) constraints enter as a uniform prior (:func:`covariance`). Both act on t
 computed over ``s`` and then expressed in the ROS ``PoseWithCovariance`` convention (docs/protocol.md,
 "Covariance"): metres and radians, the rotation block over small rotations about the fixed X, Y, Z axes
 (:func:`fixed_axis_covariance`), the one convention of the solver's output, ``PoseEstimate`` and the ROS
-messages. :mod:`evopose.uncertainty` builds the verdict ``confident`` on it, with pose differences in the same
+messages. :mod:`evopose.trust` builds the verdict ``confident`` on it, with pose differences in the same
 coordinates (:func:`deviation`).
 """
 

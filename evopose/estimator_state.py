@@ -17,7 +17,8 @@ from .solver import Solution
 
 @dataclass(frozen=True)
 class Estimate:
-    """One frame's result of :class:`CooperativeEstimator`.
+    """One frame's result of :class:`evopose.cooperative.Cooperation`; whether to trust it is
+    :func:`evopose.trust.judge`'s.
 
     Attributes
     ----------
@@ -28,82 +29,64 @@ class Estimate:
         force over its value when nothing matches (robust fitness; 1 when it cannot be judged).
     solved : bool
         The pose was searched from scratch (first frame, or tracking was lost).
-    good_at : float or None
-        The ``time.perf_counter()`` instant at which the best individual was first *good* — for the paper's
-        "time to a good pose": fitness under a threshold (here the search's confident mismatch, or almost
-        every visible mark matched one to one). A search goes on after that to confirm the pose.
+    close_at : float or None
+        The ``time.perf_counter()`` instant at which the search's best individual first matched closely
+        (:meth:`evopose.options.SearchOptions.is_close`) — for the paper's "time to a good pose": fitness under a
+        threshold. A search goes on after that to confirm the pose.
     """
 
     solution: Solution
     mismatch: float
     solved: bool
-    good_at: float | None = None
+    close_at: float | None = None
 
     @property
     def pose(self) -> np.ndarray:
         return self.solution.pose
 
     @property
-    def good(self) -> bool:
-        """Converged (the search's own judgement); the published verdict is :attr:`verdict`."""
+    def converged(self) -> bool:
+        """The search's own judgement (:attr:`Solution.converged`); the verdict is :func:`evopose.trust.judge`'s."""
         return bool(self.solution.converged)
 
-    @property
-    def verdict(self) -> Verdict:
-        return verdict(self)
+
+def random_key(*seed: int) -> dict:
+    """The random stream seeded by ``seed`` as a value: the state of numpy's default bit generator (PCG64), which
+    :func:`generator` turns back into a generator at that point of the stream."""
+    return np.random.default_rng(list(seed)).bit_generator.state
 
 
-@dataclass(frozen=True)
-class Verdict:
-    """The one verdict on a pose (docs/design.md §2): ``converged`` (the search judged its best good), ``confident``
-    (no distinct pose fits nearly as well: the right basin), ``precise`` (its covariance places it within the
-    target's own size, :attr:`evopose.solver.Solution.precise`), ``on_track`` (the published track took it:
-    :class:`evopose.pose_filter.PoseFilter`; a frame judged alone leaves it True), ``settled`` (the track it
-    joined knows its rotation well enough to publish: ``ConfidenceRules.max_published_rotation_sigma``; True for a
-    frame judged alone); ``good`` = all five, what a vehicle publishes and counts. ``in_right_basin`` = converged
-    and confident, what a vehicle may offer its team-mates as a hint."""
-
-    converged: bool
-    confident: bool
-    precise: bool = False
-    on_track: bool = True
-    settled: bool = True
-
-    @property
-    def in_right_basin(self) -> bool:
-        return self.converged and self.confident
-
-    @property
-    def good(self) -> bool:
-        return self.converged and self.confident and self.precise and self.on_track and self.settled
-
-    @property
-    def set_aside(self) -> bool:
-        """Good on its own, but it jumped off the published track (:class:`evopose.pose_filter.PoseFilter`)."""
-        return self.converged and self.confident and self.precise and not self.on_track
-
-
-def verdict(estimate: "Estimate | None") -> Verdict:
-    """The verdict on an estimate (none: neither)."""
-    if estimate is None:
-        return Verdict(False, False)
-    sol = estimate.solution
-    return Verdict(bool(sol.converged), bool(getattr(sol, "confident", False)), bool(getattr(sol, "precise", False)))
+def generator(key: dict) -> np.random.Generator:
+    """A new generator at the point of the stream ``key`` (:func:`random_key`, or a generator's
+    ``bit_generator.state`` after it drew): the same key gives the same draws, however often it is used."""
+    rng = np.random.Generator(np.random.PCG64())
+    rng.bit_generator.state = key
+    return rng
 
 
 @dataclass(frozen=True, eq=False)
-class _Search:
-    """A global search in progress (the first pose, or after tracking was lost), resumed slice by slice."""
+class SearchInProgress:
+    """A global search in progress (the first pose, after tracking was lost, or confirming a tracked pose), resumed
+    slice by slice. A value: the optimiser holds constant rules only, and the search's random stream is ``key``
+    (its point after the last slice), so resuming the same value twice gives the same result."""
 
     optimiser: EvoPose
     run: Run
     problem: PoseProblem
     frame: int
-    #: perf_counter when it started, and when its best was first good (or None)
+    #: the clock's instant when it started, and when its best first matched closely (or None)
     started: float
-    good_at: float | None = None
+    close_at: float | None = None
     #: a confirming search: the tracked pose at the frame it started (its answer is compared with this)
     anchor: np.ndarray | None = None
+    #: where its random stream stands (:func:`random_key`): each slice draws from :func:`generator` of it
+    key: dict | None = None
+
+    def with_hints(self, hints: np.ndarray | None) -> "SearchInProgress":
+        """The search with team-mates' poses ``hints`` (H, 6) queued for its next generation."""
+        if hints is None or not np.size(hints):
+            return self
+        return replace(self, run=replace(self.run, state=self.optimiser.inject(self.run.state, hints)))
 
 
 @dataclass(frozen=True, eq=False)
@@ -114,7 +97,7 @@ class EstimatorState:
     ----------
     last : Solution or None
         The pose being tracked (converged), None before the first one or after tracking was lost.
-    search, confirm : _Search or None
+    search, confirm : SearchInProgress or None
         A search from scratch in progress; a search confirming a tracked pose that is not confident.
     evaluator : Evaluator or None
         How the last frame's views evaluate candidates between frames (its objective: the last eq. 4 weights).
@@ -122,26 +105,38 @@ class EstimatorState:
         Of ``last`` under ``evaluator.objective``.
     frame : int
         The frame last estimated.
-    good, motion : tuple or None
-        ``(frame, pose (6,))`` of the last good estimate; ``(frame, pose change per frame)`` at it.
+    last_converged, motion : tuple or None
+        ``(frame, pose (6,))`` of the last converged estimate; ``(frame, pose change per frame)`` at it.
     idle : int
         Generations run between frames so far (seeds the next one's mutations).
     """
 
     last: Solution | None = None
-    search: _Search | None = None
-    confirm: _Search | None = None
+    search: SearchInProgress | None = None
+    confirm: SearchInProgress | None = None
     evaluator: Evaluator | None = None
     best_fitness: float = np.inf
     frame: int = 0
-    good: tuple[int, np.ndarray] | None = None
+    last_converged: tuple[int, np.ndarray] | None = None
     motion: tuple[int, np.ndarray] | None = None
     idle: int = 0
 
     @property
     def searching(self) -> bool:
-        """A search from scratch is in progress (the estimates are the best so far, not good)."""
+        """A search from scratch is in progress (the estimates are its best so far: :class:`evopose.trust.Trust`
+        ``searching``)."""
         return self.search is not None
+
+    def with_motion(self, solution: Solution | None) -> "EstimatorState":
+        """The state remembering ``solution`` (converged, or None) as the last converged estimate, and the velocity
+        per frame between the last two (for eq. 2's prediction)."""
+        frame, previous = self.frame, self.last_converged
+        st = replace(self, last_converged=None if solution is None else (frame, np.array(solution.pose)))
+        if solution is None or previous is None or frame <= previous[0]:
+            return replace(st, motion=None)
+        delta = np.array(solution.pose) - previous[1]
+        delta[3:] = wrap_angle(delta[3:])
+        return replace(st, motion=(frame, delta / (frame - previous[0])))
 
     @property
     def current_best(self) -> np.ndarray | None:
@@ -152,22 +147,4 @@ class EstimatorState:
         return None if self.last is None else np.array(self.last.pose)
 
 
-def _injected(search: _Search, hints: np.ndarray | None) -> _Search:
-    if hints is None or not np.size(hints):
-        return search
-    return replace(search, run=replace(search.run, state=search.optimiser.inject(search.run.state, hints)))
-
-
-def _remember_motion(st: EstimatorState, solution: Solution | None) -> EstimatorState:
-    """The velocity per frame between the last two good estimates (for eq. 2's prediction)."""
-    frame, previous = st.frame, st.good
-    st = replace(st, good=None if solution is None else (frame, np.array(solution.pose)))
-    if solution is None or previous is None or frame <= previous[0]:
-        return replace(st, motion=None)
-    delta = np.array(solution.pose) - previous[1]
-    delta[3:] = wrap_angle(delta[3:])
-    return replace(st, motion=(frame, delta / (frame - previous[0])))
-
-
-
-__all__ = ["Estimate", "EstimatorState", "Verdict", "verdict"]
+__all__ = ["Estimate", "EstimatorState", "SearchInProgress", "generator", "random_key"]

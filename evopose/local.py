@@ -69,8 +69,6 @@ class LocalSearch:
     ----------
     bounds : Bounds
         Every candidate is brought into the box (eq. 3).
-    rng : numpy Generator, optional
-        For the mutations (needed when ``children`` > 0).
     children : int
         Mutated copies of the incumbent per generation.
     child_step : (float, float)
@@ -88,12 +86,10 @@ class LocalSearch:
         (:func:`evopose.solver.track`).
     """
 
-    def __init__(self, bounds: Bounds, rng: np.random.Generator | None = None, *, children: int = 0,
+    def __init__(self, bounds: Bounds, *, children: int = 0,
                  child_step: tuple[float, float] = (0.0, 0.0), generations: int = 1,
                  lost_mismatch: float | None = None, lost_fitness_share: float | None = None) -> None:
-        if children and rng is None:
-            raise ValueError("mutated children need a random generator")
-        self.bounds, self.rng = bounds, rng
+        self.bounds = bounds
         self.children, self.child_step = int(children), child_step
         self.generations, self.lost_mismatch = int(generations), lost_mismatch
         self.lost_fitness_share = lost_mismatch if lost_fitness_share is None else lost_fitness_share
@@ -109,14 +105,17 @@ class LocalSearch:
             return state
         return replace(state, pending_hints=np.concatenate([state.pending_hints, hints.reshape(-1, 6)]))
 
-    def ask(self, state: LocalState) -> tuple[LocalState, Ask]:
-        """The incumbent, its mutated children, then the pending hints; shapes (K, 6), origins (K,)."""
+    def ask(self, state: LocalState, rng: np.random.Generator | None = None) -> tuple[LocalState, Ask]:
+        """The incumbent, its mutated children (drawn from ``rng``, needed when ``children`` > 0), then the pending
+        hints; shapes (K, 6), origins (K,)."""
         best = state.best_pose
         parts = [best[None]]
         if self.children:
+            if rng is None:
+                raise ValueError("mutated children need a random generator")
             position, angle = self.child_step
             scale = np.r_[np.full(3, position * max(np.linalg.norm(best[:3]), 1.0)), np.full(3, angle)]
-            parts.append(best + self.rng.standard_normal((self.children, 6)) * scale)
+            parts.append(best + rng.standard_normal((self.children, 6)) * scale)
         n_hints = len(state.pending_hints)
         parts.append(state.pending_hints)
         origins = np.r_[np.zeros(1 + self.children, int), -1 - state.hints_seen - np.arange(n_hints)]

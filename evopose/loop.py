@@ -39,7 +39,7 @@ class AskTell(Protocol):
 
     def inject(self, state: Any, hints: np.ndarray) -> Any: ...
 
-    def ask(self, state: Any) -> tuple[Any, Ask]: ...
+    def ask(self, state: Any, rng: np.random.Generator | None) -> tuple[Any, Ask]: ...
 
     def tell(self, state: Any, asked: Ask, poses: np.ndarray, fitness: np.ndarray, *, judge: Judge | None = None,
              evaluations: int = 0, elapsed: float = 0.0) -> tuple[Any, Told]: ...
@@ -217,7 +217,8 @@ class Run:
 def evolve(optimiser: AskTell, state: Any, evaluator: Evaluator, *,
            hint_source: Callable[[], np.ndarray | None] | None = None,
            on_generation: Callable[[Any], None] | None = None, deadline: float | None = None,
-           elapsed_before: float = 0.0, until_generation: int | None = None, time_budget: float | None = None) -> Run:
+           elapsed_before: float = 0.0, until_generation: int | None = None, time_budget: float | None = None,
+           rng: np.random.Generator | None = None, clock: Callable[[], float] = time.perf_counter) -> Run:
     """Run generations until the optimiser's ``tell`` gives a stop reason, or until ``deadline``.
 
     Parameters
@@ -231,7 +232,7 @@ def evolve(optimiser: AskTell, state: Any, evaluator: Evaluator, *,
     on_generation : callable (state) -> None, optional
         Called after every generation (progress, Fig. 6 curves).
     deadline : float, optional
-        A ``time.perf_counter()`` instant: after the generation that passes it, return an unfinished run
+        An instant of ``clock``: after the generation that passes it, return an unfinished run
         (``Run.finished`` False) whose state and evaluator resume the search in a later call (real time:
         a vehicle publishes the best so far at its camera rate while a search goes on).
     elapsed_before : float
@@ -242,30 +243,35 @@ def evolve(optimiser: AskTell, state: Any, evaluator: Evaluator, *,
     time_budget : float, optional
         The search's whole budget, s (``SearchOptions.time_budget``; earlier calls' ``elapsed_before`` count):
         held inside a generation too (:meth:`Evaluator.until`). The optimiser's ``tell`` stops on it.
+    rng : numpy Generator, optional
+        The random stream the optimiser's ``ask`` draws from (an input, as evosax's ``ask(key, state)``: the
+        optimiser holds none), advanced by this run.
+    clock : callable () -> float
+        The clock ``deadline`` is an instant of, and the run's seconds are measured on (``time.perf_counter``).
     """
-    t0 = time.perf_counter() - elapsed_before
+    t0 = clock() - elapsed_before
     # inside a generation, evaluation stops at the search's time budget (a slice's ``deadline`` is a pause between
-    # whole generations: the resumed search is the same as an unpaused one)
-    inside = None if time_budget is None else t0 + time_budget
+    # whole generations: the resumed search is the same as an unpaused one); the evaluator holds it on perf_counter
+    inside = None if time_budget is None else time.perf_counter() - elapsed_before + time_budget
     while True:
         if hint_source is not None:
             new = hint_source()
             if new is not None and np.size(new):
                 state = optimiser.inject(state, new)
-        state, asked = optimiser.ask(state)
+        state, asked = optimiser.ask(state, rng)
         asked = evaluator.screen(asked, inside)
         asked, poses, fitness = evaluator.until(asked, inside)
         state, told = optimiser.tell(state, asked, poses, fitness, judge=evaluator.objective.match,
-                                     evaluations=evaluator.evaluations, elapsed=time.perf_counter() - t0)
+                                     evaluations=evaluator.evaluations, elapsed=clock() - t0)
         if told.generation >= STEP_RULE_FROM_GENERATION:
             reweighted = evaluator.reweighted(state.best_pose)
             if reweighted is not None:  # eq. (4) changed: the population's fitness must be recomputed
                 evaluator = reweighted
                 objective = evaluator.objective
                 state, told = optimiser.rescore(state, objective(state.population), judge=objective.match,
-                                                evaluations=evaluator.evaluations, elapsed=time.perf_counter() - t0)
+                                                evaluations=evaluator.evaluations, elapsed=clock() - t0)
         if on_generation is not None:
             on_generation(state)
-        if (told.stop_reason is not None or (deadline is not None and time.perf_counter() >= deadline)
+        if (told.stop_reason is not None or (deadline is not None and clock() >= deadline)
                 or (until_generation is not None and told.generation >= until_generation)):
-            return Run(state, told, evaluator, time.perf_counter() - t0)
+            return Run(state, told, evaluator, clock() - t0)

@@ -1,4 +1,4 @@
-"""Tuning of the search (:class:`SearchOptions`) and what it calls a good or a confident match."""
+"""Tuning of the search (:class:`SearchOptions`) and what it calls an acceptable or a close match."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .fitness import FitnessKind, Match
-from .uncertainty import ConfidenceRules
+from .trust import ConfidenceRules
 from .weights import VIEW_WEIGHTINGS, ViewWeighting
 
 
@@ -45,17 +45,17 @@ class SearchOptions:
         Stop as soon as the best fitness is at or below this value.
     consensus : int
         Stop when the best basin was reached from this many independent starts (0: never),
-        at least ``min_starts`` starts were made, and its match is good: mismatch or unmatched
-        share at most ``good_mismatch``.
-    good_mismatch : float
+        at least ``min_starts`` starts were made, and its match is acceptable: mismatch or unmatched
+        share at most ``acceptable_mismatch``.
+    acceptable_mismatch : float
     min_starts : int
         Independent (screened, refined) random starts before the consensus or stall rule may stop
         (times up to 4 when the problem has fewer than ``REFERENCE_PAIRS`` model x image point pairs)...
-    confident_mismatch : float
-        ...when the best match is confident: mismatch at most this, or at most ``confident_unmatched``
+    close_mismatch : float
+        ...when the best match is close: mismatch at most this, or at most ``close_unmatched``
         of the best pose's visible marks lack a one-to-one image match; otherwise
-    confident_unmatched : float
-    min_starts_unsure : int
+    close_unmatched : float
+    min_starts_loose : int
         starts are needed (a poor best match may be a wrong basin: search longer).
     patience : int
         Stop ("stalled") when the best has not improved for this many generations after ``min_starts``.
@@ -77,7 +77,7 @@ class SearchOptions:
     same_rotation : float
         ...and their rotations by less than this many radians.
     confidence : ConfidenceRules
-        When a solution is called confident (:func:`evopose.uncertainty.assess`).
+        When a solution is called confident (:func:`evopose.trust.assess`) and the other rules of the verdict.
     """
 
     fitness: FitnessKind = "mutual"
@@ -92,11 +92,11 @@ class SearchOptions:
     time_budget: float | None = None
     good_fitness: float | None = None
     consensus: int = 2
-    good_mismatch: float = 0.5
+    acceptable_mismatch: float = 0.5
     min_starts: int = 256
-    confident_mismatch: float = 0.3
-    confident_unmatched: float = 0.1
-    min_starts_unsure: int = 1024
+    close_mismatch: float = 0.3
+    close_unmatched: float = 0.1
+    min_starts_loose: int = 1024
     patience: int = 6
     min_generations: int = 1
     view_reject: float | None = 0.8
@@ -117,14 +117,15 @@ class SearchOptions:
         if self.view_weights not in VIEW_WEIGHTINGS:
             raise ValueError(f"view_weights must be one of {', '.join(VIEW_WEIGHTINGS)}, got {self.view_weights!r}")
 
-    def is_good(self, match: Match) -> bool:
-        """Mismatch or unmatched share within ``good_mismatch`` (always True when the mismatch is unknown:
-        the paper's eq. 1 has no no-match value to judge by)."""
-        return (match.mismatch is None or match.mismatch <= self.good_mismatch
-                or match.unmatched <= self.good_mismatch)
+    def is_acceptable(self, match: Match) -> bool:
+        """Mismatch or unmatched share within ``acceptable_mismatch`` (always True when the mismatch is unknown:
+        the paper's eq. 1 has no no-match value to judge by): what a search may stop on, and converge with."""
+        return (match.mismatch is None or match.mismatch <= self.acceptable_mismatch
+                or match.unmatched <= self.acceptable_mismatch)
 
-    def is_confident(self, match: Match) -> bool:
-        """Mismatch within ``confident_mismatch`` or unmatched share within ``confident_unmatched``
-        (True when the mismatch is unknown)."""
-        return (match.mismatch is None or match.mismatch <= self.confident_mismatch
-                or match.unmatched <= self.confident_unmatched)
+    def is_close(self, match: Match) -> bool:
+        """Mismatch within ``close_mismatch`` or unmatched share within ``close_unmatched`` (True when the
+        mismatch is unknown): a search with a close best needs ``min_starts`` starts, else ``min_starts_loose``;
+        when a search's best first matched closely is the paper's "time to a good pose"."""
+        return (match.mismatch is None or match.mismatch <= self.close_mismatch
+                or match.unmatched <= self.close_unmatched)

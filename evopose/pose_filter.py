@@ -5,7 +5,7 @@ Eq. (2) warm-starts each frame from the last, and each frame's pose is judged on
 scale (the Pioneer ~25 px, its marks 3-5 px apart) one frame knows its rotation to 2.5-4.6 deg (1 sigma), and on
 the hardest lighting a few frames land 7-10 deg off *within their own basin*: the truth lies ~4 sigma away under
 the frame's covariance, no rival pose fits distinctly better, and the per-frame tracking gate
-(:func:`evopose.uncertainty.track_confidence`) lets the jump through at 2-3 sigma. The target cannot tilt that
+(:func:`evopose.trust.track_confidence`) lets the jump through at 2-3 sigma. The target cannot tilt that
 fast (its model file's ``motion``), and the frames before knew its tilt to ~1 deg together.
 
 So what a vehicle publishes is the track's estimate: every good frame is fused into a
@@ -29,7 +29,8 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from .covariance import deviation
-from .uncertainty import TrackReference, mahalanobis, rotation_sigma
+from .trust import settled
+from .uncertainty import TrackReference, mahalanobis
 
 __all__ = ["FilteredPose", "PoseFilter"]
 
@@ -53,8 +54,9 @@ class FilteredPose:
     jump_sigmas : float
         The frame's Mahalanobis distance from the track (nan when there was no track or the frame was not good).
     settled : bool
-        On the track, and the track knows its rotation to ``PoseFilter.most_rotation_sigma``: what is published is
-        good. False whenever ``on_track`` is False.
+        On the track, and the track knows its rotation to ``PoseFilter.most_rotation_sigma``
+        (:func:`evopose.trust.settled`). False whenever ``on_track`` is False. Whether what is published is good
+        is :func:`evopose.trust.judge`'s (its ``standing``).
     """
 
     pose: np.ndarray
@@ -99,13 +101,13 @@ class PoseFilter:
 
     @classmethod
     def of_rules(cls, rules) -> "PoseFilter":
-        """A filter with the tracking gate's rules (:class:`evopose.uncertainty.ConfidenceRules`)."""
+        """A filter with the tracking gate's rules (:class:`evopose.trust.ConfidenceRules`)."""
         return cls(np.asarray(rules.track_motion, float), float(rules.track_sigmas), int(rules.track_set_aside),
                    float(rules.max_published_rotation_sigma))
 
     def _settled(self, covariance: np.ndarray) -> bool:
-        """Whether a track of ``covariance`` (6, 6) knows its rotation well enough to be published good."""
-        return rotation_sigma(covariance) <= self.most_rotation_sigma
+        """Whether a track of ``covariance`` (6, 6) knows its rotation well enough (:func:`evopose.trust.settled`)."""
+        return settled(covariance, self.most_rotation_sigma)
 
     def _aged(self, frame: float) -> TrackReference | None:
         """The track predicted to ``frame``: its covariance grown by the motion of each elapsed frame."""

@@ -177,20 +177,20 @@ def same_basin(a: np.ndarray, b: np.ndarray, options: SearchOptions, reference_d
 
 
 class EvoPose:
-    """The optimiser: ``state = start(); loop: state, asked = ask(state) -> evaluate -> state, told = tell(...)``.
+    """The optimiser: ``state = start(); loop: state, asked = ask(state, rng) -> evaluate -> state, told = tell(...)``.
+
+    Constant rules, no random stream of its own: ``ask`` draws from the generator it is given (a seed reproduces a
+    run exactly), so the same state and generator give the same proposal.
 
     Parameters
     ----------
     problem : PoseProblem
     options : SearchOptions
-    rng : numpy Generator
-        The optimiser's own random stream (a seed reproduces a run exactly).
     """
 
-    def __init__(self, problem: PoseProblem, options: SearchOptions, rng: np.random.Generator) -> None:
+    def __init__(self, problem: PoseProblem, options: SearchOptions) -> None:
         self.problem = problem
         self.options = options
-        self.rng = rng
         lo, hi = problem.bounds.lo, problem.bounds.hi
         cams = np.array([v.camera.center_world for v in problem.views])
         mid = 0.5 * (lo[:3] + hi[:3])
@@ -222,14 +222,13 @@ class EvoPose:
         return replace(state, pending_hints=np.concatenate([state.pending_hints, hints.reshape(-1, 6)]))
 
     # -- ask / tell --------------------------------------------------------------------
-    def ask(self, state: EvoPoseState) -> tuple[EvoPoseState, Ask]:
+    def ask(self, state: EvoPoseState, rng: np.random.Generator) -> tuple[EvoPoseState, Ask]:
         """New candidates and their origins (:class:`Ask`), and the state that has handed them out.
 
         Fresh random starts are over-sampled ``options.screening`` times; the caller keeps the best
         ``asked.fresh_keep`` of them by a coarse fitness (:func:`evopose.loop.screen`) before refining.
         """
         o = self.options
-        rng = self.rng
         parts, origins = [], []
         next_origin = state.next_origin
         fresh_from, fresh_keep = next_origin, 0
@@ -254,7 +253,7 @@ class EvoPose:
             n_imm = int(round(o.immigrants * o.offspring))
             n_children = o.offspring - n_imm
             if n_children:
-                children, child_origin = self._children(state, n_children)
+                children, child_origin = self._children(state, n_children, rng)
                 parts.append(children)
                 origins.append(child_origin)
             if n_imm:
@@ -349,11 +348,11 @@ class EvoPose:
         supporters = state.best_supporters
         hinted = any(x < 0 for x in supporters)
         if (state.generation >= o.min_generations and hinted and o.consensus
-                and len(supporters) >= o.consensus and o.is_good(state.best_match)):
+                and len(supporters) >= o.consensus and o.is_acceptable(state.best_match)):
             return "consensus"  # a team-mate's hint confirmed by the own search: no need for more starts
-        needed = (o.min_starts if o.is_confident(state.best_match) else o.min_starts_unsure) * self.start_factor
+        needed = (o.min_starts if o.is_close(state.best_match) else o.min_starts_loose) * self.start_factor
         if state.generation >= o.min_generations and state.starts >= needed:
-            if o.consensus and len(supporters) >= o.consensus and o.is_good(state.best_match):
+            if o.consensus and len(supporters) >= o.consensus and o.is_acceptable(state.best_match):
                 return "consensus"
             if state.generation - state.improved_at >= o.patience:
                 return "stalled"
@@ -379,15 +378,14 @@ class EvoPose:
         return near
 
     # -- operators -----------------------------------------------------------------------
-    def _tournament(self, state: EvoPoseState, n: int) -> np.ndarray:
-        a = self.rng.integers(0, len(state.population), n)
-        b = self.rng.integers(0, len(state.population), n)
+    def _tournament(self, state: EvoPoseState, n: int, rng: np.random.Generator) -> np.ndarray:
+        a = rng.integers(0, len(state.population), n)
+        b = rng.integers(0, len(state.population), n)
         return np.where(state.fitness[a] <= state.fitness[b], a, b)
 
-    def _children(self, state: EvoPoseState, n: int) -> tuple[np.ndarray, np.ndarray]:
-        rng = self.rng
-        p1 = self._tournament(state, n)
-        p2 = self._tournament(state, n)
+    def _children(self, state: EvoPoseState, n: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+        p1 = self._tournament(state, n, rng)
+        p2 = self._tournament(state, n, rng)
         x1, x2 = state.population[p1], state.population[p2]
         # intermediate crossover on a third of the children (angles along the short way round)
         cross = rng.random(n) < 1 / 3

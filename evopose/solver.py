@@ -24,14 +24,13 @@ from .problem import PoseProblem, View
 from .refine import TRACK_HARD_SCHEDULE, TRACK_SCHEDULE, annealing, refine
 from .robust_fit import robust_fit
 from .search import EvoPose
-from .uncertainty import Confidence, TrackReference, assess, covariance, imprecise, track_confidence
+from .trust import Confidence, assess, checked_in_time, converged, imprecise, track_confidence
+from .uncertainty import TrackReference, covariance
 from .weights import rule_weights
 
 #: Final polish of the best pose: hard nearest-neighbour steps (accepted only when the fitness drops).
 POLISH_SCHEDULE = annealing(1, hard=6, start=1.0)
-#: Stop reasons that mean "the pose is good" (as opposed to a budget running out).
-GOOD_REASONS = ("good_fitness", "consensus", "stalled")
-#: Other basins of the final population that are polished and compared with the best (:func:`evopose.uncertainty.assess`).
+#: Other basins of the final population that are polished and compared with the best (:func:`evopose.trust.assess`).
 RIVALS = 8
 #: Repeated displacement directions of the model tried as rivals (:func:`shifted_rivals`; each with both signs).
 SHIFT_DIRECTIONS = 2
@@ -63,7 +62,7 @@ class Solution:
     converged : bool
         The search stopped because it judged the pose good (consensus, stall or threshold, not a budget running
         out), its match is good and no distinct pose it found fits about as well (runner-up margin at least
-        :attr:`evopose.uncertainty.ConfidenceRules.converged_margin`). For :func:`track`: the fit held.
+        :attr:`evopose.trust.ConfidenceRules.converged_margin`). For :func:`track`: the fit held.
         Unlike ``confident``, a statement about the search, not calibrated against the truth.
     stop_reason : str
     history : list of float
@@ -78,7 +77,7 @@ class Solution:
         pose (:func:`evopose.uncertainty.covariance`); inf-filled when not computable.
     confident : bool
         In the right basin with high probability: enough marks matched one to one, a tight fit, and no distinct
-        pose found by the search fits nearly as well (:func:`evopose.uncertainty.assess`; for :func:`track`, see
+        pose found by the search fits nearly as well (:func:`evopose.trust.assess`; for :func:`track`, see
         there). A verdict on the answer, calibrated against the truth in ``benchmarks/bench_confidence.py``
         (precision >= 97 % at both image scales, absent targets confident <= 1 %).
     confidence : Confidence or None
@@ -88,7 +87,7 @@ class Solution:
         precise (one camera at the paper's scale is confident, not precise).
     track_reference : TrackReference or None
         (track) The confident frames of the track so far fused into one pose, which the next frame's pose is
-        gated against (:func:`evopose.uncertainty.track_confidence`). A frame that jumped away from it is set
+        gated against (:func:`evopose.trust.track_confidence`). A frame that jumped away from it is set
         aside (not confident) and the track stands: the next frame starts from its pose too, and is confident
         again if it lies where the track is (at most ``ConfidenceRules.track_set_aside`` such frames in a row).
         None when the track broke otherwise: the next frame starts from this pose and covariance.
@@ -118,7 +117,7 @@ class Solution:
 
     @property
     def precise(self) -> bool:
-        """The covariance places the pose within the target's own size (:func:`evopose.uncertainty.imprecise`
+        """The covariance places the pose within the target's own size (:func:`evopose.trust.imprecise`
         under the options' rules): what, beside ``converged`` and ``confident``, makes a pose good to act on."""
         if self.problem is None:
             return False
@@ -151,9 +150,9 @@ def solve(problem: PoseProblem, options: SearchOptions | None = None,
     """
     t0 = time.perf_counter()
     options = options or SearchOptions()
-    evo = EvoPose(problem, options, _rng(seed))
+    evo = EvoPose(problem, options)
     run = evolve(evo, evo.start(initial), Evaluator.for_search(problem, options), hint_source=hint_source,
-                 on_generation=on_generation, time_budget=options.time_budget)
+                 on_generation=on_generation, time_budget=options.time_budget, rng=_rng(seed))
     return solution_of(problem, options, run, time.perf_counter() - t0)
 
 
@@ -191,9 +190,8 @@ def solution_of(problem: PoseProblem, options: SearchOptions, run: Run, seconds:
     # matches judged on every view with its own weight: a view the step rule dropped still counts against a pose
     # (a wrong basin that fits one view and gave up the other must not look sure)
     confidence = assess(objective, pose, rivals, options.confidence,
-                        judge=objective.with_weights(objective.base_weights))
-    if not checked and confidence.confident:  # the other basins were not polished in time: not sure
-        confidence = replace(confidence, confident=False, reason="out of time")
+                        matches_on=objective.with_weights(objective.base_weights))
+    confidence = checked_in_time(confidence, checked)  # the other basins not polished in time: not sure
     if options.refine_steps and in_time:
         pose, confidence = published(objective, pose, confidence)
         fitness = float(objective(pose[None])[0])
@@ -201,8 +199,7 @@ def solution_of(problem: PoseProblem, options: SearchOptions, run: Run, seconds:
     return Solution(
         pose=pose, fitness=fitness, view_terms=terms, view_weights=objective.weights.copy(),
         generations=state.generation, evaluations=objective.evaluations, seconds=seconds + time.perf_counter() - t0,
-        converged=(run.told.stop_reason in GOOD_REASONS and options.is_good(match)
-                   and confidence.margin >= options.confidence.converged_margin),
+        converged=converged(run.told.stop_reason, options.is_acceptable(match), confidence, options.confidence),
         stop_reason=run.told.stop_reason or "unfinished",
         history=list(state.history), from_hint=state.best_from_hint, problem=problem, options=options,
         covariance=confidence.covariance.matrix, confident=confidence.confident, confidence=confidence)
@@ -310,9 +307,9 @@ def track(previous: Solution, new_views: list[View] | tuple[View, ...], *, probl
     search re-initialises from scratch with the previous pose as a hint.
 
     A tracked solution has a covariance from its new views and is ``confident`` when the previous solution
-    was, the fit held, the marks are still matched well (the match rules of :func:`evopose.uncertainty.assess`)
+    was, the fit held, the marks are still matched well (the match rules of :func:`evopose.trust.assess`)
     and the pose moved within the previous covariance plus a frame's motion
-    (:func:`evopose.uncertainty.track_confidence`); a re-initialised one is judged as :func:`solve` judges.
+    (:func:`evopose.trust.track_confidence`); a re-initialised one is judged as :func:`solve` judges.
 
     Parameters
     ----------
@@ -354,12 +351,12 @@ def track(previous: Solution, new_views: list[View] | tuple[View, ...], *, probl
         basin = np.array(best.best_pose)
         # confident only while the fit holds inside the previous uncertainty (no population to find rivals in)
         current = assess(objective, basin, None, options.confidence,
-                         judge=objective.with_weights(objective.base_weights))
+                         matches_on=objective.with_weights(objective.base_weights))
         reference = previous.track_reference or TrackReference.of(previous.pose, previous.covariance)
         expected = None if reference is None else reference.predicted(
             np.asarray(options.confidence.track_motion, float))  # this frame's: a frame's motion on
-        on_track = (previous.confident or chained is not None) and tracked
-        confidence = track_confidence(expected, on_track, current, basin, options.confidence)
+        chain_holds = (previous.confident or chained is not None) and tracked
+        confidence = track_confidence(expected, chain_holds, current, basin, options.confidence)
         pose, confidence = published(objective, basin, confidence)
         if confidence.confident:  # this frame joins the track's pose
             reference = expected.fused(pose, confidence.covariance.matrix)

@@ -3,8 +3,9 @@
 :func:`decode` checks, in this order, and raises the matching :class:`ProtocolError`:
 the topic (InvalidName), the payload size against the topic's limit (OversizedPayload, before any
 parsing), msgpack with per-object limits and no trailing bytes (MalformedPayload), a map with
-a ``version`` equal to :data:`SCHEMA_VERSION` (SchemaMismatch), then the model's fields
-(InvalidMessage, naming the first bad field).
+a ``version`` equal to :data:`SCHEMA_VERSION` or :data:`PREVIOUS_SCHEMA_VERSION` (SchemaMismatch; a previous
+version's document is upgraded, :func:`upgraded`), then the model's fields (InvalidMessage, naming the first bad
+field).
 """
 
 from __future__ import annotations
@@ -18,7 +19,7 @@ from .errors import InvalidMessage, MalformedPayload, OversizedPayload, SchemaMi
 from .hint import decode_hint, encode_hint
 from .keys import Topic, TopicKey, check_topic, parse_key
 from .limits import MAX_ARRAY_LEN, MAX_MAP_LEN, MAX_STR_LEN, SIZE_LIMITS
-from .messages import MESSAGE_TYPES, SCHEMA_VERSION, Hint, Message, Payload
+from .messages import MESSAGE_TYPES, PREVIOUS_SCHEMA_VERSION, SCHEMA_VERSION, Hint, Message, Payload
 
 
 def encode(message: Payload) -> bytes:
@@ -82,12 +83,30 @@ def decode(topic: Topic | str, payload: bytes | bytearray | memoryview) -> Paylo
                                topic=topic)
     if "version" not in document:
         raise InvalidMessage("missing field 'version'", topic=topic)
-    if type(document["version"]) is not int or document["version"] != SCHEMA_VERSION:
+    if type(document["version"]) is not int or document["version"] not in (SCHEMA_VERSION, PREVIOUS_SCHEMA_VERSION):
         raise SchemaMismatch(document["version"], SCHEMA_VERSION, topic=topic)
+    document = upgraded(topic, document)
     try:
         return cls.model_validate(document, strict=True)
     except ValidationError as err:
         raise InvalidMessage(_first_error(err), topic=topic) from None
+
+
+#: Fields renamed from :data:`PREVIOUS_SCHEMA_VERSION` to :data:`SCHEMA_VERSION`, per topic: old -> new.
+RENAMED_SINCE_PREVIOUS: dict[Topic, dict[str, str]] = {Topic.POSE: {"confident": "good"}}
+
+
+def upgraded(topic: Topic, document: dict) -> dict:
+    """A decoded map of :data:`PREVIOUS_SCHEMA_VERSION` as :data:`SCHEMA_VERSION` says it (its fields renamed);
+    a current one as it is. Version 2 -> 3: ``pose``'s ``confident``, which carried the sender's good verdict,
+    became ``good``."""
+    if document.get("version") != PREVIOUS_SCHEMA_VERSION:
+        return document
+    renamed = RENAMED_SINCE_PREVIOUS.get(topic, {})
+    # a field the previous version did not have (one named like a new field) was ignored then and is ignored now
+    out = {renamed.get(key, key): value for key, value in document.items() if key not in renamed.values()}
+    out["version"] = SCHEMA_VERSION
+    return out
 
 
 def decode_sample(key: str, payload: bytes | bytearray | memoryview) -> tuple[TopicKey, Payload]:

@@ -7,8 +7,10 @@ and the ``topic`` it concerns, when known. Receivers catch :class:`ProtocolError
 
 from __future__ import annotations
 
+from evopose_errors import EvoPoseError
 
-class ProtocolError(ValueError):
+
+class ProtocolError(EvoPoseError, ValueError):
     """Root of every wire-format error."""
 
     reason: str = "invalid"

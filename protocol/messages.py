@@ -18,8 +18,10 @@ from pydantic import BaseModel, ConfigDict, Field, computed_field, field_validat
 from .keys import Topic, check_name
 from .limits import FEATURE_POINT_SIZE, MAX_FEATURE_POINTS
 
-#: Version of the message schema; a receiver rejects any other (SchemaMismatch).
-SCHEMA_VERSION = 2
+#: Version of the message schema; a receiver rejects any other (SchemaMismatch) but the previous one.
+SCHEMA_VERSION = 3
+#: The previous version, still decoded for one version (:func:`protocol.codec.upgraded`): docs/protocol.md §6.
+PREVIOUS_SCHEMA_VERSION = 2
 
 Float = Annotated[float, Field(allow_inf_nan=False)]
 NonNegative = Annotated[float, Field(ge=0, allow_inf_nan=False)]
@@ -59,7 +61,7 @@ class Message(Payload):
         ``max_age`` is ignored.
     """
 
-    version: Literal[2] = SCHEMA_VERSION
+    version: Literal[3] = SCHEMA_VERSION
     sender: str
     seq: Uint64
     stamp_ns: Annotated[int, Field(ge=0, lt=2**63)]
@@ -235,8 +237,9 @@ class PoseEstimate(Message):
     ``quaternion`` is derived from the Euler angles and sent for convenience; receivers ignore
     the one on the wire. ``mismatch`` is in [0, 1] (0 best: :attr:`evopose.fitness.Match.mismatch`, the
     fitness over its value when nothing matches); ``inputs`` names the team-mates whose
-    data (images, features, hints, attitude) went into the estimate. ``confident``: no distinct pose fits
-    nearly as well and enough marks are matched (:mod:`evopose.uncertainty`); ``covariance``: the 6x6
+    data (images, features, hints, attitude) went into the estimate. ``good``: the sender's verdict is good
+    (:attr:`evopose.trust.Trust.good`: converged, confident, precise and not held back by its published track;
+    version 2 called this field ``confident``); ``covariance``: the 6x6
     covariance in the convention of ROS ``PoseWithCovariance`` (docs/protocol.md, "Covariance": position, then
     small rotations about the fixed axes), row-major, metres and radians, absent when it could
     not be computed.
@@ -253,7 +256,7 @@ class PoseEstimate(Message):
     seconds: NonNegative
     from_hint: bool = False
     inputs: Annotated[tuple[str, ...], Field(max_length=32)] = ()
-    confident: bool = False
+    good: bool = False
     covariance: Annotated[tuple[Float, ...], Field(min_length=36, max_length=36)] | None = None
 
     _check_target = field_validator("target")(classmethod(lambda cls, v: _name(v)))

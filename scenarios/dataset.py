@@ -34,8 +34,8 @@ from geometry import matrix_from_pose
 from .camera_info_file import CameraInfoSpec, calibration_document
 from .dataset_files import (CAMERA_INFO, FORMAT, FRAME_DIGITS, IMAGE_SUFFIXES, MANIFEST, MAX_POSES_BYTES,
                             MAX_POSES_LINE, MAX_TRUTH_BYTES, MAX_TRUTH_LINE, POSES, TRUTH, WORLD,
-                            DatasetError, ManifestSpec, PosesLineSpec, TruthLineSpec, _check_frame_numbers,
-                            _IMAGE_NAME, image_name, read_camera_info_file, read_json_lines)
+                            DatasetError, ManifestSpec, PosesLineSpec, TruthLineSpec, check_frame_numbers,
+                            IMAGE_NAME, image_name, read_camera_info_file, read_json_lines)
 from .dataset_writer import DatasetWriter
 from .documents import read_mapping, validate
 from .errors import WorldError
@@ -179,7 +179,7 @@ def _camera_images(folder: Path, frames: int) -> list[Path]:
     """Frame ``k``'s image for ``k`` in ``0..frames - 1``: exactly one ``{k:06d}.<image suffix>`` each."""
     found: dict[int, Path] = {}
     for entry in sorted(folder.iterdir()):
-        match = _IMAGE_NAME.fullmatch(entry.name)
+        match = IMAGE_NAME.fullmatch(entry.name)
         if match is None or entry.suffix.lower() not in IMAGE_SUFFIXES or not entry.is_file():
             continue
         k = int(match.group(1))
@@ -195,7 +195,7 @@ def _camera_images(folder: Path, frames: int) -> list[Path]:
 
 def _lines_of(path: Path, schema: type[T], frames: int, max_bytes: int, max_line: int) -> list[T]:
     lines = read_json_lines(path, schema, max_bytes=max_bytes, max_line=max_line)
-    _check_frame_numbers(path, lines)
+    check_frame_numbers(path, lines)
     if len(lines) != frames:
         raise DatasetError(f"{path}: {len(lines)} lines, the manifest says {frames} frames")
     return lines

@@ -17,7 +17,7 @@ from pydantic import BaseModel, ConfigDict, Field, field_validator
 from evopose import Camera
 
 from .camera_info_file import CameraInfoSpec
-from .documents import (MAX_DEPTH, FullPoseSpec, Strict, _json_depth_ok, _json_object, _no_constant, describe, one_line,
+from .documents import (MAX_DEPTH, FullPoseSpec, Strict, json_depth_ok, json_object, no_constant, describe, one_line,
                         read_bytes, read_mapping, validate)
 from .errors import WorldError
 
@@ -42,7 +42,7 @@ MAX_TRUTH_BYTES, MAX_TRUTH_LINE = 256 * 1024 * 1024, 2 * 1024 * 1024
 MAX_POSES_BYTES, MAX_POSES_LINE = 64 * 1024 * 1024, 4096
 #: A camera (vehicle) name: a folder name, as the fleet's vehicle names (protocol.keys).
 CAMERA_NAME = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.\-]{0,63}")
-_IMAGE_NAME = re.compile(rf"(\d{{{FRAME_DIGITS}}})(\.[A-Za-z]+)")
+IMAGE_NAME = re.compile(rf"(\d{{{FRAME_DIGITS}}})(\.[A-Za-z]+)")
 
 
 class DatasetError(WorldError):
@@ -151,10 +151,10 @@ def read_json_lines(path: Path, schema: type[T], *, max_bytes: int, max_line: in
             raise DatasetError(f"{where}: not UTF-8 text") from None
         if not text.strip():
             raise DatasetError(f"{where}: empty line (expected one JSON object)")
-        if not _json_depth_ok(text):
+        if not json_depth_ok(text):
             raise DatasetError(f"{where}: invalid JSON: nesting deeper than {MAX_DEPTH} levels")
         try:
-            document = json.loads(text, object_pairs_hook=_json_object, parse_constant=_no_constant)
+            document = json.loads(text, object_pairs_hook=json_object, parse_constant=no_constant)
         except json.JSONDecodeError as err:
             raise DatasetError(f"{where}:{err.colno}: invalid JSON: {err.msg}") from None
         except (ValueError, RecursionError) as err:
@@ -165,22 +165,22 @@ def read_json_lines(path: Path, schema: type[T], *, max_bytes: int, max_line: in
     return out
 
 
-def _check_frame_numbers(path: Path, lines: Sequence[Any]) -> None:
+def check_frame_numbers(path: Path, lines: Sequence[Any]) -> None:
     """Line ``n`` (1-based) must be frame ``n - 1``."""
     for n, line in enumerate(lines, 1):
         if line.frame != n - 1:
             raise DatasetError(f"{path}:{n}: frame: expected {n - 1} (frames in order from 0), got {line.frame}")
 
 
-def _json_line(model: BaseModel) -> str:
+def json_line(model: BaseModel) -> str:
     return json.dumps(model.model_dump(mode="json"), separators=(",", ":"), allow_nan=False) + "\n"
 
 
-def _dump_yaml(document: Any) -> str:
+def dump_yaml(document: Any) -> str:
     return yaml.safe_dump(document, sort_keys=False, default_flow_style=None, width=120)
 
 
-def _write_text(path: Path, text: str) -> None:
+def write_text(path: Path, text: str) -> None:
     """Write ``text`` to ``path`` through a temporary file (a reader never sees half a file)."""
     tmp = path.with_name(f".{path.name}.tmp")
     tmp.write_text(text, encoding="utf-8")
@@ -189,7 +189,7 @@ def _write_text(path: Path, text: str) -> None:
 
 
 
-def _check_camera(camera: str, cameras: Sequence[str]) -> None:
+def check_camera(camera: str, cameras: Sequence[str]) -> None:
     if camera not in cameras:
         raise DatasetError(f"no camera {camera!r} in the dataset (cameras: {', '.join(cameras)})")
 

@@ -20,7 +20,7 @@ from .camera_info_file import calibration_document
 from .dataset_files import (CAMERA_INFO, FORMAT, FRAME_DIGITS, IMAGE_SUFFIXES, MANIFEST, MAX_POSES_BYTES,
                             MAX_POSES_LINE, MAX_TRUTH_BYTES, MAX_TRUTH_LINE, MODEL, POSES, TRUTH, WORLD, DatasetError,
                             ManifestSpec, MarkSpec, PosesLineSpec, TruthLineSpec, ViewTruthSpec,
-                            _check_camera, _check_frame_numbers, _dump_yaml, _json_line, _write_text,
+                            check_camera, check_frame_numbers, dump_yaml, json_line, write_text,
                             image_name, read_json_lines)
 from .documents import FullPoseSpec, StrictLoader, describe, read_mapping, validate
 from .target import resolve_model_path
@@ -109,11 +109,11 @@ class DatasetWriter:
                 raise DatasetError(f"{self.root}: exists and is not an empty directory (resume to continue it)")
             self.root.mkdir(parents=True, exist_ok=True)
             shutil.copyfile(model_path, self.root / MODEL)
-            _write_text(self.root / WORLD, _dump_yaml(world_doc))
+            write_text(self.root / WORLD, dump_yaml(world_doc))
             for camera in cameras:
                 (self.root / camera).mkdir(exist_ok=True)
-                _write_text(self.root / camera / CAMERA_INFO, _dump_yaml(camera_infos[camera]))
-            _write_text(self.root / MANIFEST, _dump_yaml(manifest_document(self.manifest)))
+                write_text(self.root / camera / CAMERA_INFO, dump_yaml(camera_infos[camera]))
+            write_text(self.root / MANIFEST, dump_yaml(manifest_document(self.manifest)))
         self.scenario = load_scenario(self.root / WORLD)
         self.next_frame = self._cut_to_complete()
         self._poses_next = {c: self.next_frame for c in cameras}
@@ -135,7 +135,7 @@ class DatasetWriter:
             if old.get(key) != new[key]:
                 raise DatasetError(f"{self.root / MANIFEST}: {key}: the dataset has {describe(old.get(key))}, "
                                    f"resuming would write {describe(new[key])} (start a new dataset)")
-        written = yaml.load(_dump_yaml(world_doc), Loader=StrictLoader)  # noqa: S506 - a SafeLoader subclass
+        written = yaml.load(dump_yaml(world_doc), Loader=StrictLoader)  # noqa: S506 - a SafeLoader subclass
         if read_mapping(self.root / WORLD, DatasetError) != written:
             raise DatasetError(f"{self.root / WORLD}: differs from the world being rendered (start a new dataset)")
 
@@ -143,14 +143,14 @@ class DatasetWriter:
 
     def image_path(self, camera: str, k: int, suffix: str = ".jpg") -> Path:
         """Where frame ``k``'s image of ``camera`` goes: ``DIR/<camera>/<k:06d><suffix>``."""
-        _check_camera(camera, self.manifest.cameras)
+        check_camera(camera, self.manifest.cameras)
         return self.root / camera / image_name(k, suffix)
 
     def _lines(self, path: Path, schema: type[T], max_bytes: int, max_line: int) -> list[T]:
         if not path.exists():
             return []
         lines = read_json_lines(path, schema, max_bytes=max_bytes, max_line=max_line, complete_only=True)
-        _check_frame_numbers(path, lines)
+        check_frame_numbers(path, lines)
         return lines
 
     def _has_image(self, camera: str, k: int) -> bool:
@@ -200,13 +200,13 @@ class DatasetWriter:
     def append_pose(self, camera: str, k: int, world_from_camera: np.ndarray) -> None:
         """Append frame ``k``'s ``world_from_camera`` (a pose (6,) or a transform (4, 4)) to ``camera``'s poses.jsonl;
         frames go in order."""
-        _check_camera(camera, self.manifest.cameras)
+        check_camera(camera, self.manifest.cameras)
         if k != self._poses_next[camera]:
             raise DatasetError(f"{self.root / camera / POSES}: frame {k} out of order: frame "
                                f"{self._poses_next[camera]} is next")
         line = PosesLineSpec(frame=k, world_from_camera=FullPoseSpec.of(world_from_camera))
         with open(self.root / camera / POSES, "a", encoding="utf-8") as f:
-            f.write(_json_line(line))
+            f.write(json_line(line))
         self._poses_next[camera] = k + 1
 
     def append_truth(self, k: int, target_pose: np.ndarray, views: Mapping[str, Any], *,
@@ -236,7 +236,7 @@ class DatasetWriter:
                              target_visible=self.manifest.target_visible if target_visible is None else target_visible,
                              cameras=cameras)
         with open(self.root / TRUTH, "a", encoding="utf-8") as f:
-            f.write(_json_line(line))
+            f.write(json_line(line))
         self.next_frame = k + 1
 
     def add_frame(self, k: int, rendered: Mapping[str, Any], suffix: str = ".jpg", **image_options: Any) -> None:

@@ -28,6 +28,7 @@ import yaml
 from pydantic import BaseModel, ConfigDict, ValidationError, model_validator
 
 from geometry import PARAM_NAMES, pose_from_matrix
+from evopose_errors import EvoPoseError
 
 T = TypeVar("T", bound=BaseModel)
 
@@ -41,7 +42,7 @@ MAX_EXPANDED_NODES = 2_000_000
 MAX_QUOTE = 40
 
 
-class DocumentError(ValueError):
+class DocumentError(EvoPoseError, ValueError):
     """A document that cannot be read or does not have the expected shape; the message is one line."""
 
 
@@ -196,7 +197,7 @@ def read_bytes(path: str | Path, error: type[Exception] = DocumentError, max_byt
     return data
 
 
-def _json_object(pairs: list[tuple[str, Any]]) -> dict:
+def json_object(pairs: list[tuple[str, Any]]) -> dict:
     out: dict = {}
     for key, value in pairs:
         if key in out:
@@ -205,7 +206,7 @@ def _json_object(pairs: list[tuple[str, Any]]) -> dict:
     return out
 
 
-def _json_depth_ok(text: str) -> bool:
+def json_depth_ok(text: str) -> bool:
     """True when the brackets of a JSON text nest at most :data:`MAX_DEPTH` deep (strings skipped)."""
     depth, in_string, escaped = 0, False, False
     for ch in text:
@@ -225,10 +226,10 @@ def _json_depth_ok(text: str) -> bool:
 def _parse(path: Path, text: str, error: type[Exception]) -> Any:
     """The document in ``text``: JSON for a ``.json`` file, YAML otherwise."""
     if path.suffix.lower() == ".json":
-        if not _json_depth_ok(text):
+        if not json_depth_ok(text):
             raise error(f"{path}: invalid JSON: nesting deeper than {MAX_DEPTH} levels")
         try:
-            return json.loads(text, object_pairs_hook=_json_object, parse_constant=_no_constant)
+            return json.loads(text, object_pairs_hook=json_object, parse_constant=no_constant)
         except json.JSONDecodeError as err:
             raise error(f"{path}:{err.lineno}:{err.colno}: invalid JSON: {err.msg}") from None
         except (ValueError, RecursionError) as err:
@@ -243,7 +244,7 @@ def _parse(path: Path, text: str, error: type[Exception]) -> Any:
         raise error(f"{path}: invalid YAML: {one_line(err)}") from None
 
 
-def _no_constant(name: str) -> Any:
+def no_constant(name: str) -> Any:
     raise ValueError(f"{name} is not a number JSON allows")
 
 

@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+from evopose_errors import EvoPoseError
 
-class WorldError(ValueError):
+
+class WorldError(EvoPoseError, ValueError):
     """Root of every input problem in the simulated world: a bad file, a frame out of range, an unreadable image."""
 
 

@@ -20,7 +20,7 @@ good_within: {rotation_deg: 5.0}    # optional: a good published pose lies withi
 ``motion`` is what the target can do between two frames, for the tracking gate
 (:class:`evopose.uncertainty.TrackReference`): 1-sigma rates of horizontal speed, vertical speed, tilt (turning
 about a horizontal axis) and turn (about the vertical). Without it the gate allows 0.1 m and 0.1 rad per frame on
-every axis (:class:`evopose.uncertainty.ConfidenceRules`).
+every axis (:class:`evopose.trust.ConfidenceRules`).
 
 ``good_within`` is what the target's user calls right: a vehicle publishes its track (:mod:`evopose.pose_filter`)
 as good only once the track knows its rotation to half of ``rotation_deg`` (1 sigma), so that a good pose lies
@@ -40,7 +40,7 @@ import numpy as np
 from pydantic import Field, field_validator, model_validator
 
 from evopose import Model
-from evopose.uncertainty import ConfidenceRules
+from evopose.trust import ConfidenceRules
 
 from .documents import Strict, read_mapping, validate
 from .errors import ModelFileError
@@ -115,7 +115,7 @@ class MotionSpec(Strict):
 
     def per_frame(self, period_s: float) -> tuple[float, float, float, float, float, float]:
         """The 1-sigma change per frame of ``period_s`` seconds, in the covariance's coordinates (x, y, z, then
-        rotations about the fixed X, Y, Z axes): :attr:`evopose.uncertainty.ConfidenceRules.track_motion`."""
+        rotations about the fixed X, Y, Z axes): :attr:`evopose.trust.ConfidenceRules.track_motion`."""
         s = float(period_s)
         return (self.speed * s, self.speed * s, self.climb * s, self.tilt * s, self.tilt * s, self.turn * s)
 

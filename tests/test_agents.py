@@ -158,7 +158,7 @@ def test_ground_station_holds_the_airship_attitude_and_sends_it_its_pose(teams):
     assert station["traffic"]["received"]["attitude"] >= 12 and airship["traffic"]["sent"]["attitude"] >= 15
     assert station["error_roll"] < 3.0 and station["error_position"] < 0.15
     own = [r for r in team.procs["airship"].all_records() if r.get("event") == "own-pose"]
-    assert airship["good"] >= 10 and len(own) >= 10 and all(r["from"] == "ground-station" for r in own)
+    assert airship["converged"] >= 10 and len(own) >= 10 and all(r["from"] == "ground-station" for r in own)
     assert airship["error_position"] < 0.15
 
 

@@ -158,7 +158,7 @@ def test_a_vehicle_playing_a_recording_behind_the_wall_clock_judges_staleness_at
     # a team playing a dataset 20 s behind the wall clock: a team-mate's view of that instant is fresh for it,
     # data 5 s older than that instant is stale (on the wall clock both are stale; the fleet paired nothing)
     with open_bus("tx", endpoint, listen=True) as tx, open_bus("rx", endpoint, max_age_s=1.0) as rx:
-        rx.playback_lag_ns = 20 * 10**9
+        rx.playback.play_behind(20 * 10**9)
         rx.subscribe(Topic.ATTITUDE)
         assert rx.wait_for_teammates({"tx"}, DEADLINE) and tx.wait_for_subscribers(Topic.ATTITUDE, DEADLINE)
         tx.publish(message(tx, Topic.ATTITUDE, seq=0, age_s=25.0))  # 5 s before the instant played

@@ -40,7 +40,7 @@ def test_two_views_in_either_order_give_one_pose(exp2):
     assert names_a == names_b == ["H1", "H2"] and [v.weight for v in views_a] == [0.5, 0.5]
     a = _estimator(scenario).estimate(views_a, frame=3)
     b = _estimator(scenario).estimate(views_b, frame=3)
-    assert a.good and a.solved and np.array_equal(a.pose, b.pose)
+    assert a.converged and a.solved and np.array_equal(a.pose, b.pose)
     assert _position_error(a.pose, frames["H1"].truth) < 0.02
 
 
@@ -82,9 +82,9 @@ def test_a_bad_hint_is_discarded_and_a_good_one_kept(exp2):
     for name, hint in (("bad", bad), ("good", truth)):
         estimator = _estimator(scenario)
         first = estimator.estimate(views, frame=0, generations=1)
-        assert estimator.searching and not first.good  # one generation does not finish a search
+        assert estimator.searching and not first.converged  # one generation does not finish a search
         estimate = estimator.generation(hint[None])
-        outcomes[name] = (estimate.solution.from_hint, estimate.good, estimator.searching)
+        outcomes[name] = (estimate.solution.from_hint, estimate.converged, estimator.searching)
         assert _position_error(estimate.pose, truth) < 0.05, name
     assert outcomes == {"bad": (False, False, True), "good": (True, True, False)}
     tracking = _estimator(scenario)
@@ -166,7 +166,7 @@ def test_a_narrow_attitude_box_still_lets_the_position_converge():
                      for i, name in enumerate(("roll", "pitch", "yaw"))]
         estimator = _estimator(scenario)
         estimate = estimator.estimate(views, knowledge=knowledge)
-        assert estimate.good and estimate.good_at is not None
+        assert estimate.converged and estimate.close_at is not None
         objective = PoseObjective(estimator.problem(views, knowledge, None), estimator.options.fitness,
                                   estimator.options.tau)
         at_estimate, at_truth = objective(np.stack([estimate.pose, frame.truth]))
@@ -214,7 +214,7 @@ def test_the_estimator_never_mutates_an_objective(exp2, monkeypatch):
     views = [views[0], View(views[1].camera, junk, views[1].weight)]
     estimator = _estimator(scenario)
     first = estimator.estimate(views, frame=0)
-    assert first.good and list(first.solution.view_weights) == [0.5, 0.0]
+    assert first.converged and list(first.solution.view_weights) == [0.5, 0.0]
     assert estimator.estimate(views[:1], frame=1).solution.stop_reason == "tracked"
     truth = frames["H1"].truth
     for _ in range(3):

@@ -121,7 +121,7 @@ def test_an_absent_target_dataset_has_no_errors_and_counts_false_positives(runs)
 
 def test_the_camera_of_each_frame_is_the_datasets_or_the_files_given(datasets, tmp_path):
     from agents.vehicle.config import AgentConfig
-    from agents.vehicle.sources import open_camera
+    from agents.vehicle.cameras import open_camera
     from scenarios.world import load_scenario
 
     exp2, _ = datasets
@@ -153,7 +153,7 @@ def test_a_datasets_frame_is_stamped_with_the_tick_it_was_taken_at_however_late_
     # when one of them processes it ticks later than the other
     from agents.vehicle.config import AgentConfig
     from agents.vehicle.frames import FrameClock
-    from agents.vehicle.sources import open_camera
+    from agents.vehicle.cameras import open_camera
     from scenarios.world import load_scenario
 
     exp2, _ = datasets
@@ -181,7 +181,7 @@ def test_a_datasets_frame_is_stamped_with_the_tick_it_was_taken_at_however_late_
 def test_a_team_playing_a_recording_behind_the_wall_clock_still_pairs_its_views(datasets):
     # H1 and H2 play the recording at 1000 frames/s, faster than they can process it: every frame is played (none
     # skipped), so the team falls further behind the wall clock each frame, past --max-age 0.1 s. Staleness is
-    # judged at the instant played (FleetBus.playback_lag_ns), so a team-mate's view of that very instant is not
+    # judged at the instant played (FleetBus.playback), so a team-mate's view of that very instant is not
     # refused as stale (on the wall clock it was, and each then solved a problem of its own)
     exp2, _ = datasets
     epoch, port = time.time_ns() + int(3e9), free_port()

@@ -87,9 +87,17 @@ def test_a_vehicle_without_its_camera_or_a_bad_dataset_is_one_line_and_exit_2(ca
 
 
 @pytest.mark.parametrize("scale", ["paper", "telephoto", "telephoto-agx", "telephoto-flat-cool"])
-def test_two_helicopters_on_the_committed_cycles_frames_agree_and_no_good_pose_is_wrong(scale):
+def test_two_helicopters_on_the_committed_cycles_frames_stay_within_a_right_poses_accuracy_and_no_good_pose_is_wrong(
+        scale):
     # Blender Cycles frames (tests/data/photoreal, docs/datasets.md), the contrast front-end, feature sets shared
-    # (eq. 4): both publish the same pose, and a pose either calls good is within the bar (0.5 m, 5 deg)
+    # (eq. 4): on every frame the two publish poses within the accuracy of a right pose at that scale of each other
+    # (not the same pose: see below), and a pose either calls good is within the bar (0.5 m, 5 deg). That
+    # they publish the same pose (1 cm and 0.1 deg, agents.experiments.results.frame_agreement) is a measurement,
+    # not this test's claim: benchmarks/bench_photoreal_fleet.py's "same pose" column and the report's agreement
+    # table. Why not here: a dataset source plays one frame per frame processed, so a vehicle that ran late takes a
+    # frame at a later tick than its team-mate; the views are paired by instant, but the best pose each sends with
+    # its feature set is its own at the tick it sent it, so while a search from scratch is in progress the two
+    # weigh different candidates and stop their slices at different bests
     from geometry import pose_error
     from scenarios.dataset import open_dataset
 

@@ -64,8 +64,19 @@ def test_every_figure_is_drawn_from_its_run_records(tmp_path):
 
 
 @pytest.mark.parametrize("missing", ["exp2a-features", "exp2b-hints"])
-def test_a_mode_that_did_not_run_is_left_out(tmp_path, missing):
-    records = [{"scenario": s, "world": WORLD, "variant": "v", "run": 0, "agents": {"H1": {"poses": published(
-        range(5))}}} for s in ("exp2a-features", "exp2b-hints") if s != missing]
+def test_a_mode_that_did_not_run_is_left_out(tmp_path, monkeypatch, missing):
+    """The figures name only the modes that ran: one panel from above, one line per helicopter's error plot."""
+    from matplotlib.figure import Figure
+
+    drawn: list[Figure] = []
+    save = Figure.savefig
+    monkeypatch.setattr(Figure, "savefig", lambda fig, *args, **kwargs: (drawn.append(fig), save(fig, *args, **kwargs)))
+    ran = "exp2b-hints" if missing == "exp2a-features" else "exp2a-features"
+    records = [{"scenario": ran, "world": WORLD, "variant": "v", "run": 0, "agents": {"H1": {"poses": published(
+        range(5))}}}]
     assert cv2.imread(str(figures.tracks_from_above(records, tmp_path / "t.png", WORLD))) is not None
+    assert [ax.get_title() for ax in drawn[-1].axes] == [f"{figures.SHARE_LABELS[ran]}, {WORLD}"]
     assert cv2.imread(str(figures.error_over_time(records, tmp_path / "e.png", WORLD))) is not None
+    legend = drawn[-1].axes[0].get_legend()
+    assert [text.get_text() for text in legend.get_texts()] == [figures.SHARE_LABELS[ran]]
+    assert figures.SHARE_LABELS[missing] not in {line.get_label() for ax in drawn[-1].axes for line in ax.lines}

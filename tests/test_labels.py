@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from benchmarks.problems import in_right_basin, make_paper_scale_problem
+from benchmarks.problems import in_true_basin, make_paper_scale_problem
 from evopose import Camera, Model, PoseObjective, PoseProblem, View, refine, solve
 from evopose.fitness import matches
 from evopose.problem import Bounds, label_coordinates
@@ -58,7 +58,7 @@ def test_colours_resolve_the_paper_scale_ambiguity():
     for i in range(6):
         for labelled in (False, True):
             sp = make_paper_scale_problem(np.random.default_rng([7, i, 2]), cameras=("H1",), labelled=labelled)
-            right[labelled] += bool(in_right_basin(sp, solve(sp.problem, seed=i).pose))
+            right[labelled] += bool(in_true_basin(sp, solve(sp.problem, seed=i).pose))
     assert right[True] == 6
     assert right[False] < 6
 

@@ -95,18 +95,19 @@ def test_an_agent_counts_a_frame_set_aside_and_does_not_count_it_good():
     from agents.vehicle.events import FrameEvent
     from agents.vehicle.records import RunRecord
     from evopose import Solution
-    from evopose.estimator_state import Estimate, Verdict
+    from evopose.estimator_state import Estimate
+    from evopose.trust import Trust
 
     solution = Solution(LEVEL, 0.1, np.zeros(2), np.ones(2), 0, 0, 0.0, True, "tracked", [])
     record = RunRecord()
-    for verdict in (Verdict(True, True, True, on_track=False), Verdict(True, True, True),
-                    Verdict(True, True, False, on_track=False)):  # the last is not good alone: not set aside
-        record.add_frame(FrameEvent("H1", 0, 12, views=("H1", "H2"), pose=tuple(LEVEL), verdict=verdict,
+    for verdict in (Trust(True, True, True, "set aside"), Trust(True, True, True),
+                    Trust(True, True, False, "set aside")):  # the last is not good alone: not set aside
+        record.add_frame(FrameEvent("H1", 0, 12, views=("H1", "H2"), pose=tuple(LEVEL), trust=verdict,
                                     estimate=Estimate(solution, 0.2, False)), 0.0)
     summary = record.summary()
     assert summary["good"] == 1 and summary["set_aside"] == 1
-    assert FrameEvent("H1", 0, 12, pose=tuple(LEVEL), verdict=Verdict(True, True, True, on_track=False),
-                      estimate=Estimate(solution, 0.2, False)).to_json()["on_track"] is False
+    assert FrameEvent("H1", 0, 12, pose=tuple(LEVEL), trust=Trust(True, True, True, "set aside"),
+                      estimate=Estimate(solution, 0.2, False)).to_json()["standing"] == "set aside"
 
 
 def test_a_track_is_published_good_only_once_it_knows_its_rotation_to_two_and_a_half_degrees():
@@ -127,25 +128,25 @@ def test_a_track_is_published_good_only_once_it_knows_its_rotation_to_two_and_a_
 
 
 def test_an_unsettled_track_makes_the_verdict_not_good_and_is_not_set_aside():
-    from evopose.estimator_state import Verdict
+    from evopose.trust import Trust
 
-    unsettled = Verdict(True, True, True, on_track=True, settled=False)
+    unsettled = Trust(True, True, True, "unsettled")
     assert not unsettled.good and not unsettled.set_aside and unsettled.in_right_basin
-    assert Verdict(True, True, True).good
+    assert Trust(True, True, True).good
 
 
 def test_a_frame_record_says_whether_its_track_settled_and_why_it_is_unsure():
     from agents.vehicle.events import FrameEvent
     from evopose import Solution
-    from evopose.estimator_state import Estimate, Verdict
-    from evopose.uncertainty import Confidence
+    from evopose.estimator_state import Estimate
+    from evopose.trust import Confidence, Trust, judge
 
     unsure = Solution(LEVEL, 0.1, np.zeros(2), np.ones(2), 0, 0, 0.0, True, "tracked", [])
     unsure = unsure.with_(confidence=Confidence(False, None, 9, 0.1, reason="ambiguous"))
-    line = FrameEvent("H1", 0, 12, pose=tuple(LEVEL), verdict=Verdict(True, False, True),
+    line = FrameEvent("H1", 0, 12, pose=tuple(LEVEL), trust=judge(unsure),
                       estimate=Estimate(unsure, 0.2, False)).to_json()
-    assert line["unsure"] == "ambiguous" and line["good"] is False
+    assert line["reason"] == "ambiguous" and line["good"] is False and line["trust"] == "unsure"
     sure = unsure.with_(confidence=Confidence(True, None, 12, 0.0))
-    line = FrameEvent("H1", 0, 12, pose=tuple(LEVEL), verdict=Verdict(True, True, True, settled=False),
+    line = FrameEvent("H1", 0, 12, pose=tuple(LEVEL), trust=Trust(True, True, True, "unsettled"),
                       estimate=Estimate(sure, 0.2, False)).to_json()
-    assert "unsure" not in line and line["settled"] is False and line["good"] is False
+    assert line["reason"] == "track unsettled" and line["standing"] == "unsettled" and line["good"] is False

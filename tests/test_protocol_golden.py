@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 
 import protocol as p
-from tests.golden.make import golden_messages, golden_path
+from tests.golden.make import PREVIOUS, golden_messages, golden_path
 
 DOC = Path(__file__).resolve().parents[1] / "docs" / "protocol.md"
 GOLDEN = golden_messages()
@@ -36,3 +36,22 @@ def test_the_worked_examples_in_the_docs_are_the_golden_bytes(name):
     text = DOC.read_text(encoding="utf-8")
     for line in _hex_lines(golden_path(name).read_bytes()):
         assert line in text, f"docs/protocol.md worked example of {name} is out of date: missing {line!r}"
+
+
+@pytest.mark.parametrize("name", sorted(PREVIOUS))
+def test_the_previous_schema_version_still_decodes_to_the_current_message(name):
+    """One version back is decoded and upgraded (docs/protocol.md §6): version 2's ``pose`` said ``confident`` for
+    the good verdict that version 3 calls ``good``."""
+    old = golden_path(name).read_bytes()
+    message = GOLDEN[PREVIOUS[name]]
+    assert p.decode(message.TOPIC, old) == message and p.decode(message.TOPIC, old).good is True
+    assert p.PREVIOUS_SCHEMA_VERSION == p.SCHEMA_VERSION - 1
+
+
+def test_a_version_older_than_the_previous_one_is_refused():
+    import msgpack
+
+    document = msgpack.unpackb(golden_path("pose_v2").read_bytes(), raw=False)
+    document["version"] = p.PREVIOUS_SCHEMA_VERSION - 1
+    with pytest.raises(p.SchemaMismatch):
+        p.decode("pose", msgpack.packb(document, use_bin_type=True))

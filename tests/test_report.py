@@ -38,7 +38,7 @@ def test_team_size_table_from_run_records():
 
 
 def test_above_paper_names_each_cell_over_the_papers_table_ii_and_a_row_without_a_good_pose():
-    from agents.experiments.report import PAPER_TABLE_II, above_paper
+    from agents.experiments.paper_tables import PAPER_TABLE_II, above_paper
 
     def row(scenario: str, vehicle: str, **errors: float) -> dict:
         base = {"roll": 0.01, "pitch": 0.01, "yaw": 0.01, "x": 0.001, "y": 0.001, "z": 0.001}

@@ -68,18 +68,18 @@ def test_errors_are_over_the_right_basin_and_good_counts_only_precise_frames():
     from types import SimpleNamespace
 
     from agents.vehicle.events import FrameEvent
-    from evopose.estimator_state import Verdict
+    from evopose.trust import Trust
 
     record = RunRecord()
-    estimate = SimpleNamespace(solved=False, good_at=None, solution=SimpleNamespace(history=[]))
-    for verdict, error in ((Verdict(True, True, False), 0.8),    # one camera: right basin, range unknown
-                           (Verdict(True, True, True), 0.02),    # two cameras: good
-                           (Verdict(True, False, False), 5.0)):  # not sure of the basin: no error counted
-        event = FrameEvent("H1", 0, 12, pose=(0.0,) * 6, verdict=verdict, error={"position": error},
+    estimate = SimpleNamespace(solved=False, close_at=None, solution=SimpleNamespace(history=[]))
+    for verdict, error in ((Trust(True, True, False), 0.8),    # one camera: right basin, range unknown
+                           (Trust(True, True, True), 0.02),    # two cameras: good
+                           (Trust(True, False, False), 5.0)):  # not sure of the basin: no error counted
+        event = FrameEvent("H1", 0, 12, pose=(0.0,) * 6, trust=verdict, error={"position": error},
                            estimate=estimate)
         record.add_frame(event, image_ready_s=0.0)
     summary = record.summary()
     assert summary["good"] == 1 and summary["estimates"] == 3
     assert summary["error_position"] == (0.8 + 0.02) / 2 and summary["error_position_max"] == 0.8
-    line = FrameEvent("H1", 0, 12, pose=(0.0,) * 6, verdict=Verdict(True, True, False), estimate=estimate).to_json()
+    line = FrameEvent("H1", 0, 12, pose=(0.0,) * 6, trust=Trust(True, True, False), estimate=estimate).to_json()
     assert (line["good"], line["converged"], line["confident"], line["precise"]) == (False, True, True, False)

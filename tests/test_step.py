@@ -3,6 +3,7 @@ and candidate exchange at the paper's image scale (exp2-paper-scale: the Pioneer
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import replace
 
 import numpy as np
@@ -12,6 +13,7 @@ from agents.vehicle.frames import SimulatedCamera
 from agents.vehicle.hints import HintInbox
 from agents.vehicle.step import POLICIES, FrameInputs, VehicleState, idle, share, share_policy, step
 from agents.vehicle.team_views import Staleness, TeamViews, build_views, mate_view, own_view
+from evopose import SearchOptions
 from evopose.cooperative import Cooperation, CooperativeEstimator
 from protocol import PoseEstimate, Topic, decode, encode
 from protocol.hint import Hint
@@ -46,12 +48,12 @@ def test_step_publishes_the_pose_and_in_hint_mode_a_hint(paper_scale):
     after, messages, event = step(before, inputs)
     assert [m.TOPIC for m in messages] == [Topic.POSE, Topic.HINT]
     pose = messages[0]
-    assert isinstance(pose, PoseEstimate) and pose.converged and pose.confident == event.verdict.good
+    assert isinstance(pose, PoseEstimate) and pose.converged and pose.good == event.trust.good
     assert pose.target == "pioneer" and pose.inputs == () and isinstance(messages[1], Hint)
     # one helicopter at the paper's scale: the right basin (so a hint), but its range known only to tens of cm,
     # so not a good pose to act on (Solution.precise)
-    assert messages[1].pose == pose.pose and event.verdict.in_right_basin and event.error["position"] < 0.5
-    assert not event.verdict.precise and not event.verdict.good and not pose.confident
+    assert messages[1].pose == pose.pose and event.trust.in_right_basin and event.error["position"] < 0.5
+    assert not event.trust.precise and not event.trust.good and not pose.good
     assert before.estimator.last is None and after.estimator.last is not None  # a new state; the old one intact
     assert event.to_json()["event"] == "frame" and not event.to_json()["good"]
     _, alone, _ = step(_state(scenario, "H1", "none"), inputs)
@@ -87,7 +89,7 @@ def test_between_frames_a_best_in_the_right_basin_goes_out_as_a_hint_only_in_hin
     inputs = FrameInputs(0, _own(frames, "H1", 0))
     for mode, expected in (("hint", [Topic.HINT]), ("none", [])):
         state, _, event = step(_state(scenario, "H1", mode), inputs)
-        assert event.verdict.in_right_basin and not event.verdict.precise
+        assert event.trust.in_right_basin and not event.trust.precise
         state, messages, estimate = idle(state, None, None)
         assert [m.TOPIC for m in messages] == expected and estimate is not None
     empty_state, messages, estimate = idle(_state(scenario, "H1", "hint"), None, None)
@@ -134,14 +136,53 @@ def test_a_search_in_slices_ends_where_the_whole_search_ends(paper_scale):
     whole = _estimator(scenario).estimate(views, frame=0)
     sliced = _estimator(scenario)
     first = sliced.estimate(views, frame=0, budget_s=0.0)
-    assert not first.good and sliced.searching  # one generation, then the best so far
+    assert not first.converged and sliced.searching  # one generation, then the best so far
     estimate = first
     for _ in range(10_000):
         if not sliced.searching:
             break
         estimate = sliced.generation(budget_s=0.0)
-    assert not sliced.searching and estimate.good == whole.good
+    assert not sliced.searching and estimate.converged == whole.converged
     np.testing.assert_array_equal(estimate.pose, whole.pose)
+
+
+def _ticking():
+    """A clock for one call: 1 ms per reading from 0 (a fresh one gives the same readings)."""
+    readings = itertools.count()
+    return lambda: next(readings) * 1e-3
+
+
+def test_the_same_state_and_inputs_give_the_same_frame(paper_scale):
+    """State that is a value: the random streams are in the state (a search's ``key``), the time is an input
+    (``FrameInputs.clock``); a search from scratch left unfinished by frame 0 is resumed twice from the same state,
+    and both frames, their messages and the states they leave are the same."""
+    scenario, frames = paper_scale
+    state, _, _ = step(_state(scenario, "H1", "features"), FrameInputs(0, _own(frames, "H1", 0), clock=_ticking()))
+    assert state.estimator.searching  # a few generations a frame: the search goes on at frame 1
+    key = dict(state.estimator.search.key)
+    outcomes = [step(state, FrameInputs(1, _own(frames, "H1", 1), clock=_ticking())) for _ in range(2)]
+    (one, sent_one, event_one), (two, sent_two, event_two) = outcomes
+    assert state.estimator.search.key == key  # resuming did not change the state it started from
+    assert [m.model_dump() for m in sent_one] == [m.model_dump() for m in sent_two]
+    assert (event_one.pose, event_one.trust, event_one.seconds) == (event_two.pose, event_two.trust, event_two.seconds)
+    assert np.array_equal(one.estimator.current_best, two.estimator.current_best)
+    assert one.estimator.searching == two.estimator.searching
+    assert one.estimator.search is None or one.estimator.search.key == two.estimator.search.key
+
+
+def test_ask_draws_from_the_generator_it_is_given():
+    from evopose.search import EvoPose
+
+    from benchmarks.problems import make_paper_scale_problem
+
+    problem = make_paper_scale_problem(np.random.default_rng(1)).problem
+    evo = EvoPose(problem, SearchOptions())
+    start = evo.start()
+    _, first = evo.ask(start, np.random.default_rng(7))
+    _, again = evo.ask(start, np.random.default_rng(7))
+    _, other = evo.ask(start, np.random.default_rng(8))
+    assert np.array_equal(first.candidates, again.candidates) and not np.array_equal(first.candidates,
+                                                                                      other.candidates)
 
 
 def test_feature_sets_carry_the_best_and_team_mates_agree(paper_scale):

@@ -29,9 +29,9 @@ def test_a_deadline_already_passed_still_does_the_first_row_and_no_more():
 def generation(seed: int = 3):
     problem = make_paper_scale_problem(np.random.default_rng(seed), cameras=("H1", "H2")).problem
     options = SearchOptions()
-    evo = EvoPose(problem, options, np.random.default_rng(seed))
+    evo = EvoPose(problem, options)
     evaluator = Evaluator.for_search(problem, options)
-    _, asked = evo.ask(evo.start(None))
+    _, asked = evo.ask(evo.start(None), np.random.default_rng(seed))
     return evaluator, asked
 
 
@@ -71,8 +71,8 @@ def test_a_verdict_without_time_to_polish_the_rivals_is_not_confident():
     than budget and grace): the rivals go unpolished, so no distinct pose can be ruled out."""
     problem = make_paper_scale_problem(np.random.default_rng(3), cameras=("H1", "H2")).problem
     options = SearchOptions(time_budget=5.0)
-    evo = EvoPose(problem, options, np.random.default_rng(3))
-    run = evolve(evo, evo.start(None), Evaluator.for_search(problem, options))
+    evo = EvoPose(problem, options)
+    run = evolve(evo, evo.start(None), Evaluator.for_search(problem, options), rng=np.random.default_rng(3))
     in_time = solution_of(problem, options, run, seconds=0.0)
     late = solution_of(problem, options, run, seconds=10.0)
     assert in_time.confident, in_time.confidence.reason

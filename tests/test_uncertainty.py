@@ -9,13 +9,14 @@ import numpy as np
 import pytest
 
 from agents.problem.problem_file import solution_to_dict
-from benchmarks.problems import (absent_target, in_right_basin, make_paper_scale_problem, make_problem, observe,
+from benchmarks.problems import (absent_target, in_true_basin, make_paper_scale_problem, make_problem, observe,
                                  pose_errors)
 from evopose import PoseObjective, PoseProblem, SearchOptions, View, refine, solve, track
 from geometry import euler_from_rotation, rotation_from_euler
 from evopose.solver import POLISH_SCHEDULE
 from evopose.covariance import fixed_axis_jacobian
-from evopose.uncertainty import (ConfidenceRules, TrackReference, assess, covariance, deviation, in_box_second_moment, mutual_matches,
+from evopose.trust import ConfidenceRules, assess
+from evopose.uncertainty import (TrackReference, covariance, deviation, in_box_second_moment, mutual_matches,
                                  same_image, sum_of_squares, untruncated_variance)
 
 
@@ -35,7 +36,7 @@ def test_confident_at_paper_scale_when_the_marks_are_clear():
     """0.7 px noise, 20 % clutter, one helicopter (H1, f = 1700 px at 30 m): right, and sure of it."""
     sp = _paper(0)
     sol = solve(sp.problem, seed=0)
-    assert in_right_basin(sp, sol.pose)
+    assert in_true_basin(sp, sol.pose)
     assert sol.confident and sol.converged and sol.confidence.reason == ""
     assert sol.confidence.n_pairs >= ConfidenceRules().min_pairs
     assert sol.confidence.margin >= ConfidenceRules().margin
@@ -46,7 +47,7 @@ def test_not_confident_in_a_wrong_basin_at_paper_scale():
     pose fits about as well), nor converged."""
     sp = _paper(2, noise=1.8)
     sol = solve(sp.problem, seed=0)
-    assert not in_right_basin(sp, sol.pose)
+    assert not in_true_basin(sp, sol.pose)
     assert not sol.confident and sol.confidence.reason == "ambiguous"
     assert not sol.converged
     assert sol.confidence.runner_up is not None
@@ -56,7 +57,7 @@ def test_not_confident_when_right_but_a_distinct_pose_fits_as_well():
     """Right basin, but at 1.8 px noise a flipped pose fits nearly as well: confident means sure, not lucky."""
     sp = _paper(0, noise=1.8)
     sol = solve(sp.problem, seed=0)
-    assert in_right_basin(sp, sol.pose)
+    assert in_true_basin(sp, sol.pose)
     assert not sol.confident and sol.confidence.margin < ConfidenceRules().margin
     rot, _ = pose_errors(sol.confidence.runner_up, sp.true_pose, sp.symmetries, sp.problem.model.points.mean(0))
     assert np.rad2deg(rot) > 30  # the rival is another basin, not the same pose moved by the noise
@@ -293,11 +294,11 @@ def test_one_camera_at_paper_scale_finds_the_basin_but_not_the_range_two_cameras
     """The paper's Table II: H1 alone is metres off in range, H1 + H2 centimetres. Confident (the right basin) is
     not enough to act on: ``precise`` needs the covariance within the target's own size (3 sigma), and the
     errors it rules out are real ones."""
-    from evopose.uncertainty import imprecise
+    from evopose.trust import imprecise
 
     alone, both = _paper(1), _paper(1, cameras=("H1", "H2"))
     one, two = solve(alone.problem, seed=0), solve(both.problem, seed=0)
-    assert one.confident and in_right_basin(alone, one.pose) and not one.precise
+    assert one.confident and in_true_basin(alone, one.pose) and not one.precise
     assert two.confident and two.precise
     extent = np.linalg.norm(np.ptp(alone.problem.model.points, axis=0))
     range_sigma = np.sqrt(np.linalg.eigvalsh(one.covariance[:3, :3]).max())

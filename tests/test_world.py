@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import yaml
 
-from evopose.uncertainty import ConfidenceRules
+from evopose.trust import ConfidenceRules
 from geometry import rotation_from_euler
 from scenarios.errors import FrameError, ModelFileError, ScenarioError, WorldError
 from scenarios.sensors import GpsModel, ImuModel

@@ -14,7 +14,7 @@ Channels (open ``docs/foxglove-layout.json`` in Foxglove for the panels):
 - ``/<V>/features`` (foxglove.ImageAnnotations): the feature points (green), the model projected at V's estimate
   (red) and at the truth (blue);
 - ``/metrics`` (JSON, schema ``evopose.Metrics``, :data:`METRICS_SCHEMA`): per estimate: its time (Foxglove's
-  ``{sec, nsec}``), vehicle, fitness, mismatch, converged, confident, generations and, once a truth is known
+  ``{sec, nsec}``), vehicle, fitness, mismatch, converged, good, generations and, once a truth is known
   (``has_truth``), position and rotation error to it.
 
 ``/tf`` and ``/scene`` are coalesced to at most :data:`VIEW_RATE_HZ` messages a second (:meth:`FleetView.flush`); the
@@ -63,12 +63,12 @@ METRICS_SCHEMA = {
     "type": "object",
     "properties": {
         "timestamp": TIME_SCHEMA, "vehicle": {"type": "string"}, "fitness": {"type": "number"},
-        "mismatch": {"type": "number"}, "converged": {"type": "boolean"}, "confident": {"type": "boolean"},
+        "mismatch": {"type": "number"}, "converged": {"type": "boolean"}, "good": {"type": "boolean"},
         "generations": {"type": "integer", "minimum": 0, "maximum": 2**32 - 1},
         "has_truth": {"type": "boolean"}, "error_position_m": {"type": "number"},
         "error_rotation_deg": {"type": "number"},
     },
-    "required": ["timestamp", "vehicle", "fitness", "mismatch", "converged", "confident", "generations",
+    "required": ["timestamp", "vehicle", "fitness", "mismatch", "converged", "good", "generations",
                  "has_truth"],
 }
 #: /tf and /scene are coalesced: what arrived since the last flush goes out as one message (the newest transform per
@@ -267,7 +267,7 @@ def metrics_message(vehicle: str, message: PoseEstimate, errors: tuple[float, fl
     the protocol refuses others)."""
     out = {"timestamp": time_of(message.stamp_ns), "vehicle": vehicle, "fitness": float(message.fitness),
            "mismatch": float(message.mismatch), "converged": bool(message.converged),
-           "confident": bool(getattr(message, "confident", False)), "generations": int(message.generations),
+           "good": bool(message.good), "generations": int(message.generations),
            "has_truth": errors is not None}
     if errors is not None:
         for name, value in zip(("error_position_m", "error_rotation_deg"), errors):

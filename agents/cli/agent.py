@@ -145,7 +145,8 @@ def register(app: typer.Typer) -> None:
                 measured = (f"error {e['position'] * 100:.1f} cm {max(e['roll'], e['pitch'], e['yaw']):.2f}°"
                             if e is not None else f"pose x {p['x']:.3f} y {p['y']:.3f} z {p['z']:.3f} m")
                 console.print(f"frame {record['frame']}: views {','.join(record['views'])} {measured} "
-                              f"{'good' if record['good'] else 'not converged'} {record['seconds'] * 1e3:.0f} ms")
+                              f"{record['trust']}{'' if record['good'] else ': ' + record['reason']} "
+                              f"{record['seconds'] * 1e3:.0f} ms")
 
         with stop_on_signals() as stop:
             summary = run_agent(session_options(mode, connect, listen, config, multicast), agent_config, stop, emit)

@@ -108,17 +108,12 @@ def _fail(message: str, code: int) -> int:
     return code
 
 
-def _usage_errors() -> tuple[type[BaseException], ...]:
-    """The errors that mean a bad input or argument. Imported only on the error path: the modules that
-    raise them are loaded by then, and ``--help`` stays light."""
-    from protocol.errors import ProtocolError
-    from scenarios.documents import DocumentError
-    from scenarios.errors import WorldError
+def _usage_error() -> type[BaseException]:
+    """The root of the errors that mean a bad input or argument (every package's derive from it). Imported only on
+    the error path: ``--help`` stays light."""
+    from evopose_errors import EvoPoseError
 
-    from agents.errors import FleetError
-    from agents.problem.problem_file import ProblemFileError
-
-    return ProblemFileError, FleetError, ProtocolError, WorldError, DocumentError
+    return EvoPoseError
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -134,7 +129,7 @@ def main(argv: list[str] | None = None) -> int:
     except RecursionError:
         return _fail("input nested too deeply", USAGE_ERROR)
     except Exception as err:  # noqa: BLE001 - one line for a usage error, the traceback for a bug
-        if isinstance(err, _usage_errors()):
+        if isinstance(err, _usage_error()):
             return _fail(str(err), USAGE_ERROR)
         raise
     return code if isinstance(code, int) else 0

@@ -14,7 +14,7 @@ import math
 import threading
 from pathlib import Path
 
-from agents.experiments.report import _table_ii
+from agents.experiments.paper_tables import table_ii
 from agents.experiments.results import frame_agreement, improves, rows
 from agents.experiments.runner import dataset_scenario, run_scenario
 
@@ -156,7 +156,7 @@ def photoreal_section(records: list[dict], info: dict | None, source: str) -> li
               f"pose from the dataset; errors against the dataset's truth. {len(done)} runs"
               + (f", {len(records) - len(done)} failed" if len(records) > len(done) else "") + ".", ""]
     result_rows = rows(done)
-    lines += _table_ii(result_rows, info["world"])
+    lines += table_ii(result_rows, info["world"])
     lines += ["", "| the paper's finding | on this dataset | numbers |", "|---|---|---|"]
     for text, verdict, numbers in photoreal_findings(result_rows, done, info["world"]):
         shown = verdict if verdict == "holds" else f"**{verdict}**"

@@ -10,7 +10,6 @@ at each scale.
 
 from __future__ import annotations
 
-import math
 import os
 import platform
 import statistics
@@ -21,6 +20,8 @@ from pathlib import Path
 from scenarios.fleet import load_fleet_scenario
 
 from agents.experiments import DEFAULT_ENDPOINT, figures
+from agents.experiments.paper_tables import (ANGLES, AXES, HEADER, PAPER_TABLE_I, PAPER_TABLE_II, above_paper, cell,
+                                            find_row, find_variant, our_row, paper_row, table_ii)
 from agents.experiments.results import agreement, frame_agreement, improves, rows
 from agents.experiments.runner import run_scenario
 
@@ -39,73 +40,20 @@ DRIVING = ("exp2a-features", "exp2b-hints")
 #: its seven variants starts up to nine processes on this 2-core machine.
 TEAM_SIZE, TEAM_SIZE_RUNS = "exp2-team-size", 3
 
-#: Paper, Table I: roll, pitch, yaw error (deg), X, Y, Z error (cm), each (mean, σ); time (s).
-PAPER_TABLE_I = {
-    "EvoPose": ((20.6, 15.2), (1.8, 2.4), (2.9, 3.6), (5, 4.6), (9, 6.9), (16, 15), 3.2),
-    "EvoPose+IMU": ((0.1, 0.1), (0.1, 0.1), (0.1, 0.1), (6, 4.2), (9, 7.1), (15, 16), 2.3),
-}
-#: Paper, Table II: roll, pitch, yaw error (deg), X, Y, Z error (m), each (mean, σ); time (s; H2: "> 5").
-PAPER_TABLE_II = {
-    "H1": ((1.3, 1.7), (1.0, 2.1), (0.1, 0.3), (1.0, 0.4), (0.5, 0.2), (2.3, 1.8), 2.3),
-    "H2": ((1.1, 1.6), (1.0, 3.3), (0.5, 1.3), (1.0, 0.7), (1.2, 1.3), (2.2, 3.3), 5.0),
-    "H1 + H2": ((1.1, 1.8), (0.1, 0.3), (0.0, 0.1), (0.1, 0.1), (0.2, 0.2), (0.9, 0.4), 1.6),
-    "H1 + hint": ((0.6, 1.0), (1.0, 1.8), (0.0, 0.0), (0.9, 0.3), (0.3, 0.1), (1.6, 0.9), 0.6),
-    "H2 + hint": ((0.2, 0.1), (0.1, 0.5), (0.0, 0.1), (0.6, 0.2), (0.7, 0.2), (0.7, 0.4), 1.3),
-}
-ANGLES, AXES = ("roll", "pitch", "yaw"), ("x", "y", "z")
-#: Half the last digit Table II prints (degrees and metres to one decimal).
-PAPER_ROUNDING = 0.05
-#: Table II's rows: (label, scenario, vehicle).
-TABLE_II_ROWS = (("H1", "exp2-solo", "H1"), ("H2", "exp2-solo", "H2"), ("H1 + H2", "exp2a-features", "H1"),
-                 ("H1 + hint", "exp2b-hints", "H1"), ("H2 + hint", "exp2b-hints", "H2"))
-
-
-def _cell(mean: float, sd: float, digits: int) -> str:
-    return "-" if mean is None or math.isnan(mean) else f"{mean:.{digits}f} ({sd:.{digits}f})"
-
-
-def _row(label: str, r: dict, scale: float, digits: tuple[int, int], paper_time_s: float) -> str:
-    cells = [_cell(r[n], r[f"{n}_sd"], digits[0]) for n in ANGLES]
-    cells += [_cell(r[n] * scale, r[f"{n}_sd"] * scale, digits[1]) for n in AXES]
-    cells.append(_cell(r["first_good_s"], r["first_good_sd"], 3)
-                 + (f" ({paper_time_s / r['first_good_s']:.0f}x faster)" if r["first_good_s"] > 0 else ""))
-    return f"| {label} | ours | " + " | ".join(cells) + " |"
-
-
-def _paper_row(label: str, values: tuple) -> str:
-    cells = [f"{m:g} ({s:g})" for m, s in values[:6]]
-    time_s = values[6]
-    cells.append(("> 5" if label == "H2" else f"{time_s:g}"))
-    return f"| {label} | paper | " + " | ".join(cells) + " |"
-
-
-HEADER = ("| {what} | source | roll ° (σ) | pitch ° (σ) | yaw ° (σ) | X {u} (σ) | Y {u} (σ) | Z {u} (σ) | "
-          "time to good pose, s |\n|---|---|---|---|---|---|---|---|---|")
-
-
-def _find(result_rows: list[dict], scenario: str, vehicle: str, world: str | None = None) -> dict | None:
-    return next((r for r in result_rows if r["scenario"] == scenario and r["vehicle"] == vehicle
-                 and (world is None or r["world"] == world)), None)
-
-
-def _find_variant(result_rows: list[dict], variant: str, vehicle: str) -> dict | None:
-    return next((r for r in result_rows if r["variant"] == variant and r["vehicle"] == vehicle), None)
-
-
 def findings(result_rows: list[dict], agree_a: dict, agree_b: dict, world: str,
              with_exp1: bool = True) -> list[tuple[str, bool, str]]:
     """The paper's qualitative findings on ``world``, each with whether our numbers show it and the numbers."""
     out = []
-    plain, imu = _find_variant(result_rows, "EvoPose", "ground-station"), _find_variant(result_rows, "EvoPose+IMU",
+    plain, imu = find_variant(result_rows, "EvoPose", "ground-station"), find_variant(result_rows, "EvoPose+IMU",
                                                                                         "ground-station")
     if plain and imu and with_exp1:
         out.append(("The IMU cuts the time to a good pose (Table I)", imu["first_good_s"] < plain["first_good_s"],
                     f"{plain['first_good_s']:.3f} s -> {imu['first_good_s']:.3f} s"))
         out.append(("The IMU cuts the roll error (Table I)", imu["roll"] < plain["roll"],
                     f"{plain['roll']:.2f}° -> {imu['roll']:.2f}°"))
-    h1, h2 = _find(result_rows, "exp2-solo", "H1", world), _find(result_rows, "exp2-solo", "H2", world)
-    both = _find(result_rows, "exp2a-features", "H1", world)
-    h1h, h2h = _find(result_rows, "exp2b-hints", "H1", world), _find(result_rows, "exp2b-hints", "H2", world)
+    h1, h2 = find_row(result_rows, "exp2-solo", "H1", world), find_row(result_rows, "exp2-solo", "H2", world)
+    both = find_row(result_rows, "exp2a-features", "H1", world)
+    h1h, h2h = find_row(result_rows, "exp2b-hints", "H1", world), find_row(result_rows, "exp2b-hints", "H2", world)
     if h1 and h2 and both:
         out.append(("Both cameras beat either alone (position error)", both["position"] < min(h1["position"],
                                                                                                h2["position"]),
@@ -158,7 +106,7 @@ def bandwidth_rows(result_rows: list[dict], world: str) -> list[str]:
     for scenario, label, topic in (("exp2-raw", "raw images", "image"), ("exp2a-features", "feature sets (a)",
                                                                           "features"),
                                    ("exp2b-hints", "hints (b)", "hint")):
-        r = _find(result_rows, scenario, "H1", world)
+        r = find_row(result_rows, scenario, "H1", world)
         if r and topic in r["traffic"]:
             t = r["traffic"][topic]
             lines.append(f"| {label} | {topic} | {t['rate_hz']:.1f} | {t['bytes_per_message']:,.0f} | "
@@ -186,36 +134,6 @@ def run_all(*, runs: int, frames: int | None, seed: int, endpoint: str, stop: th
     return records
 
 
-def _table_ii(result_rows: list[dict], world: str) -> list[str]:
-    lines = [HEADER.format(what="cameras", u="m")]
-    for label, scenario, vehicle in TABLE_II_ROWS:
-        r = _find(result_rows, scenario, vehicle, world)
-        if r:
-            lines.append(_row(label, r, 1, (2, 4), PAPER_TABLE_II[label][6]))
-        lines.append(_paper_row(label, PAPER_TABLE_II[label]))
-    return lines
-
-
-def above_paper(result_rows: list[dict], world: str) -> list[str]:
-    """The cells of Table II on ``world`` whose mean error exceeds the paper's (or that have no good pose), as
-    ``"H2 pitch 4.05 > 1 deg"``: at least the paper's value plus half its last printed digit
-    (:data:`PAPER_ROUNDING`). A row not run is not listed."""
-    out = []
-    for label, scenario, vehicle in TABLE_II_ROWS:
-        r = _find(result_rows, scenario, vehicle, world)
-        if r is None:
-            continue
-        for (name, unit), (paper, _) in zip([(a, "deg") for a in ANGLES] + [(x, "m") for x in AXES],
-                                            PAPER_TABLE_II[label][:6]):
-            ours = r[name]
-            if ours is None or math.isnan(ours):
-                out.append(f"{label} {name}: no good pose")
-                break
-            if ours >= paper + PAPER_ROUNDING:  # the paper prints one decimal: "0.0" is under 0.05
-                out.append(f"{label} {name} {ours:.3g} > {paper:g} {unit}")
-    return out
-
-
 def _agreement_lines(records: list[dict], worlds: list[str]) -> list[str]:
     lines = ["| world | strategy | frames both published | same pose (1 cm, 0.1°) | both good | "
              "final poses: mean / max distance, cm |", "|---|---|---|---|---|---|"]
@@ -235,7 +153,7 @@ def _tracking_lines(result_rows: list[dict]) -> list[str]:
     for _, driving, _ in WORLDS:
         for r in (r for r in result_rows if r["world"] == driving):
             lines.append(f"| {driving} | {r['scenario']} | {r['vehicle']} | {r['good_fraction']:.0%} | "
-                         f"{_cell(r['position'] * 100, r['position_sd'] * 100, 1)} | {_cell(r['yaw'], r['yaw_sd'], 2)} |")
+                         f"{cell(r['position'] * 100, r['position_sd'] * 100, 1)} | {cell(r['yaw'], r['yaw_sd'], 2)} |")
     return lines
 
 
@@ -259,7 +177,7 @@ def _team_size_lines(records: list[dict], result_rows: list[dict]) -> list[str]:
         shares = [frame_agreement(runs, "H1", r["vehicle"]) for r in uavs[1:]]
         same = (f"{min(a['fraction'] for a in shares):.0%} (worst pair)" if shares else "-")
         lines.append(f"| {uavs[0]['share']} | {len(uavs)} | {mean['good_fraction']:.0%} | "
-                     f"{_cell(uavs[0]['position'] * 100, uavs[0]['position_sd'] * 100, 1)} | "
+                     f"{cell(uavs[0]['position'] * 100, uavs[0]['position_sd'] * 100, 1)} | "
                      f"{mean['position'] * 100:.1f} ({worst['position'] * 100:.1f}) | "
                      f"{mean['yaw']:.2f} ({worst['yaw']:.2f}) | {same} | "
                      f"{mean['cpu_per_frame_s'] * 1e3:.0f} ({mean['render_per_frame_s'] * 1e3:.0f}) | "
@@ -297,7 +215,7 @@ def write_report(out: Path, *, runs: int, frames: int | None, seed: int, endpoin
              "lenses.",
              ""]
     for world, _, title in WORLDS:
-        lines += [f"## Table II at {title}: `{world}`", "", *_table_ii(result_rows, world), ""]
+        lines += [f"## Table II at {title}: `{world}`", "", *table_ii(result_rows, world), ""]
     lines += [f"## Table II through a camera model (`--features {CAMERA_FEATURES}`)", "",
               "The same experiments on the project's renderer with Lambert and specular shading and its camera model "
               "(auto exposure, Bayer mosaic demosaiced bilinearly, shot and read noise, 12-bit ADC, sRGB, JPEG 85 "
@@ -305,17 +223,17 @@ def write_report(out: Path, *, runs: int, frames: int | None, seed: int, endpoin
               "(`vision/blobs.py`).", ""]
     for world, title in CAMERA_WORLDS:
         above = above_paper(result_rows, world)
-        lines += [f"### {title}: `{world}`", "", *_table_ii(result_rows, world), "",
+        lines += [f"### {title}: `{world}`", "", *table_ii(result_rows, world), "",
                   ("Every cell below the paper's." if not above else "**Above the paper's:** " + "; ".join(above)
                    + "."), ""]
     lines += photoreal_section(photoreal_records, None if dataset is None else dataset_info(dataset), dataset_source)
     lines += ["## Table I: the airship localized by the ground station (Experiment 1, `exp1-airship`)", "",
               HEADER.format(what="algorithm", u="cm")]
     for variant in ("EvoPose", "EvoPose+IMU"):
-        r = _find_variant(result_rows, variant, "ground-station")
+        r = find_variant(result_rows, variant, "ground-station")
         if r:
-            lines.append(_row(variant, r, 100, (2, 1), PAPER_TABLE_I[variant][6]))
-        lines.append(_paper_row(variant, PAPER_TABLE_I[variant]))
+            lines.append(our_row(variant, r, 100, (2, 1), PAPER_TABLE_I[variant][6]))
+        lines.append(paper_row(variant, PAPER_TABLE_I[variant]))
     airship = [r for r in result_rows if r["vehicle"] == "airship"]
     if airship:
         lines += ["", "The airship received its pose back from the station: "
@@ -338,9 +256,9 @@ def write_report(out: Path, *, runs: int, frames: int | None, seed: int, endpoin
               "pay. Bytes: every topic, per second of the run, per UAV (the router's and the meter's traffic "
               "aside).", "", "## Fig. 6: fitness of the best individual", ""]
     for world, _, title in WORLDS:
-        fig = figures.figure_6({"H1 alone": _find(result_rows, "exp2-solo", "H1", world),
-                                "H2 alone": _find(result_rows, "exp2-solo", "H2", world),
-                                "H1 + H2 (eq. 4)": _find(result_rows, "exp2a-features", "H1", world)},
+        fig = figures.figure_6({"H1 alone": find_row(result_rows, "exp2-solo", "H1", world),
+                                "H2 alone": find_row(result_rows, "exp2-solo", "H2", world),
+                                "H1 + H2 (eq. 4)": find_row(result_rows, "exp2a-features", "H1", world)},
                                out / f"fig6_{world}.png", world)
         lines += [f"![Fig. 6, {title}]({fig.name})", ""]
     lines += ["First search of run 0: fitness (eq. 4, pixels) of the best individual per generation.", "",

@@ -20,6 +20,7 @@ from pydantic import (AfterValidator, BeforeValidator, Field, ValidationError,
 
 from evopose import Bounds, Camera, Model, PoseProblem, SearchOptions, Solution, View
 from geometry import PARAM_NAMES, pose_from_matrix, quaternion_from_euler
+from evopose_errors import EvoPoseError
 
 from scenarios.errors import WorldError
 from scenarios.target import TargetModel, load_model, resolve_model_path
@@ -42,7 +43,7 @@ FULL_TURN = (-math.pi, math.pi)
 MIN_NORMAL_LENGTH = 1e-12
 
 
-class ProblemFileError(ValueError):
+class ProblemFileError(EvoPoseError, ValueError):
     """A pose-problem file that cannot be used; the message is one line naming the file or the field."""
 
 

@@ -21,7 +21,7 @@ from typing import Any
 from scenarios.camera_model import CameraModelSpec, spec_record
 from scenarios.dataset import open_dataset
 from scenarios.dataset_files import (CAMERA_INFO, MANIFEST, MODEL, POSES, TRUTH, WORLD, DatasetError, ManifestSpec,
-                                     _dump_yaml, _write_text)
+                                     dump_yaml, write_text)
 from scenarios.dataset_writer import manifest_document
 from scenarios.documents import read_mapping, validate
 from scenarios.errors import WorldError
@@ -29,7 +29,7 @@ from scenarios.looks import apply_look, look_overrides
 from scenarios.photoreal.develop import camera_model_of
 from scenarios.world import load_scenario
 
-from agents.tools.render_dataset import _write_bytes, develop_exr
+from agents.tools.render_dataset import write_bytes, develop_exr
 
 #: The look name a manifest records for a look given as a mapping of fields.
 CUSTOM_LOOK = "custom"
@@ -126,7 +126,7 @@ def develop_dataset(src_dir: str | Path, out_dir: str | Path, look: str | Mappin
     tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.developing-", dir=out.parent))
     tmp.chmod(0o755)  # mkdtemp makes it private; a dataset directory is not
     try:
-        _write_text(tmp / WORLD, _dump_yaml(world_doc))
+        write_text(tmp / WORLD, dump_yaml(world_doc))
         for name_ in (MODEL, TRUTH):
             if (src / name_).is_file():
                 shutil.copyfile(src / name_, tmp / name_)
@@ -138,11 +138,11 @@ def develop_dataset(src_dir: str | Path, out_dir: str | Path, look: str | Mappin
         for k in range(dataset.frames):
             for camera in dataset.cameras:
                 data, suffix = develop_exr(scenario, raw_path(src, camera, k), k, camera, spec)
-                _write_bytes(tmp / camera / f"{k:06d}{suffix}", data)
+                write_bytes(tmp / camera / f"{k:06d}{suffix}", data)
                 done += 1
                 if progress is not None:
                     progress({"camera": camera, "frame": k, "frames": dataset.frames, "done": done, "total": total})
-        _write_text(tmp / MANIFEST, _dump_yaml(manifest_document(new_manifest)))
+        write_text(tmp / MANIFEST, dump_yaml(manifest_document(new_manifest)))
         open_dataset(tmp).world()  # reads back: a dataset and a world that load
         if out.exists():
             shutil.rmtree(out) if any(out.iterdir()) else out.rmdir()

@@ -70,7 +70,7 @@ def existing_image(root: Path, camera: str, k: int) -> Path | None:
     return None
 
 
-def _write_bytes(path: Path, data: bytes) -> Path:
+def write_bytes(path: Path, data: bytes) -> Path:
     tmp = path.with_name(f".tmp-{path.name}")
     tmp.write_bytes(data)
     os.replace(tmp, path)
@@ -187,7 +187,7 @@ def render_dataset(world: str | Path, out_dir: str | Path, *, engine: str = "cyc
             if existing_image(out_dir, c, k) is None:
                 t0 = time.perf_counter()
                 data, suffix = _opencv_image(scenario, render_world, k, c)
-                _write_bytes(writer.image_path(c, k, suffix), data)
+                write_bytes(writer.image_path(c, k, suffix), data)
                 report(c, k, True, time.perf_counter() - t0)
             else:
                 report(c, k, False, 0.0)
@@ -224,7 +224,7 @@ def _render_cycles(writer: DatasetWriter, scenario: Scenario, pending: list[tupl
         k, c = int(event["frame"]), event["camera"]
         exr = Path(event["path"])
         data, suffix = develop_exr(scenario, exr, k, c)
-        _write_bytes(writer.image_path(c, k, suffix), data)
+        write_bytes(writer.image_path(c, k, suffix), data)
         if not keep_raw:
             exr.unlink(missing_ok=True)
         report(c, k, not event["skipped"], float(event["seconds"]))

@@ -49,6 +49,7 @@ from protocol import (QOS, Message, Payload, ProtocolError, Stats, Topic, alive_
 from protocol.hint import Hint
 
 from agents.transport.inbox import BoundedSenders, Inbox, SenderBudget
+from agents.transport.playback import PlaybackClock
 from agents.transport.receiver import TopicReceiver
 from agents.transport.traffic import RateLimitedLog, TrafficCounters
 from agents.transport.session import SessionOptions, open_session
@@ -104,7 +105,7 @@ class FleetBus:
     fleet, vehicle : str
         Names (``protocol.check_name``).
     max_age_s : float or None
-        Data acquired longer ago (less :attr:`playback_lag_ns`) are rejected as ``stale``; ``None`` keeps all.
+        Data older than the instant played (:attr:`playback`) are rejected as ``stale``; ``None`` keeps all.
     image_ring : int
         Newest image frames kept by the receiver; older ones are dropped (counted as ``overflow``).
     queue_size : int
@@ -124,9 +125,8 @@ class FleetBus:
         self.session = session
         self.fleet, self.vehicle = check_name(fleet, "fleet"), check_name(vehicle, "vehicle")
         self.max_age_s, self.stats_period_s = max_age_s, stats_period_s
-        #: How far the instant the vehicle plays lags the wall clock, ns (a recording played slower than it was
-        #: taken, agents/vehicle/dataset_source.py); written by its frame loop only.
-        self.playback_lag_ns = 0
+        #: The instant the vehicle plays (set by the frame loop; the receiver's threads judge staleness on it).
+        self.playback = PlaybackClock()
         self.counters = TrafficCounters()
         self._owns_session = owns_session
         self._on_join, self._on_leave = on_join, on_leave
@@ -324,7 +324,7 @@ class FleetBus:
         """Newest message of ``topic`` per team-mate, without those older than ``max_age_s`` (default the bus's)."""
         topic = check_topic(topic)
         max_age_s = self.max_age_s if max_age_s is None else max_age_s
-        now_ns = time.time_ns() - self.playback_lag_ns
+        now_ns = self.playback.now_ns()
         with self._lock:
             return {vehicle: rx for vehicle, rx in self._latest[topic].items()
                     if max_age_s is None or rx.age_s(now_ns) <= max_age_s}
@@ -369,7 +369,7 @@ class FleetBus:
             return
         rx = Received(topic, key_parts.vehicle, message, len(payload), received_ns)
         if isinstance(message, Message):
-            now_ns = received_ns - self.playback_lag_ns
+            now_ns = self.playback.now_ns(received_ns)
             if self.max_age_s is not None and rx.age_s(now_ns) > self.max_age_s:
                 self._reject(topic, "stale", f"{key}: acquired {rx.age_s(now_ns):.3f} s ago (max {self.max_age_s} s)")
                 return

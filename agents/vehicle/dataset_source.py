@@ -16,7 +16,7 @@ at. A vehicle plays one frame per frame processed (a slow one falls behind, it s
 tick plus ``k``. So team-mates playing the same dataset stamp the same instant alike, and their views of it pair
 (eq. 4) even when one is late: a view is never paired with a team-mate's view of another instant of the recording.
 A team that plays slower than the recording was taken falls behind the wall clock; a team-mate's data are judged
-stale at the instant the vehicle plays (:attr:`agents.transport.bus.FleetBus.playback_lag_ns`), not on the wall
+stale at the instant the vehicle plays (:class:`agents.transport.playback.PlaybackClock`), not on the wall
 clock, where after a second behind every view of the very instant played would be refused.
 """
 

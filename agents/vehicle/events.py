@@ -6,7 +6,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, replace
 
-from evopose.cooperative import Estimate, Verdict
+from evopose.cooperative import Estimate
+from evopose.trust import Trust
 
 from agents.vehicle.records import pose_dict
 
@@ -19,9 +20,9 @@ class FrameEvent:
     ----------
     pose : tuple of 6 floats
         The published pose (canonical roll-pitch-yaw), ``world_from_target``.
-    verdict : Verdict
-        ``converged``, ``confident``, ``precise``, ``on_track``, ``settled`` and ``good`` (all five), the one verdict
-        (docs/design.md §2).
+    trust : Trust
+        Whether to trust the estimate and why (:func:`evopose.trust.judge`, docs/design.md §2): its ``level``
+        (searching, unsure, good), ``reason`` and the conditions it rests on.
     error : dict or None
         Against the simulator's truth (:func:`geometry.pose_error`), when there is one.
     scene_frame, skipped : set by the runtime: the source's frame shown; why the own view was not taken.
@@ -38,9 +39,8 @@ class FrameEvent:
     pose: tuple[float, ...] | None = None
     fitness: float = float("nan")
     mismatch: float = 1.0
-    verdict: Verdict = Verdict(False, False)
+    trust: Trust = Trust(False, False)
     solved: bool = False
-    searching: bool = False
     from_hint: bool = False
     seconds: float = 0.0
     error: dict | None = None
@@ -55,7 +55,7 @@ class FrameEvent:
 
     @property
     def good(self) -> bool:
-        return self.verdict.good
+        return self.trust.good
 
     def from_source(self, scene_frame: int | None, skipped: str | None) -> "FrameEvent":
         """The event with the source's frame and, when the own view was not taken, why (not "too few")."""
@@ -74,14 +74,12 @@ class FrameEvent:
                    "points": self.points, "views": list(self.views),
                    "views_of_this_instant": self.views_of_this_instant, "knowledge": list(self.knowledge),
                    "pose": pose_dict(self.pose), "fitness": self.fitness, "mismatch": self.mismatch,
-                   "good": self.verdict.good, "converged": self.verdict.converged,
-                   "confident": self.verdict.confident, "precise": self.verdict.precise,
-                   "on_track": self.verdict.on_track,
-                   "settled": self.verdict.settled, "solved": self.solved,
-                   "searching": self.searching, "from_hint": self.from_hint, "seconds": self.seconds}
-            unsure = getattr(getattr(self.estimate.solution, "confidence", None), "reason", "")
-            if unsure:  # why the estimate is not confident (evopose.uncertainty.Confidence.reason)
-                out["unsure"] = unsure
+                   "trust": self.trust.level, "good": self.trust.good, "converged": self.trust.converged,
+                   "confident": self.trust.confident, "precise": self.trust.precise,
+                   "standing": self.trust.standing, "solved": self.solved,
+                   "from_hint": self.from_hint, "seconds": self.seconds}
+            if not self.trust.good:  # why the estimate is not good (evopose.trust.Trust.reason)
+                out["reason"] = self.trust.reason
             if self.error is not None:
                 out["error"] = self.error
         out["scene_frame"] = self.scene_frame

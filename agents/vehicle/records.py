@@ -25,7 +25,8 @@ RECENT = 4096
 class ErrorTotals:
     """Running mean and max of each error component over the frames in the right basin (converged and confident,
     precise or not: the paper's Table II averages such estimates, metres off for one helicopter alone), in
-    constant memory. ``good`` counts the stricter verdict (precise too)."""
+    constant memory. The run record counts those frames as ``in_right_basin`` beside the ``good`` ones (the
+    whole verdict, precise too): docs/design.md, "Glossary"."""
 
     def __init__(self) -> None:
         self.count = 0
@@ -53,6 +54,8 @@ class RunRecord:
     frames: int = 0
     estimates: int = 0
     good: int = 0
+    in_right_basin: int = 0  #: frames converged and confident, precise or not: the ones the errors average over
+    converged: int = 0  #: (the target) estimates of its pose that converged; ``first_good_s``: the first of them
     set_aside: int = 0  #: frames good on their own that jumped off the published track (docs/design.md §2)
     solves: int = 0
     late_frames: int = 0
@@ -86,12 +89,13 @@ class RunRecord:
         if estimate.solved and self.first_solve_s is None:
             self.first_history = [float(f) for f in estimate.solution.history]
             self.first_solve_s = event.seconds
-        good = event.verdict.good
-        if good and self.first_good_s is None:  # the paper's time to a good pose: when the best first was good
-            self.first_good_s = (estimate.good_at or time.perf_counter()) - image_ready_s
-        if event.verdict.in_right_basin and event.error is not None:
+        good = event.trust.good
+        if good and self.first_good_s is None:  # the paper's time to a good pose: when the best first matched closely
+            self.first_good_s = (estimate.close_at or time.perf_counter()) - image_ready_s
+        self.in_right_basin += int(event.trust.in_right_basin)
+        if event.trust.in_right_basin and event.error is not None:
             self.errors.add(event.error)
-        self.set_aside += int(event.verdict.set_aside)
+        self.set_aside += int(event.trust.set_aside)
         if good:
             self.good += 1
             if self.first_confirmed_s is None:

@@ -35,7 +35,8 @@ from agents.vehicle.hints import HintInbox
 from agents.vehicle.memory import release_free_memory
 from agents.vehicle.plausibility import Plausibility
 from agents.vehicle.records import RunRecord
-from agents.vehicle.sources import SourceEnded, SourceError, open_camera
+from agents.vehicle.cameras import open_camera
+from agents.vehicle.sources import SourceEnded, SourceError
 from agents.vehicle.step import FrameInputs, VehicleState, idle, share, share_policy, step
 from agents.vehicle.team_views import (Staleness, TeamViews, attitude_knowledge, build_views, mate_view, own_view,
                                        wait_until)
@@ -297,7 +298,7 @@ class CameraVehicle(Vehicle):
         frame = self.camera.acquire(n, self.clock.stamp_ns(n))
         stamp = frame.stamp_ns  # when the image was taken: tick n's, or a recording's own instant (dataset_source)
         # the instant this vehicle is at: a recording played behind the wall clock judges team-mates' data there
-        self.bus.playback_lag_ns = max(0, time.time_ns() - stamp)
+        self.bus.playback.play_behind(time.time_ns() - stamp)
         self.record.render_cpu_s += frame.render_cpu_s
         if self._image_ready is None:
             self._image_ready = t_acquire + frame.render_s

@@ -25,7 +25,8 @@ when the frame is taken), else the scenario vehicle's at scenario frame ``k mod 
 use for the same frame). Every bad input is one :class:`SourceError` line; a bad ROS message is counted in the
 agent's traffic (``rejected``, by reason) and dropped.
 
-The ROS inputs are made by :mod:`agents.vehicle.ros_camera`, imported only when an input is a ``ros2:`` topic.
+Which camera a vehicle gets (the renderer, one of these, a rendered dataset or ROS 2 topics) is
+:func:`agents.vehicle.cameras.open_camera`'s choice; the ROS inputs are made by :mod:`agents.vehicle.ros_camera`.
 """
 
 from __future__ import annotations
@@ -43,17 +44,13 @@ import cv2
 import numpy as np
 
 from evopose import Camera
-from geometry import matrix_from_pose
 from scenarios.errors import WorldError
 from scenarios.world import Scenario
 
 from agents.errors import FleetError
-from agents.problem.camera_info import read_camera_info, read_camera_pose
-from vision.extract import FeatureExtractor, feature_extractor, resolve_features
+from vision.extract import FeatureExtractor
 from vision.images import read_image
-from agents.transport.bus import FleetBus
-from agents.vehicle.config import AgentConfig
-from agents.vehicle.frames import Frame, SimulatedCamera, fleet_clock
+from agents.vehicle.frames import Frame
 
 #: Files a directory source plays (by suffix, lower case).
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".ppm", ".pgm", ".webp")
@@ -305,66 +302,5 @@ def is_ros(spec: object) -> bool:
     return spec is not None and str(spec).startswith(ROS_SCHEME)
 
 
-def _mark_scorer(config: AgentConfig):
-    """``--mark-scorer``'s scorer, read now (None: the shipped one); a bad file is one :class:`FleetError`."""
-    if config.mark_scorer is None:
-        return None
-    from vision.mark_scorer import load
-
-    try:
-        return load(Path(config.mark_scorer))
-    except OSError as error:
-        raise FleetError(f"--mark-scorer {config.mark_scorer}: cannot read it ({error.strerror or error})") from None
-    except ValueError as error:
-        raise FleetError(f"--mark-scorer {config.mark_scorer}: {error}") from None
-
-
-def open_camera(config: AgentConfig, scenario: Scenario, bus: FleetBus | None = None) -> SimulatedCamera | SourceCamera:
-    """The vehicle's camera: the renderer, or ``config.source`` with its camera files and topics (files read now, so
-    that a bad one is an error before the vehicle joins its fleet).
-
-    ROS 2 topics are followed on ``bus``'s Zenoh session. Without a bus (the warm-up, before the vehicle joins), a
-    camera with a ROS input is checked (topic names, files) and is then the renderer: its first frame compiles the
-    same kernels, and no ROS message can arrive before the session is open.
-    """
-    scorer = _mark_scorer(config)
-    try:
-        camera_images = config.source is not None or scenario.render.camera_model is not None
-        extract = feature_extractor(resolve_features(config.features, camera_images), scenario.model,
-                                    scenario.bounds() if scenario.spec.search else None, scorer)
-    except ValueError as error:  # a scorer fitted on another palette
-        raise FleetError(f"--mark-scorer {config.mark_scorer}: {error}") from None
-    if config.source is None:
-        return SimulatedCamera(scenario, config.vehicle, extract)
-    ros_inputs = any(is_ros(spec) for spec in (config.source, config.camera_info, config.camera_pose))
-    from agents.vehicle.dataset_source import dataset_location, open_dataset_camera  # it imports this module
-
-    if ros_inputs:  # imported here: ros_camera imports this module, and it brings in the bridges (rosbags)
-        from agents.vehicle.ros_camera import check_ros_topics, open_ros_camera
-
-        check_ros_topics(config)
-    k_file = None if config.camera_info is None or is_ros(config.camera_info) else read_camera_info(config.camera_info)
-    pose_file = None if config.camera_pose is None or is_ros(config.camera_pose) else \
-        matrix_from_pose(read_camera_pose(config.camera_pose))
-    located = None if ros_inputs else dataset_location(config.source)
-    if located is not None:  # a rendered dataset (docs/datasets.md): its images, per-frame cameras and truth
-        # a common clock (--epoch-ns): the dataset's frame k is the fleet's frame k; else from the first tick
-        return open_dataset_camera(str(config.source), located, scenario, config.vehicle, extract,
-                                   fleet_clock(config.fps, scenario, config.epoch_ns),
-                                   first_tick=0 if config.epoch_ns else None, intrinsics=k_file,
-                                   world_from_camera=pose_file, intrinsics_from=None if config.camera_info is None
-                                   else f"--camera-info {config.camera_info}")
-    if ros_inputs and bus is None:
-        if not is_ros(config.source):
-            open_reader(str(config.source)).close()
-        return SimulatedCamera(scenario, config.vehicle, extract)
-    if ros_inputs:
-        return open_ros_camera(config, scenario, bus, extract, k_file, pose_file)
-    return SourceCamera(open_reader(str(config.source)), scenario, config.vehicle, extract,
-                        intrinsics=None if k_file is None else (lambda: k_file),
-                        world_from_camera=None if pose_file is None else (lambda: pose_file),
-                        intrinsics_from=None if config.camera_info is None else f"--camera-info {config.camera_info}")
-
-
 __all__ = ["CaptureReader", "FileListReader", "FrameSkipped", "LatestFrameReader", "SourceCamera", "SourceEnded",
-           "SourceError", "is_ros", "open_camera", "open_reader", "quiet_native_stderr"]
+           "SourceError", "is_ros", "open_reader", "quiet_native_stderr"]

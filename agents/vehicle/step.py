@@ -1,9 +1,11 @@
 """A camera vehicle's frame as one transition, pure: ``step(state, inputs) -> (state', messages, FrameEvent)``.
 
-No Zenoh, no clock, no threads, as the search is ask/tell (docs/architecture.md, "A frame's path"). The state is
+No Zenoh, no threads, and no clock of its own: the time is an input (:attr:`FrameInputs.clock`), and so is every
+random stream (the estimator state's), so the same state and inputs give the same result, as the search is ask/tell
+(docs/architecture.md, "A frame's path"). The state is
 frozen (:class:`VehicleState`: the vehicle's constant rules and its :class:`evopose.cooperative.EstimatorState`);
-every rule that depends on ``--share`` is one :class:`SharePolicy` value; the verdict (good = converged and
-confident) is :class:`evopose.cooperative.Verdict`'s. The runtime (:mod:`agents.vehicle.roles`) acquires the
+every rule that depends on ``--share`` is one :class:`SharePolicy` value; whether to trust the estimate is
+:func:`evopose.trust.judge`'s (one :class:`evopose.trust.Trust`). The runtime (:mod:`agents.vehicle.roles`) acquires the
 frame, publishes :func:`share`'s message, pairs team-mates' views, calls :func:`step` and publishes what it returns;
 between frames it calls :func:`idle`. Tests call all three directly.
 """
@@ -11,13 +13,14 @@ between frames it calls :func:`idle`. Tests call all three directly.
 from __future__ import annotations
 
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from evopose.cooperative import Cooperation, Estimate, EstimatorState, Knowledge, verdict
+from evopose.cooperative import Cooperation, Estimate, EstimatorState, Knowledge
 from evopose.pose_filter import PoseFilter
+from evopose.trust import judge
 from geometry import canonical_pose, pose_error
 from protocol import FeatureSet, ImageFrame, Message, PoseEstimate, Topic
 from protocol.hint import Hint
@@ -28,7 +31,7 @@ from agents.vehicle.team_views import MateView, build_views, encode_image
 
 #: When team-mates share the same views, a search from scratch runs a fixed number of generations per frame (so
 #: their bests agree): as many as POINTS_PER_FRAME image points in all allow, 1 to MAX_GENERATIONS_PER_FRAME. A
-#: search from scratch makes 256-1024 fresh starts (SearchOptions.min_starts, _unsure; up to 4x on a small problem),
+#: search from scratch makes 256-1024 fresh starts (SearchOptions.min_starts, _loose; up to 4x on a small problem),
 #: ~51 a generation: 20-80 generations, which at one a frame outlast a 2 s sequence. Four on two paper-scale views
 #: take 24-36 ms of a 100 ms frame (benchmarks/bench_photoreal_fleet.py, "frame ms").
 POINTS_PER_FRAME, MAX_GENERATIONS_PER_FRAME = 160, 4
@@ -140,6 +143,9 @@ class FrameInputs:
         The newest hint of a team-mate (hint mode), weighed against the own best with :data:`HINT_MARGIN`.
     budget_s : float or None
         Seconds a search from scratch may take in this frame (None: until it stops).
+    clock : callable () -> float
+        The time, seconds (``time.perf_counter`` at run time): the frame's seconds, the search's deadline and the
+        instants it records are read on it, never on a clock of the step's own.
     """
 
     index: int
@@ -150,6 +156,7 @@ class FrameInputs:
     truth: np.ndarray | None = None
     latest_hint: np.ndarray | None = None
     budget_s: float | None = None
+    clock: Callable[[], float] = time.perf_counter
 
 
 def _header(state: VehicleState, stamp_ns: int) -> dict:
@@ -184,17 +191,17 @@ def _covariance(cov: np.ndarray) -> tuple[float, ...] | None:
 def step(state: VehicleState, inputs: FrameInputs) -> tuple[VehicleState, list[Message | Hint], FrameEvent]:
     """One frame of a camera vehicle: eq. (1)-(4) on the own and team-mates' views, with knowledge and hints.
 
-    The estimate is published as a ``pose`` (``confident`` = the verdict good); with ``sends_hints`` a good
-    estimate also goes out as a hint. Team-mates' ``best`` poses (sent with their feature sets) are weighed
-    against the own best on this frame's eq. (4): the fitter one is tracked, so that vehicles with the same views
-    publish the same pose. ``inputs.budget_s`` bounds a search from scratch in this frame: an unfinished search is
+    The estimate is published as a ``pose`` (``good``: the :class:`evopose.trust.Trust` is good); with
+    ``sends_hints`` an estimate in the right basin also goes out as a hint. Team-mates' ``best`` poses (sent with
+    their feature sets) are weighed against the own best on this frame's eq. (4): the fitter one is tracked, so that
+    vehicles with the same views publish the same pose. ``inputs.budget_s`` bounds a search from scratch in this frame: an unfinished search is
     resumed later and its best so far is published, not good.
     """
     own, policy = inputs.own, state.policy
     views, used = build_views([own, *inputs.mates])
     if not views:
         return state, [], FrameEvent.none(state.vehicle, inputs.index, len(own.points), "too few image points")
-    t0 = time.perf_counter()
+    t0 = inputs.clock()
     candidates = [m.best for m in inputs.mates if m.best is not None]
     margin = 0.0
     if inputs.latest_hint is not None:  # hints: a team-mate's pose that fits the own views about as well wins
@@ -202,43 +209,43 @@ def step(state: VehicleState, inputs: FrameInputs) -> tuple[VehicleState, list[M
     estimator, estimate = state.cooperation.estimate(
         state.estimator, views, knowledge=inputs.knowledge, hints=inputs.hints, frame=inputs.index,
         budget_s=inputs.budget_s, candidates=np.array(candidates) if candidates else None, candidate_margin=margin,
-        generations=policy.generations_per_frame(sum(len(view.points) for view in views)))
-    seconds = time.perf_counter() - t0
-    sol, alone = estimate.solution, verdict(estimate)
+        generations=policy.generations_per_frame(sum(len(view.points) for view in views)), clock=inputs.clock)
+    seconds = inputs.clock() - t0
+    sol = estimate.solution
     # what goes out is the track's fused pose (evopose/pose_filter.py): a good frame that jumped off it is set aside
     published = state.published or PoseFilter.of_rules(state.cooperation.options.confidence)
     taken = inputs.index if state.frame_period_s is None else own.stamp_ns / (state.frame_period_s * 1e9)
-    published, out = published.step(taken, sol.pose, sol.covariance, alone.good)
+    published, out = published.step(taken, sol.pose, sol.covariance, judge(sol).good)
     state = replace(state, estimator=estimator, published=published)
-    judged = replace(alone, on_track=out.on_track or not alone.good, settled=out.settled or not out.on_track)
+    trust = judge(sol, searching=estimator.searching, published=out)
     pose = canonical_pose(out.pose)  # pitch within +-90 deg
     mates = tuple(v for v in used if v != state.vehicle)
     messages: list[Message | Hint] = [PoseEstimate(
         **_header(state, own.stamp_ns), target=state.target, pose=tuple(float(v) for v in pose),
-        fitness=float(sol.fitness), mismatch=estimate.mismatch, converged=judged.converged,
+        fitness=float(sol.fitness), mismatch=estimate.mismatch, converged=trust.converged,
         generations=int(sol.generations), seconds=seconds, from_hint=bool(sol.from_hint), inputs=mates,
-        confident=judged.good, covariance=_covariance(out.covariance))]
-    if policy.sends_hints and judged.in_right_basin:  # a hint need not be precise: the mate's selection judges it
+        good=trust.good, covariance=_covariance(out.covariance))]
+    if policy.sends_hints and trust.in_right_basin:  # a hint need not be precise: the mate's selection judges it
         messages.append(Hint(tuple(float(v) for v in pose)))
     event = FrameEvent(
         vehicle=state.vehicle, frame=inputs.index, points=len(own.points), stamp_ns=own.stamp_ns, views=tuple(used),
         # a team-mate's view of an earlier instant (it was late) differs from the one its owner used
         views_of_this_instant=all(m.stamp_ns == own.stamp_ns for m in inputs.mates if m.vehicle in used),
         knowledge=tuple(k.name for k in inputs.knowledge), pose=tuple(float(v) for v in pose),
-        fitness=float(sol.fitness), mismatch=estimate.mismatch, verdict=judged, solved=estimate.solved,
-        searching=estimator.searching, from_hint=bool(sol.from_hint), seconds=seconds,
+        fitness=float(sol.fitness), mismatch=estimate.mismatch, trust=trust, solved=estimate.solved,
+        from_hint=bool(sol.from_hint), seconds=seconds,
         error=None if inputs.truth is None else pose_error(pose, inputs.truth), estimate=estimate)
     return state, messages, event
 
 
-def idle(state: VehicleState, hints: np.ndarray | None, budget_s: float | None
-         ) -> tuple[VehicleState, list[Hint], Estimate | None]:
+def idle(state: VehicleState, hints: np.ndarray | None, budget_s: float | None,
+         clock: Callable[[], float] = time.perf_counter) -> tuple[VehicleState, list[Hint], Estimate | None]:
     """One generation between frames (:meth:`Cooperation.generation`) with the hints that arrived; a best in the
     right basin (converged and confident, precise or not) goes out as a hint when the policy sends hints (a
     search's best so far, or an unsure pose, is no hint)."""
-    estimator, estimate = state.cooperation.generation(state.estimator, hints, budget_s)
+    estimator, estimate = state.cooperation.generation(state.estimator, hints, budget_s, clock)
     state = replace(state, estimator=estimator)
-    if estimate is not None and state.policy.sends_hints and verdict(estimate).in_right_basin:
+    if estimate is not None and state.policy.sends_hints and judge(estimate.solution).in_right_basin:
         return state, [Hint(tuple(float(v) for v in estimate.pose))], estimate
     return state, [], estimate
 

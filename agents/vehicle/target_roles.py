@@ -62,13 +62,13 @@ class Airship(Vehicle):
         error = pose_error(np.array(message.pose), self.scenario.target_pose(k % self.scenario.frames))
         self.record.estimates += 1
         self.record.last_pose, self.record.last_error = list(message.pose), error
-        if message.converged:
-            self.record.good += 1
+        if message.converged:  # the search's own judgement, as the target counted it before the sender's verdict
+            self.record.converged += 1
             self.record.errors.add(error)
             if self.record.first_good_s is None:
                 self.record.first_good_s = (rx.received_ns - self._started_ns) / NS
         self.emit({"event": "own-pose", "vehicle": self.config.vehicle, "from": rx.vehicle, "frame": k,
-                   "pose": pose_dict(np.array(message.pose)), "good": message.converged,
+                   "pose": pose_dict(np.array(message.pose)), "converged": message.converged,
                    "latency_s": (rx.received_ns - message.stamp_ns) / NS, "error": error})
 
 

@@ -39,7 +39,7 @@ def golden_messages() -> dict[str, Payload]:
                              yaw=1.0, sigma=(0.002, 0.002, 0.01)),
         "pose": PoseEstimate(sender="ugv2", seq=3, stamp_ns=STAMP_NS, target="airship",
                              pose=(1.0, 2.0, 15.0, 0.1, -0.05, 1.0), fitness=0.75, mismatch=0.1, converged=True,
-                             generations=17, seconds=0.42, from_hint=True, inputs=("uav1",), confident=True,
+                             generations=17, seconds=0.42, from_hint=True, inputs=("uav1",), good=True,
                              covariance=tuple(float(v) for v in np.diag([1e-4, 1e-4, 4e-4, 1e-5, 1e-5, 2e-5]).ravel())),
         "stats": Stats(sender="ugv2", seq=0, stamp_ns=STAMP_NS, sent={"pose": 10, "hint": 10},
                        received={"features": 9}, bytes_sent={"pose": 2670, "hint": 240},
@@ -49,6 +49,11 @@ def golden_messages() -> dict[str, Payload]:
 
 def golden_path(name: str) -> Path:
     return GOLDEN_DIR / f"{name}.bin"
+
+
+#: The previous schema version's files, kept to show it is still decoded (docs/protocol.md §6): name -> the message
+#: it decodes to. Version 2's ``pose`` carried the good verdict as ``confident``.
+PREVIOUS = {"pose_v2": "pose"}
 
 
 def main() -> None:
