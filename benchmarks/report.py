@@ -18,7 +18,7 @@ from pathlib import Path
 RESULTS = Path(__file__).resolve().parent / "results"
 ROOT = Path(__file__).resolve().parents[1]
 #: Order of the sections in BENCHMARKS.md (others follow alphabetically).
-ORDER = ("solvers", "confidence", "weights", "kernels", "features", "fleet", "frame_path", "latency", "capacity",
+ORDER = ("solvers", "solver_regression", "softposit", "solver_phases", "confidence", "weights", "kernels", "features", "fleet", "frame_path", "latency", "capacity",
          "footprint", "photoreal_features", "photoreal_features_sweep", "photoreal_features_telephoto_sweep",
          "photoreal_features_opencv_camera", "photoreal_features_train",
          "photoreal_fleet", "photoreal_fleet_long", "photoreal_fleet_paper_long", "photoreal_tracking",
@@ -26,6 +26,9 @@ ORDER = ("solvers", "confidence", "weights", "kernels", "features", "fleet", "fr
 
 #: Titles that several section files share, told apart by what each measures (by file stem).
 TITLES = {
+    "solver_regression": "Solver regression check: a fixed problem set against the committed figures",
+    "softposit": "SoftPOSIT beside EvoPose and the oracle: telephoto boxes and the paper's scale",
+    "solver_phases": "Where a solve's time goes: per phase, before and after",
     "photoreal_features": "Feature front-ends on rendered datasets: the first paper-scale and telephoto datasets",
     "photoreal_features_sweep": "Feature front-ends on rendered datasets: nine paper-scale worlds "
                                 "(three geometries, three skies)",
