@@ -49,6 +49,9 @@ by the ratios measured side by side in one run, not by absolute times across sec
 `make bench` re-runs every section but the agent footprint (`make bench-footprint`, 30 min) and re-assembles
 this file (`python -m benchmarks.report`). Every section names the command, the commit and the date that
 produced it. Newest first: sections are in the order of the date they were measured, the latest at the top.
+`make bench-solver` (about a minute) re-runs the solver on a fixed problem set and fails when its success, accuracy,
+evaluations or time got worse than the committed figures ("Solver regression check" below): run it on every change
+to the search.
 """
 
 DATE = re.compile(r"\b(20\d\d-\d\d-\d\d)\b")
