@@ -9,8 +9,9 @@ basins, the stop rules), *polish* (the best pose's last refinement), *rivals* (t
 verdict), *verdict* (:func:`evopose.uncertainty.assess`), *robust fit + covariance* (the published pose,
 :func:`evopose.solver.published`); *other* is the rest of the solve.
 
-``--other PATH`` runs the same measurement on the code at PATH (a git worktree) in a child process, the two
-alternating repeat by repeat on the same problems, so the ratios compare code under the same load.
+``--other PATH`` runs the same measurement on the code at PATH (a git worktree, with this module copied in when it
+predates it) in a child process started there, the two alternating repeat by repeat on the same problems, so the
+ratios compare code under the same load.
 """
 
 from __future__ import annotations
@@ -98,6 +99,11 @@ def summary(result: dict) -> dict:
             "stops": {s: sum(r["stop"] == s for r in first) for s in sorted({r["stop"] for r in first})}}
 
 
+def _commit(tree: Path) -> str:
+    out = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=tree, capture_output=True, text=True)
+    return out.stdout.strip() or str(tree)
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=3)
@@ -115,13 +121,19 @@ def main(argv: list[str] | None = None) -> int:
         for name, tree in trees.items():
             env = dict(os.environ, PYTHONPATH=str(tree), NUMBA_NUM_THREADS="1")
             out = subprocess.run([sys.executable, "-m", "benchmarks.bench_solver_phases", "--child", "--repeats",
-                                  "1"], cwd=here, env=env, capture_output=True, text=True, check=True)
+                                  "1"], cwd=tree, env=env, capture_output=True, text=True, check=True)
             r = json.loads(out.stdout.strip().splitlines()[-1])
             results[name]["rows"] += r["rows"]
             results[name]["problems"] = r["problems"]
     sums = {k: summary(v) for k, v in results.items()}
+    from .report import provenance, write_section
+
     lines = [f"Command: `NUMBA_NUM_THREADS=1 python -m benchmarks.bench_solver_phases --repeats {args.repeats}"
-             + (f" --other {args.other}" if args.other else "") + "`", ""]
+             + (f" --other {args.other}" if args.other else "") + f"` ({provenance()}"
+             + (f"; other = {_commit(args.other)}" if args.other else "") + ").", "",
+             "The solver regression set (40 telephoto boxes, 20 paper-scale Pioneers); time = median (mean) over "
+             "problems of each one's least CPU time over the repeats; phase shares of the CPU time summed over all "
+             "solves.", ""]
     header = ["code", "success", "median time (ms)", "mean time (ms)", "median evaluations", "median generations",
               "stops"] + [f"{p} (%)" for p in PHASES]
     lines.append("| " + " | ".join(header) + " |")
@@ -139,7 +151,7 @@ def main(argv: list[str] | None = None) -> int:
     text = "\n".join(lines) + "\n"
     print(text)
     if args.out:
-        args.out.write_text(text)
+        write_section(args.out, "Where a solve's time goes: per phase, before and after", text)
     return 0
 
 
