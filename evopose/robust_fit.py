@@ -17,8 +17,8 @@ matching (:func:`evopose.covariance.mutual_matches`, re-matched at every step as
    its view's eq. (4) weight. The cut-off ``c = k(nu) * sigma`` follows the pairs' spread at the pose given
    (:func:`view_cutoffs`: ``sigma`` from their median distance, a 2-D Gaussian's median radius being 1.177
    sigma, at least :data:`MIN_SCALE_PX`; a view whose own pairs spread wider keeps its own). With many pairs
-   ``k = TUKEY_C``: a false pair 3 sigma off no longer weighs. With few, ``sigma`` itself is uncertain (its
-   ``nu = 2m - n_free`` residual coordinates) and ``k`` widens as Student's t does (:func:`cutoff_sigmas`): a
+   ``k = TUKEY_C``: a false pair 3 sigma off no longer weighs. With few, the pooled ``sigma`` itself is uncertain
+   (its ``nu = 2m - n_free`` residual coordinates) and ``k`` widens as Student's t does (:func:`cutoff_sigmas`): a
    handful of true pairs at 1 px noise (6-13 marks of a box 50 px wide at 20-30 m) had ``sigma`` estimated at half
    its value, the largest true pair cut, and the published pose tilted past the least-squares one (issue 35).
 2. **Fit** by least squares the pairs within ``c`` ("trimmed"), ``c`` taken anew at the pose stage 1 settled on,
@@ -90,11 +90,15 @@ def cutoff_sigmas(dof: float) -> float:
 
 
 def view_cutoffs(matches: Matches, n_free: int, taus: np.ndarray | None = None) -> np.ndarray:
-    """Each view's cut-off (V,) pixels: :func:`cutoff_sigmas` times the residual scale (:func:`residual_scale`)
-    of all pairs in ``matches``, or of the view's own pairs where theirs is wider. Cameras differ: the true pairs
-    of a blurred or far one spread wider than a sharp one's and are not outliers for it; a view's own handful of
-    pairs alone (6-8 at the paper's scale) gives too loose an estimate to cut a sharp view tighter. At most the
-    view's ``taus`` (V,) pixels, eq. (1)'s own bound, within which every mutual pair lies (all pairs kept)."""
+    """Each view's cut-off (V,) pixels: :func:`cutoff_sigmas` (for all pairs' residual degrees of freedom) times
+    the residual scale (:func:`residual_scale`) of all pairs in ``matches``, or :data:`TUKEY_C` times that of the
+    view's own pairs where this is wider. Cameras differ: the true pairs of a blurred or far one spread wider than a
+    sharp one's and are not outliers for it; a view's own handful of pairs alone (6-8 at the paper's scale) gives
+    too loose an estimate to cut a sharp view tighter. That own scale, taken only where it widens the cut, is not
+    widened again for its own few degrees of freedom: on two paper-scale views that let false pairs 4-6 sigma off
+    in or out by chance, and two helicopters sharing their features published poses 0.3-0.5 m apart
+    (tests/test_dataset_scenario.py). At most the view's ``taus`` (V,) pixels, eq. (1)'s own bound, within which
+    every mutual pair lies (all pairs kept)."""
     distance = np.linalg.norm(matches.residuals, axis=1)
     total = max(len(distance), 1)
     pooled = cutoff_sigmas(2 * len(distance) - n_free) * residual_scale(distance, n_free)
@@ -102,7 +106,7 @@ def view_cutoffs(matches: Matches, n_free: int, taus: np.ndarray | None = None) 
     for k in range(len(matches.weights)):
         mine = matches.view == k
         n_mine = n_free * np.count_nonzero(mine) / total
-        own = cutoff_sigmas(2 * np.count_nonzero(mine) - n_mine) * residual_scale(distance[mine], n_mine)
+        own = TUKEY_C * residual_scale(distance[mine], n_mine)
         cutoffs.append(max(pooled, own))
     cutoffs = np.array(cutoffs)
     return cutoffs if taus is None else np.minimum(cutoffs, np.asarray(taus, float))
