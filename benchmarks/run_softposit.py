@@ -6,8 +6,8 @@ Telephoto marked boxes (:func:`benchmarks.problems.make_telephoto_box_problem`: 
 25 % clutter, 10 % missing) and the paper's scale (:func:`benchmarks.problems.make_paper_scale_problem`: the
 Pioneer ~25 px wide, H1 and H2 in turn, noise 0.5-2 px, clutter 0-30 %). Each problem is solved one after the other
 by EvoPose (its defaults, seeded), by SoftPOSIT (:mod:`benchmarks.softposit`, given the image noise sigma, random
-starts until one is accepted) and by ``cv2.solvePnP`` given the true correspondences (:func:`benchmarks.peers.pnp_oracle`);
-times are CPU seconds of this one process (NUMBA_NUM_THREADS=1).
+starts until one is accepted) and by ``cv2.solvePnP`` given the true correspondences
+(:func:`benchmarks.peers.pnp_oracle`); times are CPU seconds of this one process (NUMBA_NUM_THREADS=1).
 """
 
 from __future__ import annotations
@@ -66,7 +66,8 @@ def run(count: int, seed: int, progress=print) -> dict[str, dict[str, list[dict]
             record("solvePnP oracle", oracle.pose, time.process_time() - t0)
             progress(f"[{g[:14]} {i + 1}/{len(problems)}] EvoPose {'ok ' if ours['ok'] else 'MISS'} "
                      f"{1000 * ours['seconds']:5.0f} ms | SoftPOSIT {'ok ' if theirs['ok'] else 'MISS'} "
-                     f"{1000 * theirs['seconds']:6.0f} ms {peer.starts} starts{'' if peer.accepted else ' (none accepted)'}")
+                     f"{1000 * theirs['seconds']:6.0f} ms {peer.starts} starts"
+                     f"{'' if peer.accepted else ' (none accepted)'}")
     return out
 
 
@@ -75,7 +76,8 @@ def _median(xs) -> float:
 
 
 def markdown(result: dict, args: argparse.Namespace, minutes: float) -> str:
-    lines = [f"Command: `NUMBA_NUM_THREADS=1 python -m benchmarks.run_softposit --count {args.count} --seed {args.seed}` "
+    lines = [f"Command: `NUMBA_NUM_THREADS=1 python -m benchmarks.run_softposit --count {args.count} "
+             f"--seed {args.seed}` "
              f"({provenance()}; {minutes:.1f} min, one process).", "",
              "Success = rotation error < 5° and position error < 5 % of the distance; errors are medians over the "
              "problems the solver solves; times are CPU times of one process (NUMBA_NUM_THREADS=1). SoftPOSIT is "
@@ -83,8 +85,8 @@ def markdown(result: dict, args: argparse.Namespace, minutes: float) -> str:
              "example), given what its interface asks for at its best: the image noise sigma, the number of "
              "matchable marks (the true marks in the image), and the marks' normals (our back-face extension: the "
              "paper's points are all visible); batches of 8 random starts until one converges with 80 % of the "
-             "matchable marks matched one to one within the noise bound, at most 400 starts. The oracle is `cv2.solvePnP` given the true correspondences, which neither of the others "
-             "sees.", ""]
+             "matchable marks matched one to one within the noise bound, at most 400 starts. The oracle is "
+             "`cv2.solvePnP` given the true correspondences, which neither of the others sees.", ""]
     header = ["solver", "problems", "solved", "median rot. err (deg)", "median pos. err (% dist.)",
               "median time (ms)", "p95 time (ms)", "note"]
     for g, by_solver in result.items():
@@ -106,8 +108,8 @@ def markdown(result: dict, args: argparse.Namespace, minutes: float) -> str:
         lines += md_table(header, rows)
         ev, sp, orc = (by_solver[s] for s in SOLVERS)
         ratios = []
-        ratios.append(["SoftPOSIT / EvoPose, median time", f"{_median([o['seconds'] for o in sp]) / _median([o['seconds'] for o in ev]):.1f}",
-                       f"{len(ev)} problems"])
+        slower = _median([o["seconds"] for o in sp]) / _median([o["seconds"] for o in ev])
+        ratios.append(["SoftPOSIT / EvoPose, median time", f"{slower:.1f}", f"{len(ev)} problems"])
         for name, peer in (("EvoPose", ev), ("SoftPOSIT", sp)):
             both = [(a, b) for a, b in zip(peer, orc) if a["ok"] and b["ok"]]
             if both:

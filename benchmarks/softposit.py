@@ -55,9 +55,9 @@ BATCH, MAX_STARTS = 8, 400
 @dataclass
 class SoftPositResult:
     """One SoftPOSIT run: ``rotation`` (B, 3, 3) and ``translation`` (B, 3) camera_from_target per start,
-    ``matches`` (B,) one-to-one matches within the noise bound, ``converged`` (B,), ``steps`` annealing steps taken, ``assignment``
-    (B, N + 1, M + 1) with the slack row and column last, ``visible`` (B,) model points facing the camera at the
-    final pose (all without normals)."""
+    ``matches`` (B,) one-to-one matches within the noise bound, ``converged`` (B,), ``steps`` annealing steps
+    taken, ``assignment`` (B, N + 1, M + 1) with the slack row and column last, ``visible`` (B,) model points
+    facing the camera at the final pose (all without normals)."""
 
     rotation: np.ndarray
     translation: np.ndarray
@@ -272,5 +272,5 @@ def solve_view(view, model_points: np.ndarray, *, noise: float, seed: int, norma
     return SoftPositSolution(pose, accepted, tried, time.process_time() - t0, best[3])
 
 
-__all__ = ["SoftPositResult", "SoftPositSolution", "facing", "image_spread", "scaled_beta0", "sinkhorn_slack", "softposit",
-           "solve_view", "starts"]
+__all__ = ["SoftPositResult", "SoftPositSolution", "facing", "image_spread", "scaled_beta0", "sinkhorn_slack",
+           "softposit", "solve_view", "starts"]

@@ -2,13 +2,13 @@
 
     NUMBA_NUM_THREADS=1 python -m benchmarks.solver_regression [--repeats 3] [--update]
 
-Two seeded groups, the same every run: 40 telephoto marked boxes (:func:`benchmarks.problems.make_telephoto_box_problem`,
-issue 35's problems: 20-30 m, f = 2400 px, 1 px noise, 25 % clutter, 10 % missing) and 20 paper-scale Pioneers
-(:func:`benchmarks.problems.make_paper_scale_problem`, H1 and H2 in turn). Each problem is solved with its own
-seed, so success, errors and evaluations are reproducible, and are compared with
-``benchmarks/results/solver_regression.json`` (the figures of the last ``--update``): a group fails when its
-success count drops, its median rotation or position error (solved problems) rises more than :data:`ERROR_SLACK`,
-or its median evaluations rise more than :data:`EVALUATION_SLACK`.
+Two seeded groups, the same every run: 40 telephoto marked boxes
+(:func:`benchmarks.problems.make_telephoto_box_problem`, issue 35's problems: 20-30 m, f = 2400 px, 1 px noise,
+25 % clutter, 10 % missing) and 20 paper-scale Pioneers (:func:`benchmarks.problems.make_paper_scale_problem`,
+H1 and H2 in turn). Each problem is solved with its own seed, so success, errors and evaluations are
+reproducible, and are compared with ``benchmarks/results/solver_regression.json`` (the figures of the last
+``--update``): a group fails when its success count drops, its median rotation or position error (solved problems)
+rises more than :data:`ERROR_SLACK`, or its median evaluations rise more than :data:`EVALUATION_SLACK`.
 
 CPU time is not reproducible on a shared machine, so it is measured side by side: the figures' own commit is
 checked out in a temporary git worktree (this module and the problem generator copied in), and the suite is
@@ -58,8 +58,8 @@ CAUGHT = ("Run on the code before and at ca5fe80 (the robust last fit; this modu
 def suite() -> dict[str, list[SyntheticProblem]]:
     """The fixed problem set: group name -> problems."""
     boxes = [make_telephoto_box_problem(np.random.default_rng([SEED, 0, i])) for i in range(40)]
-    pioneers = [make_paper_scale_problem(np.random.default_rng([SEED, 1, i]), cameras=("H1",) if i % 2 == 0 else ("H2",))
-                for i in range(20)]
+    pioneers = [make_paper_scale_problem(np.random.default_rng([SEED, 1, i]),
+                                         cameras=("H1",) if i % 2 == 0 else ("H2",)) for i in range(20)]
     return {"telephoto box (f = 2400 px, 20-30 m)": boxes, "paper scale (Pioneer ~25 px)": pioneers}
 
 

@@ -194,5 +194,5 @@ def robust_pose(objective: PoseObjective, pose: np.ndarray, iterations: int = MA
     return robust_fit(objective, pose, iterations)[0]
 
 
-__all__ = ["MIN_SCALE_PX", "TUKEY_C", "cutoff_sigmas", "loss_and_weight", "residual_scale", "robust_cost", "robust_fit", "robust_pose",
-           "tukey_weights", "view_cutoffs"]
+__all__ = ["MIN_SCALE_PX", "TUKEY_C", "cutoff_sigmas", "loss_and_weight", "residual_scale", "robust_cost",
+           "robust_fit", "robust_pose", "tukey_weights", "view_cutoffs"]
