@@ -18,7 +18,7 @@ from pathlib import Path
 RESULTS = Path(__file__).resolve().parent / "results"
 ROOT = Path(__file__).resolve().parents[1]
 #: Order of the sections in BENCHMARKS.md (others follow alphabetically).
-ORDER = ("solvers", "confidence", "weights", "kernels", "features", "fleet", "frame_path", "latency", "capacity",
+ORDER = ("solvers", "solver_regression", "softposit", "solver_phases", "confidence", "weights", "kernels", "features", "fleet", "frame_path", "latency", "capacity",
          "footprint", "photoreal_features", "photoreal_features_sweep", "photoreal_features_telephoto_sweep",
          "photoreal_features_opencv_camera", "photoreal_features_train",
          "photoreal_fleet", "photoreal_fleet_long", "photoreal_fleet_paper_long", "photoreal_tracking",
@@ -26,6 +26,9 @@ ORDER = ("solvers", "confidence", "weights", "kernels", "features", "fleet", "fr
 
 #: Titles that several section files share, told apart by what each measures (by file stem).
 TITLES = {
+    "solver_regression": "Solver regression check: a fixed problem set against the committed figures",
+    "softposit": "SoftPOSIT beside EvoPose and the oracle: telephoto boxes and the paper's scale",
+    "solver_phases": "Where a solve's time goes: per phase, before and after",
     "photoreal_features": "Feature front-ends on rendered datasets: the first paper-scale and telephoto datasets",
     "photoreal_features_sweep": "Feature front-ends on rendered datasets: nine paper-scale worlds "
                                 "(three geometries, three skies)",
@@ -48,6 +51,9 @@ by the ratios measured side by side in one run, not by absolute times across sec
 `make bench` re-runs every section but the agent footprint (`make bench-footprint`, 30 min) and re-assembles
 this file (`python -m benchmarks.report`). Every section names the command, the commit and the date that
 produced it. Newest first: sections are in the order of the date they were measured, the latest at the top.
+`make bench-solver` (about a minute) re-runs the solver on a fixed problem set and fails when its success, accuracy,
+evaluations or time got worse than the committed figures ("Solver regression check" below): run it on every change
+to the search.
 """
 
 DATE = re.compile(r"\b(20\d\d-\d\d-\d\d)\b")

@@ -14,10 +14,13 @@ So the estimate ends with iteratively re-weighted least squares (IRLS) on the mu
 matching (:func:`evopose.covariance.mutual_matches`, re-matched at every step as ICP does), in two stages:
 
 1. **Sort** the pairs: each weighed by Tukey's biweight ``w(d) = (1 - (d / c)^2)^2`` for ``d < c``, else 0, times
-   its view's eq. (4) weight. The cut-off ``c = TUKEY_C * sigma`` follows the pairs' spread at the pose given
+   its view's eq. (4) weight. The cut-off ``c = k(nu) * sigma`` follows the pairs' spread at the pose given
    (:func:`view_cutoffs`: ``sigma`` from their median distance, a 2-D Gaussian's median radius being 1.177
-   sigma, at least :data:`MIN_SCALE_PX`; a view whose own pairs spread wider keeps its own). A false pair 3 sigma
-   off no longer weighs.
+   sigma, at least :data:`MIN_SCALE_PX`; a view whose own pairs spread wider keeps its own). With many pairs
+   ``k = TUKEY_C``: a false pair 3 sigma off no longer weighs. With few, the pooled ``sigma`` itself is uncertain
+   (its ``nu = 2m - n_free`` residual coordinates) and ``k`` widens as Student's t does (:func:`cutoff_sigmas`): a
+   handful of true pairs at 1 px noise (6-13 marks of a box 50 px wide at 20-30 m) had ``sigma`` estimated at half
+   its value, the largest true pair cut, and the published pose tilted past the least-squares one (issue 35).
 2. **Fit** by least squares the pairs within ``c`` ("trimmed"), ``c`` taken anew at the pose stage 1 settled on,
    where the true pairs agree more tightly. The biweight alone weighs the true pairs down too (by 0.3 at 2 sigma)
    and loses precision on clean points; least squares does not.
@@ -75,17 +78,38 @@ def loss_and_weight(distance: np.ndarray, cutoff: float, kind: str) -> tuple[np.
     return np.where(inside, 0.5 * d * d, 0.5 * cutoff ** 2), inside.astype(float)
 
 
-def view_cutoffs(matches: Matches, n_free: int) -> np.ndarray:
-    """Each view's cut-off (V,) pixels: :data:`TUKEY_C` times the residual scale (:func:`residual_scale`) of all
-    pairs in ``matches``, or of the view's own pairs where theirs is wider. Cameras differ: the true pairs of a
-    blurred or far one spread wider than a sharp one's and are not outliers for it; a view's own handful of
-    pairs alone (6-8 at the paper's scale) gives too loose an estimate to cut a sharp view tighter."""
+def cutoff_sigmas(dof: float) -> float:
+    """The cut-off in residual sigmas when sigma was estimated from ``dof`` residual coordinates (``2m - n_free``):
+    the 2-D pair's squared distance over ``2 sigma^2`` against its F(2, dof) quantile at the tail
+    ``alpha = exp(-TUKEY_C^2 / 2)`` that :data:`TUKEY_C` cuts from a 2-D Gaussian with sigma known. F(2, nu)'s
+    tail is ``(1 + 2x / nu)^(-nu / 2)``, so ``k = sqrt(nu (alpha^(-2 / nu) - 1))``: :data:`TUKEY_C` as ``nu`` grows
+    (3.4 at nu = 20, 4.6 at nu = 6), infinite at ``nu <= 0`` (no redundancy: no pair can be told false)."""
+    if dof <= 0:
+        return np.inf
+    return float(np.sqrt(dof * np.expm1(TUKEY_C ** 2 / dof)))
+
+
+def view_cutoffs(matches: Matches, n_free: int, taus: np.ndarray | None = None) -> np.ndarray:
+    """Each view's cut-off (V,) pixels: :func:`cutoff_sigmas` (for all pairs' residual degrees of freedom) times
+    the residual scale (:func:`residual_scale`) of all pairs in ``matches``, or :data:`TUKEY_C` times that of the
+    view's own pairs where this is wider. Cameras differ: the true pairs of a blurred or far one spread wider than a
+    sharp one's and are not outliers for it; a view's own handful of pairs alone (6-8 at the paper's scale) gives
+    too loose an estimate to cut a sharp view tighter. That own scale, taken only where it widens the cut, is not
+    widened again for its own few degrees of freedom: on two paper-scale views that let false pairs 4-6 sigma off
+    in or out by chance, and two helicopters sharing their features published poses 0.3-0.5 m apart
+    (tests/test_dataset_scenario.py). At most the view's ``taus`` (V,) pixels, eq. (1)'s own bound, within which
+    every mutual pair lies (all pairs kept)."""
     distance = np.linalg.norm(matches.residuals, axis=1)
-    pooled = residual_scale(distance, n_free)
     total = max(len(distance), 1)
-    return np.array([TUKEY_C * max(pooled, residual_scale(distance[matches.view == k],
-                                                          n_free * np.count_nonzero(matches.view == k) / total))
-                     for k in range(len(matches.weights))])
+    pooled = cutoff_sigmas(2 * len(distance) - n_free) * residual_scale(distance, n_free)
+    cutoffs = []
+    for k in range(len(matches.weights)):
+        mine = matches.view == k
+        n_mine = n_free * np.count_nonzero(mine) / total
+        own = TUKEY_C * residual_scale(distance[mine], n_mine)
+        cutoffs.append(max(pooled, own))
+    cutoffs = np.array(cutoffs)
+    return cutoffs if taus is None else np.minimum(cutoffs, np.asarray(taus, float))
 
 
 def robust_cost(matches: Matches, cutoffs: np.ndarray, kind: str) -> float:
@@ -158,10 +182,11 @@ def robust_fit(objective: PoseObjective, pose: np.ndarray,
     if n_free == 0:
         return start, matches
     # the biweight at each view's scale of the pairs as they are sorts them (a false pair 3 of their sigmas off no
-    # longer weighs); at the pose it settles on, the true pairs agree more tightly, and least squares keeps those
-    # within 3 of their new scale
-    core, matches = _reweighted(objective, start, matches, "tukey", view_cutoffs(matches, n_free), iterations)
-    return _reweighted(objective, core, matches, "trimmed", view_cutoffs(matches, n_free), iterations)
+    # longer weighs, more with few pairs: cutoff_sigmas); at the pose it settles on, the true pairs agree more
+    # tightly, and least squares keeps those within the cut-off of their new scale
+    taus = objective.taus
+    core, matches = _reweighted(objective, start, matches, "tukey", view_cutoffs(matches, n_free, taus), iterations)
+    return _reweighted(objective, core, matches, "trimmed", view_cutoffs(matches, n_free, taus), iterations)
 
 
 def robust_pose(objective: PoseObjective, pose: np.ndarray, iterations: int = MAX_ITERATIONS) -> np.ndarray:
@@ -169,5 +194,5 @@ def robust_pose(objective: PoseObjective, pose: np.ndarray, iterations: int = MA
     return robust_fit(objective, pose, iterations)[0]
 
 
-__all__ = ["MIN_SCALE_PX", "TUKEY_C", "loss_and_weight", "residual_scale", "robust_cost", "robust_fit", "robust_pose",
-           "tukey_weights", "view_cutoffs"]
+__all__ = ["MIN_SCALE_PX", "TUKEY_C", "cutoff_sigmas", "loss_and_weight", "residual_scale", "robust_cost",
+           "robust_fit", "robust_pose", "tukey_weights", "view_cutoffs"]

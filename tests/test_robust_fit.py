@@ -107,3 +107,25 @@ def test_the_biweight_and_the_scale():
     radii = np.linalg.norm(np.random.default_rng(0).normal(size=(20000, 2)), axis=1)
     assert residual_scale(radii) == pytest.approx(1.0, abs=0.02)
     assert residual_scale(np.array([0.01, 0.02])) == 0.35 and residual_scale(np.zeros(0)) == 0.35
+
+
+def test_a_handful_of_clean_pairs_keeps_the_least_squares_precision():
+    """Issue 35: a marked box 50 px wide (20-30 m, f = 2400 px) shows 6-14 marks at 1 px noise. The residual scale
+    from so few pairs is uncertain (half its value at times), and a fixed 3-sigma cut dropped true pairs: rotation
+    errors 1.20x and position 1.33x least squares' on these 16 problems. With the cut widened for the pairs'
+    residual degrees of freedom: 1.10x and 1.12x (the biweight stage itself is less efficient than least squares
+    on clean points)."""
+    from benchmarks.problems import box_model
+
+    extent = 2 * box_model()[0].radius
+    ls_err, rb_err = [], []
+    for seed in range(16):
+        rng = np.random.default_rng([35, seed])
+        distance = rng.uniform(20, 30)
+        sp = make_problem("box", rng, distance=distance, noise=1.0, clutter=0.0, missing=0.1,
+                          size_px=2400 * extent / distance)
+        least_squares, robust = least_squares_and_robust(sp.problem, sp.true_pose)
+        ls_err.append(errors_deg_m(least_squares, sp))
+        rb_err.append(errors_deg_m(robust, sp))
+    ls_mean, rb_mean = np.mean(ls_err, axis=0), np.mean(rb_err, axis=0)
+    assert np.all(rb_mean <= 1.15 * ls_mean), (ls_mean, rb_mean)
