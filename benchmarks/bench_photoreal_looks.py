@@ -49,7 +49,7 @@ def evaluate(directory: Path, look: str, front_ends: tuple[str, ...] = FRONT_END
     """Counts ``{front_end: [visible marks, found, detections, correct, right labels]}`` of one dataset developed
     through ``look`` (its first ``frames`` frames; None: all), with the dataset's world name, scale and the seconds
     per front-end."""
-    from agents.tools.render_dataset import develop_exr
+    from scenarios.photoreal.develop import develop_exr
     from vision.blobs import SMALL_SPOT_PX, detect_contrast_marks, mark_prior
     from vision.features import colour_ranges, detect_colour_marks, match_to_truth
     from scenarios.dataset import open_dataset

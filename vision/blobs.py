@@ -404,7 +404,8 @@ def _detect(bgr: np.ndarray, lin: np.ndarray, names: tuple[str, ...], palette: M
         pts, labels, conf, radius, contrast = pts[kept], labels[kept], conf[kept], radius[kept], contrast[kept]
         if scoring:  # the scorer decides which candidates are marks (vision.mark_scorer)
             features = candidate_features(bgr, lab, pts, radius, contrast, labels, conf, misfit[kept],
-                                          explained[kept], paint, sure, prior.extent_px or float(max(h, w)))
+                                          explained[kept], paint, sure, prior.extent_px or float(max(h, w)),
+                                          palette_bgr, body)
             if isinstance(scorer, MarkScorer):
                 probability = scorer.probability(features)
                 kept = one_per_disc(pts, probability, prior.radius_px[1])
