@@ -19,6 +19,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+from .report import provenance
+
 ROOT = Path(__file__).resolve().parents[1]
 FIXTURES = ("paper", "paper-agx", "paper-flat-cool", "telephoto", "telephoto-agx", "telephoto-flat-cool",
             "husky-paper", "husky-telephoto")
@@ -66,10 +68,16 @@ def time_tree(tree: Path, fixtures: list[Path]) -> dict[str, float]:
     return times
 
 
+def _label(tree: Path) -> str:
+    """A tree by its commit (short hash), or its folder's name."""
+    out = subprocess.run(["git", "-C", str(tree), "rev-parse", "--short", "HEAD"], capture_output=True, text=True)
+    return out.stdout.strip() or tree.name
+
+
 def markdown(trees: list[Path], medians: dict[str, list[float]], rounds: int, command: str) -> str:
-    names = [t.name if t != ROOT else "this tree" for t in trees]
+    names = [_label(t) for t in trees]
     lines = ["## Contrast front-end time per image, side by side", "",
-             f"Produced by `{command}`: {rounds} rounds, the trees taking turns in fresh interpreters, one OpenCV "
+             f"Produced by `{command}`; {provenance()}. {rounds} rounds, the trees taking turns in fresh interpreters, one OpenCV "
              "thread; the median over rounds of each tree's mean milliseconds per image of each committed fixture "
              "(both cameras, 2 frames each, the look estimated). The ratio is the first tree's time over each "
              "other's.", "",

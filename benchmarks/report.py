@@ -22,7 +22,7 @@ ORDER = ("solvers", "confidence", "weights", "kernels", "features", "fleet", "fr
          "footprint", "photoreal_features", "photoreal_features_sweep", "photoreal_features_telephoto_sweep",
          "photoreal_features_opencv_camera", "photoreal_features_train",
          "photoreal_fleet", "photoreal_fleet_long", "photoreal_fleet_paper_long", "photoreal_tracking",
-         "photoreal_encoding", "photoreal_looks", "photoreal_looks_husky", "photoreal_fleet_looks")
+         "photoreal_encoding", "photoreal_looks", "photoreal_looks_husky", "photoreal_fleet_looks", "frontend_speed")
 
 #: Titles that several section files share, told apart by what each measures (by file stem).
 TITLES = {
@@ -35,6 +35,7 @@ TITLES = {
                                         "camera model",
     "photoreal_fleet": "The fleet on rendered datasets: paper-scale and telephoto worlds, with and without the robot",
     "photoreal_fleet_looks": "The fleet on rendered datasets: nine telephoto worlds through three camera looks",
+    "frontend_speed": "Contrast front-end: time per camera image",
     "photoreal_looks": "Mark front-ends through camera looks: the Pioneer",
     "photoreal_looks_husky": "Mark front-ends through camera looks: the second robot (Husky-like UGV)",
 }
