@@ -61,6 +61,11 @@ def resolve_features(kind: str, camera_images: bool) -> str:
     return "contrast" if camera_images else "marks"
 
 
+#: Once a camera's look is tracked (nine estimates), it is estimated again every this many frames
+#: (:class:`vision.camera_look.LookTracker`).
+LOOK_EVERY = 4
+
+
 def feature_extractor(kind: str, target: TargetModel, area: Bounds | None = None,
                       scorer: MarkScorer | None = None) -> FeatureExtractor:
     """The :class:`FeatureExtractor` of ``kind`` (one of :data:`FEATURE_KINDS`) for ``target``: ``marks`` and
@@ -94,8 +99,8 @@ def feature_extractor(kind: str, target: TargetModel, area: Bounds | None = None
         prior = MarkPrior() if camera is None or area is None else mark_prior(
             camera, target.mark_radius, size, area.lo[:3], area.hi[:3])
         key = None if camera is None else (camera.fx, camera.fy, camera.cx, camera.cy, camera.width, camera.height)
-        tracker = looks.setdefault(key, LookTracker())
-        look = tracker.update(estimate_look(image, body, prior.extent_px))
+        tracker = looks.setdefault(key, LookTracker(every=LOOK_EVERY))
+        look = tracker.update(estimate_look(image, body, prior.extent_px)) if tracker.due() else tracker.current()
         found = detect_contrast_marks(image, palette, prior, body=body, scorer=scorer or "shipped", look=look)
         return found.points, found.labels
 
