@@ -72,8 +72,8 @@ def feature_extractor(kind: str, target: TargetModel, area: Bounds | None = None
     ``contrast`` label each mark with its colour's index in the model's palette (the order of
     :meth:`scenarios.target.TargetModel.colour_labels`); ``area`` is the operating area (world x, y, z bounds of
     the target) from which ``contrast`` derives the marks' size in each camera's image. ``scorer``: the mark scorer
-    ``contrast`` takes for 2-4 px marks (default: the shipped one, :mod:`vision.mark_scorer`); ValueError when it
-    was fitted on another palette's features."""
+    ``contrast`` takes for 2-4 px marks (default: the shipped one, :mod:`vision.mark_scorer`, for any palette);
+    ValueError when it was fitted on other features than the front-end computes."""
     if kind == "auto":
         raise ValueError("resolve 'auto' first (resolve_features): whether the images come from a camera")
     if kind == "corners":

@@ -9,15 +9,17 @@ with lenient bars and this scorer keeps those a logistic model of the measures c
 
     p = 1 / (1 + exp(-(w . q(z) + b))),   z = (f - mean) / scale,   q(z) = (z, z_i z_j for i <= j)
 
-on the :data:`FEATURES` of each candidate, the labels' one-hot included. The model is fitted (:func:`fit`,
-L2-regularised maximum likelihood) by ``evopose train-scorer`` on datasets whose truth gives each mark's
-projection: a candidate within the match radius of a mark's projected centre is a mark. The shipped model
-(``mark_scorer.json``) was fitted on the training worlds of ``benchmarks/photoreal_worlds.py --set train``
-(other helicopter positions and suns than the benchmark's) and is measured on the benchmark's worlds.
+on the :data:`FEATURES` of each candidate. The model is fitted (:func:`fit`, L2-regularised maximum likelihood) by
+``evopose train-scorer`` on datasets whose truth gives each mark's projection: a candidate within the match radius
+of a mark's projected centre is a mark. The shipped model (``mark_scorer.json``) was fitted on the Pioneer's
+training worlds of ``benchmarks/photoreal_worlds.py --set train`` (other helicopter positions and suns than the
+benchmark's), each frame also developed through two random camera looks (``--looks 2``), and is measured on the
+benchmark's worlds through the named looks and on the second robot, whose palette and body it never saw.
 
-The scorer knows nothing of a scene's particular numbers: its measures are ratios (contrast over the image's own
-noise, shares, pixels at the mark's scale), so it should carry over to other cameras of the same kind; a camera
-unlike the renderer's (another sensor or encoder) may need its own fit from frames with known marks.
+The scorer knows nothing of a scene's particular numbers or of a palette: its measures are ratios (contrast over
+the image's own noise, shares, pixels at the mark's scale) and differences taken along the direction from the
+body's paint to the spot's labelled paint, so one scorer serves any marked target; a camera unlike the
+renderer's (another sensor or encoder) may need its own fit from frames with known marks.
 """
 
 from __future__ import annotations
