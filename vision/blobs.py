@@ -86,10 +86,6 @@ BODY_GAP = 0.12
 #: looks (scenarios.looks.random_look, seeds 1000-1005, telephoto g1-low and g3-overcast; a one-off analysis): 0.2 recall 0.744 / precision 0.820, 0.3
 #: 0.703 / 0.824, 0.45 0.631 / 0.847 (under odd looks the paint mask frays; the Husky's outline spots want 0.45).
 MIN_PAINT_AROUND = 0.2
-#: Where marks are 3 px and more the ring of paint is not asked for: :data:`MIN_SURROUND` keeps what it kept out (a
-#: spot on the body's outline) without losing the marks whose ring the paint mask frays under a look. Chosen on
-#: the reference look and random looks (scenarios.looks.random_look seeds 2000-2009, Pioneer telephoto worlds):
-#: recall 0.966 -> 0.973, 0.933 -> 0.949, 0.950 -> 0.963, precision 0.938 -> 0.936, 0.963 -> 0.958, 0.970 -> 0.970.
 #: Where marks are 3 px and more, a spot's centre lies inside the body's silhouette (the closed, filled paint), by
 #: more than this share of its radius: a mark lies on a face; a speck on the ground beside the outline does not.
 #: Through six random looks (telephoto g1-low, g3-overcast; the one-off analysis of MIN_PAINT_AROUND): no rule 0.744 / 0.820 (recall / precision), inside 0.733 /
@@ -383,7 +379,7 @@ def _detect(bgr: np.ndarray, lin: np.ndarray, names: tuple[str, ...], palette: M
         cu, cv = np.rint(pts[sel]).astype(int).T
         ok = (cu >= 0) & (cv >= 0) & (cu < depth.shape[1]) & (cv < depth.shape[0])
         sel = sel[ok][depth[cv[ok], cu[ok]] > INSIDE_SHARE * radius[sel[ok]]]
-    if paint is not None and len(sel) and prior.radius_px[1] < SMALL_SPOT_PX:   # ringed by the body's paint
+    if paint is not None and len(sel):  # a mark on a face is ringed by the body's paint
         sel = sel[paint_around(paint, pts[sel], radius[sel]) >= (CANDIDATE_PAINT_AROUND if scoring
                                                                  else MIN_PAINT_AROUND)]
     if prior.radius_px[1] >= SMALL_SPOT_PX and len(sel):   # a mark is ringed by one paint it stands out from
