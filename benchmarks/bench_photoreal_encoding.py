@@ -22,7 +22,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-from agents.tools.render_dataset import develop_exr
+from scenarios.photoreal.develop import develop_exr
 from scenarios.dataset import open_dataset
 from scenarios.photoreal.develop import camera_model_of
 

@@ -92,3 +92,17 @@ def test_dead_band_and_tracker():
     assert tracker.update(Look()).saturation == pytest.approx(0.55)   # a frame without the body keeps the track
     with pytest.raises(ValueError):
         LookTracker(0)
+
+
+def test_a_tracked_look_is_estimated_again_every_few_frames_once_its_window_is_full():
+    tracker = LookTracker(window=3, every=4)
+    due, between = [], []
+    for frame in range(12):
+        due.append(tracker.due())
+        if due[-1]:
+            tracker.update(Look(saturation=0.5 + 0.01 * frame, body_pixels=100))
+        else:   # the median of the last three estimates
+            between.append(round(tracker.current().saturation, 6))
+    assert between == [0.51, 0.52, 0.52, 0.52, 0.54, 0.54, 0.54]
+    assert due == [True, True, True, False, True, False, False, False, True, False, False, False]
+    assert LookTracker(every=4).current() == Look()   # nothing tracked yet: the reference look

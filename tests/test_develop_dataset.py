@@ -15,7 +15,8 @@ import yaml
 
 from agents.cli.main import main
 from agents.tools.develop_dataset import develop_dataset
-from agents.tools.render_dataset import develop_exr, render_dataset
+from agents.tools.render_dataset import render_dataset
+from scenarios.photoreal.develop import develop_exr
 from scenarios.camera_model import CameraModelSpec, linear_from_srgb
 from scenarios.dataset import open_dataset
 from scenarios.errors import WorldError

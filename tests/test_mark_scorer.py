@@ -64,10 +64,14 @@ def test_fit_refuses_one_class():
         fit(np.zeros((20, 2)), np.zeros(20, bool), ("a", "b"))
 
 
-def test_the_shipped_scorer_reads_the_shipped_model_s_colours_and_was_fitted_on_the_training_worlds():
+def test_the_shipped_scorer_reads_no_palette_and_was_fitted_on_the_training_worlds():
     scorer = shipped()
     palette = load_model(ROOT / "scenarios" / "models" / "pioneer.yaml").palette
-    assert scorer.names == (*FEATURES, *(f"label_{c}" for c in palette)) == mark_scorer.feature_names(tuple(palette))
+    husky = load_model(ROOT / "scenarios" / "models" / "husky.yaml").palette
+    # palette-relative features: one scorer for any palette (the Husky's was never fitted on)
+    assert scorer.names == FEATURES == mark_scorer.feature_names(tuple(palette)) == mark_scorer.feature_names(
+        tuple(husky))
+    assert not set(scorer.names) & {f"label_{c}" for c in (*palette, *husky)}   # no palette one-hot
     # fitted on benchmarks/photoreal_worlds.py --set train, never on the benchmark's worlds it is measured on
     assert "photoreal-paper-t" in scorer.fitted_on and "-g1-" not in scorer.fitted_on
     assert 0.0 < scorer.threshold < 1.0
@@ -166,20 +170,23 @@ def test_the_extractor_takes_the_scorer_it_is_given():
     assert len(found) >= 5 and len(fewer) < len(found) / 2, (len(found), len(fewer))
 
 
-def test_a_palette_the_shipped_scorer_was_not_fitted_on_gets_the_hand_set_bars():
+def test_the_scorer_reads_the_paints_not_their_names_and_serves_a_palette_it_never_saw():
     import cv2
 
     from vision.blobs import detect_contrast_marks, mark_prior
     from scenarios.dataset import open_dataset
 
-    data = open_dataset(PAPER)
-    world = data.world()
-    area = world.bounds()
-    cam = data.cameras[0]
-    image = cv2.imread(str(data.image_path(cam, 0)))
-    prior = mark_prior(data.camera(cam, 0), world.model.mark_radius, world.model.size, area.lo[:3], area.hi[:3])
-    renamed = {f"paint{i}": bgr for i, bgr in enumerate(world.model.palette.values())}  # same paints, other names
-    found = detect_contrast_marks(image, renamed, prior, body=world.model.body_colour)
-    bars = detect_contrast_marks(image, world.model.palette, prior, body=world.model.body_colour, scorer=None)
-    assert found.features is None and len(found) == len(bars) > 5
-    np.testing.assert_array_equal(found.points, bars.points)
+    for fixture in (PAPER, PAPER.parent / "husky-paper"):   # the Pioneer's palette, and the Husky's (never fitted)
+        data = open_dataset(fixture)
+        world = data.world()
+        area = world.bounds()
+        cam = data.cameras[0]
+        image = cv2.imread(str(data.image_path(cam, 0)))
+        prior = mark_prior(data.camera(cam, 0), world.model.mark_radius, world.model.size, area.lo[:3], area.hi[:3])
+        found = detect_contrast_marks(image, world.model.palette, prior, body=world.model.body_colour)
+        renamed = {f"paint{i}": bgr for i, bgr in enumerate(world.model.palette.values())}  # the paints renamed
+        again = detect_contrast_marks(image, renamed, prior, body=world.model.body_colour)
+        bars = detect_contrast_marks(image, world.model.palette, prior, body=world.model.body_colour, scorer=None)
+        assert found.features is not None and found.features.shape[1] == len(FEATURES) and len(found) > 3
+        np.testing.assert_array_equal(found.points, again.points)
+        assert bars.features is None and not np.array_equal(found.points, bars.points)

@@ -224,8 +224,8 @@ def detect_contrast_marks(image_bgr: np.ndarray, palette: Mapping[str, tuple[int
     when every mark is under :data:`SMALL_SPOT_PX`. Returns the marks sorted by label then row.
 
     ``scorer``, for marks under :data:`SMALL_SPOT_PX` on a body: which candidates are marks
-    (:mod:`vision.mark_scorer`): ``"shipped"`` the shipped model (for a palette of other colours than the one it
-    was fitted on: the hand-set bars), or a :class:`MarkScorer`; the candidates are
+    (:mod:`vision.mark_scorer`): ``"shipped"`` the shipped model (palette-relative: any palette), or a
+    :class:`MarkScorer`; the candidates are
     then taken with the lenient :data:`CANDIDATE_K_SIGMA` bars (``k_sigma`` is not used). ``"all"``: every
     such candidate, with its features (to fit a scorer); None: the hand-set bars alone.
 
@@ -247,7 +247,7 @@ def detect_contrast_marks(image_bgr: np.ndarray, palette: Mapping[str, tuple[int
         bgr = to_reference_look(bgr, look)
     if isinstance(scorer, str) and scorer not in ("shipped", "all"):
         raise ValueError(f"scorer must be a MarkScorer, 'shipped', 'all' or None, got {scorer!r}")
-    if scorer == "shipped":  # fitted on the shipped model's colours; another palette gets the hand-set bars
+    if scorer == "shipped":  # palette-relative features: any palette (a scorer file of other features: the bars)
         fitted = shipped()
         scorer = fitted if fitted is not None and fitted.names == feature_names(names) else None
     if isinstance(scorer, MarkScorer) and scorer.names != feature_names(names):
@@ -404,7 +404,8 @@ def _detect(bgr: np.ndarray, lin: np.ndarray, names: tuple[str, ...], palette: M
         pts, labels, conf, radius, contrast = pts[kept], labels[kept], conf[kept], radius[kept], contrast[kept]
         if scoring:  # the scorer decides which candidates are marks (vision.mark_scorer)
             features = candidate_features(bgr, lab, pts, radius, contrast, labels, conf, misfit[kept],
-                                          explained[kept], paint, sure, prior.extent_px or float(max(h, w)))
+                                          explained[kept], paint, sure, prior.extent_px or float(max(h, w)),
+                                          palette_bgr, body)
             if isinstance(scorer, MarkScorer):
                 probability = scorer.probability(features)
                 kept = one_per_disc(pts, probability, prior.radius_px[1])

@@ -221,19 +221,34 @@ def to_reference_look(bgr: np.ndarray, look: Look) -> np.ndarray:
 class LookTracker:
     """A camera's look over a sequence: the median of the last ``window`` frames' estimates that found the body
     (a camera keeps its look; one frame's body may show one face only). State: the recent estimates, one writer
-    (the vehicle's frame loop). :meth:`update` takes a frame's estimate and returns the tracked look."""
+    (the vehicle's frame loop). :meth:`update` takes a frame's estimate and returns the tracked look.
 
-    def __init__(self, window: int = 9) -> None:
-        if window < 1:
-            raise ValueError(f"window must be at least 1, got {window}")
-        self.window = window
+    Once ``window`` estimates are in, a new one is :meth:`due` every ``every`` frames only (the look changes as
+    slowly as a camera's exposure and white balance; an estimate costs a quarter of the front-end's time)."""
+
+    def __init__(self, window: int = 9, every: int = 1) -> None:
+        if window < 1 or every < 1:
+            raise ValueError(f"window and every must be at least 1, got {window} and {every}")
+        self.window, self.every = window, every
         self._recent: list[Look] = []
+        self._frames = 0
+
+    def due(self) -> bool:
+        """Whether this frame's look should be estimated (:meth:`update`), else :meth:`current` is the look."""
+        return len(self._recent) < self.window or self._frames % self.every == 0
+
+    def current(self) -> Look:
+        """The tracked look without a new estimate (counts the frame)."""
+        self._frames += 1
+        return self._tracked() if self._recent else Look()
 
     def update(self, look: Look) -> Look:
+        self._frames += 1
         if look.body_pixels > 0:
             self._recent = [*self._recent[-(self.window - 1):], look] if self.window > 1 else [look]
-        if not self._recent:
-            return look
+        return self._tracked() if self._recent else look
+
+    def _tracked(self) -> Look:
         neutral = np.median([lk.neutral for lk in self._recent], axis=0)
         return Look(neutral=(float(neutral[0]), float(neutral[1])),
                     saturation=float(np.median([lk.saturation for lk in self._recent])),

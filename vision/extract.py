@@ -61,14 +61,19 @@ def resolve_features(kind: str, camera_images: bool) -> str:
     return "contrast" if camera_images else "marks"
 
 
+#: Once a camera's look is tracked (nine estimates), it is estimated again every this many frames
+#: (:class:`vision.camera_look.LookTracker`).
+LOOK_EVERY = 4
+
+
 def feature_extractor(kind: str, target: TargetModel, area: Bounds | None = None,
                       scorer: MarkScorer | None = None) -> FeatureExtractor:
     """The :class:`FeatureExtractor` of ``kind`` (one of :data:`FEATURE_KINDS`) for ``target``: ``marks`` and
     ``contrast`` label each mark with its colour's index in the model's palette (the order of
     :meth:`scenarios.target.TargetModel.colour_labels`); ``area`` is the operating area (world x, y, z bounds of
     the target) from which ``contrast`` derives the marks' size in each camera's image. ``scorer``: the mark scorer
-    ``contrast`` takes for 2-4 px marks (default: the shipped one, :mod:`vision.mark_scorer`); ValueError when it
-    was fitted on another palette's features."""
+    ``contrast`` takes for 2-4 px marks (default: the shipped one, :mod:`vision.mark_scorer`, for any palette);
+    ValueError when it was fitted on other features than the front-end computes."""
     if kind == "auto":
         raise ValueError("resolve 'auto' first (resolve_features): whether the images come from a camera")
     if kind == "corners":
@@ -94,8 +99,8 @@ def feature_extractor(kind: str, target: TargetModel, area: Bounds | None = None
         prior = MarkPrior() if camera is None or area is None else mark_prior(
             camera, target.mark_radius, size, area.lo[:3], area.hi[:3])
         key = None if camera is None else (camera.fx, camera.fy, camera.cx, camera.cy, camera.width, camera.height)
-        tracker = looks.setdefault(key, LookTracker())
-        look = tracker.update(estimate_look(image, body, prior.extent_px))
+        tracker = looks.setdefault(key, LookTracker(every=LOOK_EVERY))
+        look = tracker.update(estimate_look(image, body, prior.extent_px)) if tracker.due() else tracker.current()
         found = detect_contrast_marks(image, palette, prior, body=body, scorer=scorer or "shipped", look=look)
         return found.points, found.labels
 

@@ -9,15 +9,17 @@ with lenient bars and this scorer keeps those a logistic model of the measures c
 
     p = 1 / (1 + exp(-(w . q(z) + b))),   z = (f - mean) / scale,   q(z) = (z, z_i z_j for i <= j)
 
-on the :data:`FEATURES` of each candidate, the labels' one-hot included. The model is fitted (:func:`fit`,
-L2-regularised maximum likelihood) by ``evopose train-scorer`` on datasets whose truth gives each mark's
-projection: a candidate within the match radius of a mark's projected centre is a mark. The shipped model
-(``mark_scorer.json``) was fitted on the training worlds of ``benchmarks/photoreal_worlds.py --set train``
-(other helicopter positions and suns than the benchmark's) and is measured on the benchmark's worlds.
+on the :data:`FEATURES` of each candidate. The model is fitted (:func:`fit`, L2-regularised maximum likelihood) by
+``evopose train-scorer`` on datasets whose truth gives each mark's projection: a candidate within the match radius
+of a mark's projected centre is a mark. The shipped model (``mark_scorer.json``) was fitted on the Pioneer's
+training worlds of ``benchmarks/photoreal_worlds.py --set train`` (other helicopter positions and suns than the
+benchmark's), each frame also developed through two random camera looks (``--looks 2``), and is measured on the
+benchmark's worlds through the named looks and on the second robot, whose palette and body it never saw.
 
-The scorer knows nothing of a scene's particular numbers: its measures are ratios (contrast over the image's own
-noise, shares, pixels at the mark's scale), so it should carry over to other cameras of the same kind; a camera
-unlike the renderer's (another sensor or encoder) may need its own fit from frames with known marks.
+The scorer knows nothing of a scene's particular numbers or of a palette: its measures are ratios (contrast over
+the image's own noise, shares, pixels at the mark's scale) and differences taken along the direction from the
+body's paint to the spot's labelled paint, so one scorer serves any marked target; a camera unlike the
+renderer's (another sensor or encoder) may need its own fit from frames with known marks.
 """
 
 from __future__ import annotations
@@ -32,8 +34,10 @@ import numpy as np
 from .body_paint import paint_around
 from .spot_colour import ring_colours, to_ycrcb
 
-#: The measures of a candidate spot, in the order of a feature row (the label's one-hot follows, one column per
-#: palette colour, in the palette's order).
+#: The measures of a candidate spot, in the order of a feature row. Every one is relative to the image, the body's
+#: paint or the spot's own label, never an absolute colour, so that one scorer serves any palette on any body: the
+#: colours enter only as the direction from the body's paint to the labelled paint (``toward``; ``across``: the
+#: rest of the difference).
 FEATURES = (
     "log_contrast",        # log of the response over the level's threshold (blobs: k_sigma robust spreads)
     "label_confidence",    # 1 - best colour's misfit over the second's (vision.spot_colour)
@@ -44,15 +48,15 @@ FEATURES = (
     "misfit_ratio",        # second-best colour's misfit over the best's
     "paint_around",        # share of the ring 1-2 px outside the spot that is body paint (glossy faces included)
     "sure_paint_around",   # the same, only the sure paint
-    "luma_step",           # spot minus ring, Y (8-bit)
+    "luma_step_toward",    # spot minus ring, Y (8-bit), signed towards the label's paint (a dark paint: - step)
     "chroma_step",         # |spot minus ring| in Cr Cb (8-bit)
     "neighbours",          # other candidates within NEIGHBOUR_PX
     "relative_contrast",   # own contrast over the strongest within NEIGHBOUR_PX (1: the strongest)
     "nearest_px",          # distance to the nearest other candidate (at most FAR_PX)
     "from_centre",         # distance from the candidates' weighted centre over the target's extent in pixels
     "paint_depth_px",      # signed distance to the sure paint's outline (inside positive)
-    "dog_fine_l", "dog_fine_a", "dog_fine_b",   # L*a*b* at the spot's scale minus 1.26x that scale
-    "dog_wide_l", "dog_wide_a", "dog_wide_b",   # L*a*b* at the spot's scale minus 3x that scale
+    "dog_fine_toward", "dog_fine_across",   # L*a*b* at the spot's scale minus 1.26x that scale: along the body ->
+    "dog_wide_toward", "dog_wide_across",   # label paint direction and the rest; the same against 3x that scale
     "log_edge_ratio",      # log of tr(H)^2 / det(H) of the fine difference's Hessian (4: a round spot; an edge: large)
 )
 #: The edge ratio's cap (a saddle or an edge: det(H) <= 0).
@@ -65,18 +69,26 @@ SHIPPED = Path(__file__).with_name("mark_scorer.json")
 
 def candidate_features(bgr: np.ndarray, lab: np.ndarray, points: np.ndarray, radius: np.ndarray,
                        contrast: np.ndarray, labels: np.ndarray, confidence: np.ndarray, misfit: np.ndarray,
-                       explained: np.ndarray, paint: np.ndarray, sure: np.ndarray, extent_px: float) -> np.ndarray:
-    """The :data:`FEATURES` of K candidates and their labels' one-hot, (K, len(FEATURES) + C).
+                       explained: np.ndarray, paint: np.ndarray, sure: np.ndarray, extent_px: float,
+                       palette_bgr: np.ndarray, body_bgr: tuple[int, int, int]) -> np.ndarray:
+    """The :data:`FEATURES` of K candidates, (K, len(FEATURES)).
 
     ``bgr`` (H, W, 3) uint8 and ``lab`` (H, W, 3) float32 L*a*b* of the same crop; ``points`` (K, 2) (u, v) px,
     ``radius`` (K,) px, ``contrast`` (K,) over the threshold; ``labels`` (K,) in [0, C), ``confidence`` (K,);
     ``misfit`` and ``explained`` (K, C) of :func:`vision.spot_colour.spot_misfits`; ``paint`` and ``sure``
-    (H, W) bool: the body's paint with its glossy faces and the sure paint; ``extent_px`` the target's extent."""
+    (H, W) bool: the body's paint with its glossy faces and the sure paint; ``extent_px`` the target's extent;
+    ``palette_bgr`` (C, 3) uint8 the paint colours, ``body_bgr`` the body's."""
     k, c = misfit.shape
     rows = np.arange(k)
-    out = np.zeros((k, len(FEATURES) + c))
+    out = np.zeros((k, len(FEATURES)))
     if k == 0:
         return out
+    # the direction from the body's paint to each labelled paint, unit (C, 3) in L*a*b* and its sign in luma
+    paints = np.vstack([np.asarray(palette_bgr, np.uint8).reshape(-1, 3), np.asarray(body_bgr, np.uint8)[None]])
+    paint_lab = cv2.cvtColor(paints[None].astype(np.float32) / 255.0, cv2.COLOR_BGR2Lab)[0]
+    towards = paint_lab[:-1] - paint_lab[-1]
+    towards /= np.maximum(np.linalg.norm(towards, axis=1, keepdims=True), 1e-9)
+    darker = np.sign(to_ycrcb(paints)[:-1, 0] - to_ycrcb(paints)[-1, 0])          # (C,): +1 a lighter paint
     order = np.sort(np.where(np.isfinite(misfit), misfit, 1e3), axis=1)
     second = order[:, 1] if c > 1 else order[:, 0]
     ycc = to_ycrcb(bgr)
@@ -110,20 +122,26 @@ def candidate_features(bgr: np.ndarray, lab: np.ndarray, points: np.ndarray, rad
         det = dxx * dyy - dxy * dxy
         ratio = (dxx + dyy) ** 2 / np.where(det > 1e-12, det, 1.0)
         dog[at, 6] = np.log(np.where(det > 1e-12, np.minimum(ratio, MAX_EDGE_RATIO), MAX_EDGE_RATIO))
-    out[:, :len(FEATURES)] = np.column_stack([
+    toward = towards[labels]                                                        # (K, 3)
+    relative = []
+    for diff in (dog[:, 0:3], dog[:, 3:6]):
+        along = np.einsum("kc,kc->k", diff, toward)
+        relative += [along, np.linalg.norm(diff - along[:, None] * toward, axis=1)]
+    out[:] = np.column_stack([
         np.log(np.maximum(contrast, 1e-6)), confidence, radius, explained[rows, labels],
         np.sort(explained, axis=1)[:, -2] if c > 1 else 0.0, order[:, 0], np.minimum(second / np.maximum(
             order[:, 0], 1e-9), 10.0), paint_around(paint, points, radius), paint_around(sure, points, radius),
-        step[:, 0], np.linalg.norm(step[:, 1:], axis=1), near.sum(axis=1),
+        step[:, 0] * np.where(darker[labels] < 0, -1.0, 1.0), np.linalg.norm(step[:, 1:], axis=1), near.sum(axis=1),
         contrast / np.maximum(strongest, contrast), np.minimum(apart.min(axis=1), FAR_PX),
-        np.linalg.norm(points - centre, axis=1) / max(extent_px, 1e-9), depth[px[:, 1], px[:, 0]], dog])
-    out[rows, len(FEATURES) + labels] = 1.0
+        np.linalg.norm(points - centre, axis=1) / max(extent_px, 1e-9), depth[px[:, 1], px[:, 0]],
+        *relative, dog[:, 6]])
     return out
 
 
 def feature_names(colours: tuple[str, ...]) -> tuple[str, ...]:
-    """The columns of :func:`candidate_features` for a palette of ``colours``."""
-    return (*FEATURES, *(f"label_{c}" for c in colours))
+    """The columns of :func:`candidate_features`: the same for every palette of ``colours`` (the features are
+    relative to the body's paint and the spot's label, :data:`FEATURES`)."""
+    return FEATURES
 
 
 def quadratic(z: np.ndarray) -> np.ndarray:

@@ -24,6 +24,8 @@ from vision import mark_scorer
 from vision.blobs import SMALL_SPOT_PX, detect_contrast_marks, mark_prior
 from vision.features import match_to_truth
 from scenarios.dataset import open_dataset
+from scenarios.looks import apply_look, random_look
+from scenarios.photoreal.develop import camera_model_of, develop_exr
 from scenarios.errors import WorldError
 
 #: A candidate this close to a mark's projection (px) is that mark (the feature benchmark's radius at this scale).
@@ -31,12 +33,16 @@ MATCH_PX = 1.5
 
 
 def candidates(directories: Sequence[Path], match_px: float = MATCH_PX,
-               progress: Callable[[str], None] | None = None
+               progress: Callable[[str], None] | None = None, looks: int = 0, seed: int = 0
                ) -> tuple[np.ndarray, np.ndarray, np.ndarray, tuple[str, ...], float]:
     """The features (K, F) of every small-spot candidate in the datasets, whether each is a mark (K,) bool, its
     group (K,): the datasets whose cameras start at the same places (:func:`_place`) are one group, and the feature
     names (:func:`vision.mark_scorer.feature_names`), and the share of the candidates' marks the hand-set bars find.
-    """
+
+    ``looks``: each frame of a Cycles dataset that kept its radiance (``raw/*.exr``) is also developed through this
+    many random camera looks (:func:`scenarios.looks.random_look`, seeded by ``seed``), the front-end estimating
+    each one's look as it does on a camera's images: a scorer that has seen many looks, judged on named ones."""
+    rng = np.random.default_rng(seed)
     rows, marks, groups, names, places = [], [], [], None, {}
     by_bars = 0
     for directory in directories:
@@ -58,20 +64,27 @@ def candidates(directories: Sequence[Path], match_px: float = MATCH_PX,
                                    area.hi[:3])
                 if prior.radius_px[1] >= SMALL_SPOT_PX:
                     continue
-                found = detect_contrast_marks(image, world.model.palette, prior, body=world.model.body_colour,
-                                              scorer="all")
-                if found.features is None or not len(found):
-                    continue
                 uv = np.array([m.uv for m in dataset.truth(k).cameras[cam].marks], float).reshape(-1, 2)
-                is_mark = np.zeros(len(found), bool)
-                pairs, _ = match_to_truth(found.points, uv, match_px)
-                is_mark[[i for i, _ in pairs]] = True
-                bars = detect_contrast_marks(image, world.model.palette, prior, body=world.model.body_colour,
-                                             scorer=None)
-                by_bars += len(match_to_truth(bars.points, uv, match_px)[0])
-                rows.append(found.features)
-                marks.append(is_mark)
-                groups.append(np.full(len(is_mark), group))
+                exr = Path(directory) / cam / "raw" / f"{k:06d}.exr"
+                images = [image]
+                for _ in range(looks if exr.is_file() else 0):
+                    spec = apply_look(camera_model_of(world), random_look(rng))
+                    encoded, _ = develop_exr(world, exr, k, cam, spec)
+                    images.append(cv2.imdecode(np.frombuffer(encoded, np.uint8), cv2.IMREAD_COLOR))
+                for seen in images:
+                    found = detect_contrast_marks(seen, world.model.palette, prior, body=world.model.body_colour,
+                                                  scorer="all")
+                    if found.features is None or not len(found):
+                        continue
+                    is_mark = np.zeros(len(found), bool)
+                    pairs, _ = match_to_truth(found.points, uv, match_px)
+                    is_mark[[i for i, _ in pairs]] = True
+                    bars = detect_contrast_marks(seen, world.model.palette, prior, body=world.model.body_colour,
+                                                 scorer=None)
+                    by_bars += len(match_to_truth(bars.points, uv, match_px)[0])
+                    rows.append(found.features)
+                    marks.append(is_mark)
+                    groups.append(np.full(len(is_mark), group))
         if progress is not None:
             progress(f"{directory}: {sum(len(m) for m in marks)} candidates so far")
     if names is None or not rows:
@@ -89,13 +102,14 @@ def _place(dataset) -> tuple:
 
 
 def train(directories: Sequence[Path], out: Path, *, l2: float = 30.0, match_px: float = MATCH_PX,
-          progress: Callable[[str], None] | None = None) -> dict:
+          progress: Callable[[str], None] | None = None, looks: int = 0, seed: int = 0) -> dict:
     """Fit a scorer on ``directories`` and write it to ``out``; a summary (candidates, marks, threshold, and the
     fitting data's recall and precision of marks among the candidates it keeps). The threshold keeps the share of
     marks the bars find (:func:`vision.mark_scorer.fit` with ``keep``), each geometry (:func:`_place`) scored by
     a model fitted on the others."""
-    features, is_mark, groups, names, by_bars = candidates(directories, match_px, progress)
-    fitted_on = "evopose train-scorer " + " ".join(Path(d).name for d in directories)
+    features, is_mark, groups, names, by_bars = candidates(directories, match_px, progress, looks, seed)
+    fitted_on = "evopose train-scorer " + " ".join(Path(d).name for d in directories) + (
+        f" --looks {looks} --seed {seed}" if looks else "")
     scorer = mark_scorer.fit(features, is_mark, names, l2=l2, groups=groups, keep=by_bars, fitted_on=fitted_on)
     out.parent.mkdir(parents=True, exist_ok=True)
     scorer.save(out)

@@ -168,13 +168,16 @@ def train_scorer_command(
     out: Annotated[Path, typer.Option("--out", "-o", help="The scorer's JSON file.")] = Path("mark_scorer.json"),
     l2: Annotated[float, typer.Option(min=0.0, max=1e6, help="L2 penalty on the weights (30: the least held-out "
                                                              "log-loss on the training worlds).")] = 30.0,
+    looks: Annotated[int, typer.Option(min=0, max=50, help="Also develop each frame of a dataset with raw EXRs "
+                                                          "through this many random camera looks.")] = 0,
+    seed: Annotated[int, typer.Option(help="Seed of the random looks.")] = 0,
     as_json: Annotated[bool, typer.Option("--json", help="Print the summary as JSON.")] = False,
 ) -> None:
     """Fit the contrast front-end's mark scorer (2-4 px marks) on rendered datasets with truth."""
     from vision.train_scorer import train
 
     console = Console(stderr=True)
-    summary = train(datasets, out, l2=l2, progress=None if as_json else console.print)
+    summary = train(datasets, out, l2=l2, progress=None if as_json else console.print, looks=looks, seed=seed)
     if as_json:
         print(json_line(summary))
         return

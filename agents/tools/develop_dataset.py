@@ -3,7 +3,7 @@ raw EXRs, without rendering (docs/datasets.md, docs/camera-model.md "Looks").
 
 The new dataset has the source's layout and content (manifest, world.yaml, model.yaml, truth.jsonl, each camera's
 camera_info.yaml and poses.jsonl, byte for byte except where the look changes them) and new images: each
-``<camera>/raw/NNNNNN.exr`` developed by :func:`agents.tools.render_dataset.develop_exr` with the source's camera
+``<camera>/raw/NNNNNN.exr`` developed by :func:`scenarios.photoreal.develop.develop_exr` with the source's camera
 model under the look, seeded per world, camera and frame as the original images were (the same sensor noise draws).
 Its manifest records the look's name and the source (``developed_from``); world.yaml carries the look's camera
 model as ``render.camera_model``. The raw EXRs are not copied.
@@ -26,10 +26,10 @@ from scenarios.dataset_writer import manifest_document
 from scenarios.documents import read_mapping, validate
 from scenarios.errors import WorldError
 from scenarios.looks import apply_look, look_overrides
-from scenarios.photoreal.develop import camera_model_of
+from scenarios.photoreal.develop import camera_model_of, develop_exr
 from scenarios.world import load_scenario
 
-from agents.tools.render_dataset import write_bytes, develop_exr
+from agents.tools.render_dataset import write_bytes
 
 #: The look name a manifest records for a look given as a mapping of fields.
 CUSTOM_LOOK = "custom"

@@ -26,8 +26,8 @@ from scenarios.camera_model import CameraModelSpec, encode, spec_record
 from scenarios.dataset import IMAGE_SUFFIXES, DatasetError, DatasetWriter
 from scenarios.errors import WorldError
 from scenarios.looks import look_spec
-from scenarios.photoreal.develop import (camera_model_of, camera_rng, develop_radiance, radiance_of_srgb)
-from scenarios.photoreal.exr import read_exr
+from scenarios.photoreal.develop import (camera_model_of, camera_rng, develop_exr, develop_radiance,
+                                         radiance_of_srgb)
 from scenarios.photoreal.scene import ENGINE_DEFAULTS, describe_frame, describe_scene
 from scenarios.photoreal.truth import absent_target, view_truth
 from scenarios.render import render_frame
@@ -118,18 +118,6 @@ def _opencv_image(scenario: Scenario, render_world: Scenario, k: int, camera: st
     veh = scenario.vehicle(camera)
     captured = develop_radiance(radiance_of_srgb(rendered.image), rendered.camera, CameraModelSpec(),
                                 camera_rng(scenario, veh.index, k))
-    return captured.encoded, captured.suffix
-
-
-def develop_exr(scenario: Scenario, exr: Path, k: int, camera: str,
-                spec: CameraModelSpec | None = None) -> tuple[bytes, str]:
-    """``camera``'s frame ``k`` of ``scenario`` from its radiance ``exr`` (the engine's ``raw/`` image): encoded bytes
-    and file suffix, through the world's camera model or ``spec``, seeded per world, camera and frame (the same
-    sensor noise whatever ``spec`` encodes)."""
-    veh = scenario.vehicle(camera)
-    cam = veh.camera_at(scenario.time(k))
-    captured = develop_radiance(read_exr(exr), cam, spec or camera_model_of(scenario),
-                                camera_rng(scenario, veh.index, k), scenario.render.blur_sigma)
     return captured.encoded, captured.suffix
 
 

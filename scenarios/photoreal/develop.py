@@ -12,6 +12,8 @@ and auto exposure stand for them.
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import cv2
 import numpy as np
 
@@ -20,6 +22,7 @@ from evopose import Camera
 from ..camera_model import CameraModelSpec, Captured, capture, linear_from_srgb
 from ..sensors import stream_rng
 from ..world import Scenario
+from .exr import read_exr
 
 #: Iterations and tolerance (pixels) of inverting the lens for each output pixel (:func:`distort`).
 UNDISTORT_CRITERIA = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 50, 1e-6)
@@ -68,3 +71,15 @@ def develop_radiance(radiance: np.ndarray, camera: Camera, spec: CameraModelSpec
 def radiance_of_srgb(image: np.ndarray) -> np.ndarray:
     """An 8-bit sRGB image as linear light (the OpenCV renderer's output before a camera model)."""
     return linear_from_srgb(image)
+
+
+def develop_exr(scenario: Scenario, exr: Path, k: int, camera: str,
+                spec: CameraModelSpec | None = None) -> tuple[bytes, str]:
+    """``camera``'s frame ``k`` of ``scenario`` from its radiance ``exr`` (the engine's ``raw/`` image): encoded bytes
+    and file suffix, through the world's camera model or ``spec``, seeded per world, camera and frame (the same
+    sensor noise whatever ``spec`` encodes)."""
+    veh = scenario.vehicle(camera)
+    cam = veh.camera_at(scenario.time(k))
+    captured = develop_radiance(read_exr(exr), cam, spec or camera_model_of(scenario),
+                                camera_rng(scenario, veh.index, k), scenario.render.blur_sigma)
+    return captured.encoded, captured.suffix
