@@ -308,8 +308,8 @@ def test_a_bad_mark_scorer_is_one_line_and_exit_2(capfd, h1_media, tmp_path):
     broken = tmp_path / "broken.json"
     broken.write_text(json.dumps({**shipped().to_dict(), "threshold": "high"}), encoding="utf-8")
     assert "field threshold: expected a number" in agent_error(capfd, *contrast, str(broken))
-    other = tmp_path / "other.json"  # fitted on another palette: its label columns are not this model's
+    other = tmp_path / "other.json"  # fitted on other features (a column the front-end does not compute)
     doc = shipped().to_dict()
-    doc["names"] = [n.replace("label_yellow", "label_orange") for n in doc["names"]]
+    doc["names"] = [*doc["names"][:-1], "label_orange"]
     other.write_text(json.dumps(doc), encoding="utf-8")
     assert "the mark scorer was fitted on the features" in agent_error(capfd, *contrast, str(other))
