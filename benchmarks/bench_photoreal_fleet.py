@@ -54,7 +54,7 @@ def frame_rows(dataset: Path, scenario: str, features: str) -> list[dict]:
         agreement = frame_agreement([record], "H1", "H2") if scenario == "exp2a-features" else None
         for vehicle in data.cameras:
             summary = record["agents"].get(vehicle)
-            row = {"dataset": dataset.name, "scale": _scale(data, vehicle),
+            row = {"dataset": dataset.name, "scale": _scale(data, vehicle), "look": data.manifest.look or "camera",
                    "visible": data.manifest.target_visible, "scenario": scenario, "features": features,
                    "vehicle": vehicle, "error": record.get("error")}
             if summary is None:
@@ -111,22 +111,28 @@ def markdown(rows: list[dict], command: str) -> str:
              "good or not (what a stricter or looser verdict would have to work with); \"frame ms\" the median time an agent "
              "took per frame and the clock's frames it skipped (its first frame waits for its team-mates) "
              "(benchmarks/bench_photoreal_fleet.py says how).", "",
-             "### Summary", "", "| scale | front-end | scenario | helicopter-runs | good frames | median error cm "
-             "| confident and wrong | right (<= 10 cm, 5 deg), good or not | median error cm, every frame |",
-             "|---|---|---|---|---|---|---|---|---|"]
+             "### Summary", "", "Per scale, front-end, scenario and camera look (`camera`: the datasets as rendered; "
+             "another: `evopose develop --look`, the manifest's `look`); \"ticks skipped\" sums the clock's "
+             "frames the agents skipped because one ran late, over the frames they processed.", "",
+             "| scale | look | front-end | scenario | helicopter-runs | good frames | median error cm "
+             "| confident and wrong | right (<= 10 cm, 5 deg), good or not | median error cm, every frame "
+             "| ticks skipped / frames |",
+             "|---|---|---|---|---|---|---|---|---|---|---|"]
     groups: dict[tuple, list[dict]] = {}
     for r in rows:
-        key = (r["scale"] if r["visible"] else f"{r['scale']}, target absent", r["features"], r["scenario"])
+        key = (r["scale"] if r["visible"] else f"{r['scale']}, target absent", r.get("look", "camera"),
+               r["features"], r["scenario"])
         groups.setdefault(key, []).append(r)
-    for (scale, features, scenario), members in sorted(groups.items()):
+    for (scale, look, features, scenario), members in sorted(groups.items()):
         done = [r for r in members if not r["error"]]
         frames, good = sum(r["frames"] for r in done), sum(r["good"] for r in done)
         medians = [r["median_m"] for r in done if r["median_m"] is not None]
         every = [r["median_all_m"] for r in done if r["median_all_m"] is not None]
-        lines.append(f"| {scale} | {features} | {scenario} | {len(done)} of {len(members)} | {good}/{frames} "
+        lines.append(f"| {scale} | {look} | {features} | {scenario} | {len(done)} of {len(members)} | {good}/{frames} "
                      f"({good / max(frames, 1):.0%}) | {_cm(statistics.median(medians) if medians else None)} "
                      f"| {sum(r['wrong'] for r in done)} | {sum(r['right'] for r in done)}/{frames} "
-                     f"| {_cm(statistics.median(every) if every else None)} |")
+                     f"| {_cm(statistics.median(every) if every else None)} "
+                     f"| {sum(r['late'] for r in done)}/{frames} |")
     lines += ["", "### Every run", "", "| dataset | front-end | scenario | vehicle | good | first good frame "
               "| median cm | max cm | confident and wrong | right | median cm, every frame | same pose | frame ms (skipped) |",
               "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
