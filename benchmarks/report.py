@@ -22,7 +22,8 @@ ORDER = ("solvers", "solver_regression", "softposit", "solver_phases", "confiden
          "footprint", "photoreal_features", "photoreal_features_sweep", "photoreal_features_telephoto_sweep",
          "photoreal_features_opencv_camera", "photoreal_features_train",
          "photoreal_fleet", "photoreal_fleet_long", "photoreal_fleet_paper_long", "photoreal_tracking",
-         "photoreal_encoding", "photoreal_looks", "photoreal_looks_husky", "photoreal_fleet_looks", "photoreal_fleet_looks_paper", "photoreal_fleet_husky", "frontend_speed")
+         "photoreal_encoding", "photoreal_looks", "photoreal_looks_husky", "photoreal_fleet_looks",
+         "photoreal_fleet_looks_paper", "photoreal_fleet_husky", "frontend_speed")
 
 #: Titles that several section files share, told apart by what each measures (by file stem).
 TITLES = {
