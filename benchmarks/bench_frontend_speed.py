@@ -77,7 +77,8 @@ def _label(tree: Path) -> str:
 def markdown(trees: list[Path], medians: dict[str, list[float]], rounds: int, command: str) -> str:
     names = [_label(t) for t in trees]
     lines = ["## Contrast front-end time per image, side by side", "",
-             f"Produced by `{command}`; {provenance()}. {rounds} rounds, the trees taking turns in fresh interpreters, one OpenCV "
+             f"Produced by `{command}`; {provenance()}. {rounds} rounds, the trees taking turns in fresh "
+             "interpreters, one OpenCV "
              "thread; the median over rounds of each tree's mean milliseconds per image of each committed fixture "
              "(both cameras, 2 frames each, the look estimated). The ratio is the first tree's time over each "
              "other's.", "",

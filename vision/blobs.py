@@ -80,17 +80,19 @@ CHROMA_WEIGHT = 1.0
 BODY_GAP = 0.12
 #: Least share of the ring 1-2 px outside a spot that is the body's paint, glossy faces included
 #: (:func:`vision.body_paint.paint_around`): a mark on a face is ringed by paint, about half of it on the face's
-#: outline; a spot on the body's outline, or on the ground beside it, is not. Cycles sweeps: precision 0.456 ->
-#: 0.486 at the paper's scale (recall 0.697 -> 0.695; without the glossy faces 0.517 but 0.685, and low-sun top faces
-#: lost), 0.484 -> 0.547 at telephoto (recall 0.972 -> 0.966); 0.3 took telephoto recall to 0.956. Through six random
-#: looks (scenarios.looks.random_look, seeds 1000-1005, telephoto g1-low and g3-overcast; a one-off analysis): 0.2 recall 0.744 / precision 0.820, 0.3
-#: 0.703 / 0.824, 0.45 0.631 / 0.847 (under odd looks the paint mask frays; the Husky's outline spots want 0.45).
+#: outline; a spot on the body's outline, or on the ground beside it, is not. Cycles sweeps: precision 0.456 -> 0.486 at
+#: the paper's scale (recall 0.697 -> 0.695; without the glossy faces 0.517 but 0.685, and low-sun top faces lost),
+#: 0.484 -> 0.547 at telephoto (recall 0.972 -> 0.966); 0.3 took telephoto recall to 0.956. Through six random looks
+#: (scenarios.looks.random_look, seeds 1000-1005, telephoto g1-low and g3-overcast; a one-off analysis): 0.2 recall
+#: 0.744 / precision 0.820, 0.3 0.703 / 0.824, 0.45 0.631 / 0.847 (under odd looks the paint mask frays; the Husky's
+#: outline spots want 0.45).
 MIN_PAINT_AROUND = 0.2
-#: Where marks are 3 px and more, a spot's centre lies inside the body's silhouette (the closed, filled paint), by
-#: more than this share of its radius: a mark lies on a face; a speck on the ground beside the outline does not.
-#: Through six random looks (telephoto g1-low, g3-overcast; the one-off analysis of MIN_PAINT_AROUND): no rule 0.744 / 0.820 (recall / precision), inside 0.733 /
-#: 0.835, half a radius in 0.716 / 0.833 (an odd look frays the paint mask at the silhouette); the committed Husky
-#: telephoto frames 0.16 -> 0.22 precision, the Pioneer's unchanged (tests/test_blobs.py measures both).
+#: Where marks are 3 px and more, a spot's centre lies inside the body's silhouette (the closed, filled paint), by more
+#: than this share of its radius: a mark lies on a face; a speck on the ground beside the outline does not. Through six
+#: random looks (telephoto g1-low, g3-overcast; the one-off analysis of MIN_PAINT_AROUND): no rule 0.744 / 0.820 (recall
+#: / precision), inside 0.733 / 0.835, half a radius in 0.716 / 0.833 (an odd look frays the paint mask at the
+#: silhouette); the committed Husky telephoto frames 0.16 -> 0.22 precision, the Pioneer's unchanged
+#: (tests/test_blobs.py measures both).
 INSIDE_SHARE = 0.0
 #: Where marks are 3 px and more, least share of the directions around a spot in which its surroundings are their
 #: usual colour (:func:`vision.mark_selection.surrounded`): a mark is ringed by one paint; a dark speck on a tyre,

@@ -256,4 +256,5 @@ class LookTracker:
                     body_pixels=int(np.median([lk.body_pixels for lk in self._recent])))
 
 
-__all__ = ["Look", "LookTracker", "beyond_band", "body_chroma", "chroma_of", "estimate_look", "neutral_chroma", "to_reference_look"]
+__all__ = ["Look", "LookTracker", "beyond_band", "body_chroma", "chroma_of", "estimate_look", "neutral_chroma",
+           "to_reference_look"]
