@@ -85,7 +85,9 @@ BODY_GAP = 0.12
 #: 0.484 -> 0.547 at telephoto (recall 0.972 -> 0.966); 0.3 took telephoto recall to 0.956. Through six random looks
 #: (scenarios.looks.random_look, seeds 1000-1005, telephoto g1-low and g3-overcast; a one-off analysis): 0.2 recall
 #: 0.744 / precision 0.820, 0.3 0.703 / 0.824, 0.45 0.631 / 0.847 (under odd looks the paint mask frays; the Husky's
-#: outline spots want 0.45).
+#: outline spots want 0.45). Dropped at telephoto once the surround rule existed (MIN_SURROUND), recall rose 0.7-1.6
+#: points on the Pioneer's reference and random looks, but the Husky's precision fell 5-16 points in 7 of 8 looks:
+#: kept.
 MIN_PAINT_AROUND = 0.2
 #: Where marks are 3 px and more, a spot's centre lies inside the body's silhouette (the closed, filled paint), by more
 #: than this share of its radius: a mark lies on a face; a speck on the ground beside the outline does not. Through six
