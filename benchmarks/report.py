@@ -23,7 +23,7 @@ ORDER = ("solvers", "solver_regression", "softposit", "solver_phases", "confiden
          "photoreal_features_opencv_camera", "photoreal_features_train",
          "photoreal_fleet", "photoreal_fleet_long", "photoreal_fleet_paper_long", "photoreal_tracking",
          "photoreal_encoding", "photoreal_looks", "photoreal_looks_husky", "photoreal_fleet_looks",
-         "photoreal_fleet_looks_paper", "photoreal_fleet_husky", "frontend_speed")
+         "photoreal_fleet_looks_paper", "photoreal_fleet_husky", "photoreal_fleet_realtime", "frontend_speed")
 
 #: Titles that several section files share, told apart by what each measures (by file stem).
 TITLES = {
@@ -40,6 +40,7 @@ TITLES = {
     "photoreal_fleet": "The fleet on rendered datasets: paper-scale and telephoto worlds, with and without the robot",
     "photoreal_fleet_looks": "The fleet on rendered datasets: nine telephoto worlds through three camera looks",
     "photoreal_fleet_looks_paper": "The fleet on rendered datasets: nine paper-scale worlds through three camera looks",
+    "photoreal_fleet_realtime": "The fleet on rendered datasets: 20-frame sequences at 10 fps, the clock's ticks kept",
     "photoreal_fleet_husky": "The fleet on rendered datasets: the second robot (Husky-like UGV) at telephoto",
     "frontend_speed": "Contrast front-end: time per camera image",
     "photoreal_looks": "Mark front-ends through camera looks: the Pioneer",
