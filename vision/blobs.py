@@ -27,8 +27,10 @@ scale a mark has at the target's distance. So (docs/design.md, "The feature fron
    must lie on or inside a patch of that paint seen under any light (:mod:`vision.body_paint`: the dichromatic
    reflection model, paint plus the light's own colour, and glossy faces touching it); clutter in the marks' own
    hues lies on the ground and is dropped, and so is a spot on the body's outline, which paint does not ring
-   (:data:`MIN_PAINT_AROUND`). The scale space is then built only around the body (2.8-3.4x faster on a
-   640 x 480 frame) and its threshold taken from the ground beside it.
+   (:data:`MIN_PAINT_AROUND`). Where marks are 3 px and more, a mark is also ringed by *one* paint it stands out
+   from on every side (:data:`MIN_SURROUND`); a contrast peak on an outline (a blend of two paints) is not.
+   The scale space is then built only around the body (2.8-3.4x faster on a 640 x 480 frame) and its threshold
+   taken from the ground beside it.
    The marks of one target lie within its image extent; with the prior's extent the densest such cluster is
    kept and far specks are dropped.
 
@@ -97,8 +99,8 @@ MIN_PAINT_AROUND = 0.2
 #: (tests/test_blobs.py measures both).
 INSIDE_SHARE = 0.0
 #: Where marks are 3 px and more, least share of the directions around a spot in which its surroundings are their
-#: usual colour (:func:`vision.mark_selection.surrounded`): a mark is ringed by one paint; a dark speck on a tyre,
-#: in a shadow or on a face's outline is not. Chosen on the Pioneer's telephoto worlds through the reference look
+#: usual colour (:func:`vision.mark_selection.surrounded`): a mark is ringed by one paint; a contrast peak where
+#: the body meets its plate, a tyre or a shadow is not. Chosen on the Pioneer's telephoto worlds through the reference look
 #: alone (recall 0.966 -> 0.966, precision 0.857 -> 0.938; 0.6 lost recall, 0.961), then judged on what it never
 #: saw: the Husky's telephoto worlds (reference look 0.838 / 0.183 -> 0.819 / 0.573, recall / precision; AgX 0.821 /
 #: 0.163 -> 0.811 / 0.618) and the Pioneer's in AgX, Filmic, flat-cool, hable-faded (precision 0.91 -> 0.95, 0.86 ->

@@ -1,6 +1,7 @@
-"""Which of a front-end's spots are the target's marks (:mod:`vision.blobs`): one per mark's disc, one scale, one
-cluster. A target's marks do not overlap, share a scale and a paint at one distance, and lie within its extent;
-what a camera's look, the ground's texture or the body's shading adds does not.
+"""Which of a front-end's spots are the target's marks (:mod:`vision.blobs`): one per mark's disc, one scale, ringed
+by one paint, one cluster. A target's marks do not overlap, share a scale and a paint at one distance, stand out
+from the face they are painted on, and lie within its extent; what a camera's look, the ground's texture, the
+body's shading or its outline adds does not.
 
 Points are pixels ``(u, v)``, shape (K, 2); scores, radii and contrasts (K,).
 """
@@ -58,7 +59,8 @@ def surrounded(lab: np.ndarray, pts: np.ndarray, radius: np.ndarray, directions:
     """The share of directions (float (K,)) in which what lies just outside each spot at ``pts`` (K, 2) of
     ``radius`` (K,) px, ``radius`` + 2 px away, is its surroundings' usual colour: within half the spot's contrast
     to them (the median over the directions) in ``lab`` (H, W, 3) float CIE Lab. A mark is ringed by one paint
-    that it stands out from; a speck on a face's outline, a shadow's or in a textured patch is not."""
+    that it stands out from; a contrast peak on an outline between two paints (its centre a blend of them) is
+    not."""
     pts, radius = np.asarray(pts, float).reshape(-1, 2), np.asarray(radius, float).reshape(-1)
     if not len(pts):
         return np.zeros(0)
@@ -102,4 +104,4 @@ def densest_cluster(pts: np.ndarray, weight: np.ndarray, radius: float) -> np.nd
     return np.nonzero(np.linalg.norm(pts - mean, axis=1) <= radius)[0]
 
 
-__all__ = ["densest_cluster", "one_per_disc", "one_scale", "same_spots"]
+__all__ = ["densest_cluster", "one_per_disc", "one_scale", "same_spots", "surrounded"]
