@@ -98,14 +98,14 @@ MIN_PAINT_AROUND = 0.2
 #: silhouette); the committed Husky telephoto frames 0.16 -> 0.22 precision, the Pioneer's unchanged
 #: (tests/test_blobs.py measures both).
 INSIDE_SHARE = 0.0
-#: Where marks are 3 px and more, least share of the directions around a spot in which its surroundings are their
-#: usual colour (:func:`vision.mark_selection.surrounded`): a mark is ringed by one paint; a contrast peak where
-#: the body meets its plate, a tyre or a shadow is not. Chosen on the Pioneer's telephoto worlds through the
-#: reference look alone (recall 0.966 -> 0.966, precision 0.857 -> 0.938; 0.6 lost recall, 0.961), then judged on what it never
-#: saw: the Husky's telephoto worlds (reference look 0.838 / 0.183 -> 0.819 / 0.573, recall / precision; AgX 0.821 /
-#: 0.163 -> 0.811 / 0.618) and the Pioneer's in AgX, Filmic, flat-cool, hable-faded (precision 0.91 -> 0.95, 0.86 ->
-#: 0.94, 0.61 -> 0.80, 0.89 -> 0.96, recall within 0.004). At the paper's scale a 2-4 px mark's ring reaches the
-#: next mark and the face's outline (recall 0.813 -> 0.458 at 0.5): not used there.
+#: Where marks are 3 px and more, least share of the directions around a spot in which its surroundings are their usual
+#: colour (:func:`vision.mark_selection.surrounded`): a mark is ringed by one paint; a contrast peak where the body
+#: meets its plate, a tyre or a shadow is not. Chosen on the Pioneer's telephoto worlds through the reference look alone
+#: (recall 0.966 -> 0.966, precision 0.857 -> 0.938; 0.6 lost recall, 0.961), then judged on what it never saw: the
+#: Husky's telephoto worlds (reference look 0.838 / 0.183 -> 0.819 / 0.573, recall / precision; AgX 0.821 / 0.163 ->
+#: 0.811 / 0.618) and the Pioneer's in AgX, Filmic, flat-cool, hable-faded (precision 0.91 -> 0.95, 0.86 -> 0.94, 0.61
+#: -> 0.80, 0.89 -> 0.96, recall within 0.004). At the paper's scale a 2-4 px mark's ring reaches the next mark and the
+#: face's outline (recall 0.813 -> 0.458 at 0.5): not used there.
 MIN_SURROUND = 0.5
 #: Least pixels beside the body for the response's spread to be taken there (else over the whole crop), and the
 #: least margin of ground kept around the body (the spread is the ground's texture, not the body's outline).
