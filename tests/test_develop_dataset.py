@@ -165,3 +165,18 @@ def test_render_with_a_look_records_it(tmp_path, capsys):
     _usage_error(capsys, "manifest.yaml: camera_model: the dataset has", "render", "exp2-paper-scale", "--engine",
                  "opencv", "--frames", "1",
                  "--cameras", "H2", "--out", out)
+
+
+def test_the_scorer_s_training_also_sees_each_frame_through_random_looks(source):
+    # evopose train-scorer --looks N: each frame with a raw EXR is developed again through N random camera looks
+    # (scenarios.looks.random_look), its candidates added to the reference look's; seeded, so the same twice
+    from vision.train_scorer import candidates
+
+    plain, is_mark, groups, names, _ = candidates([source])
+    seen, seen_marks, seen_groups, seen_names, _ = candidates([source], looks=2, seed=3)
+    again = candidates([source], looks=2, seed=3)[0]
+    other = candidates([source], looks=2, seed=4)[0]
+    assert names == seen_names and len(plain) > 0 and is_mark.any()
+    assert len(seen) > len(plain) and seen_marks.sum() > is_mark.sum() and set(seen_groups) == set(groups)
+    np.testing.assert_array_equal(seen, again)
+    assert other.shape != seen.shape or not np.array_equal(other, seen)
