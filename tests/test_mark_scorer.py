@@ -77,6 +77,19 @@ def test_the_shipped_scorer_reads_no_palette_and_was_fitted_on_the_training_worl
     assert 0.0 < scorer.threshold < 1.0
 
 
+def _first_frame(directory: Path):
+    """A committed dataset's first camera's first image, its world and the marks' prior there."""
+    import cv2
+
+    from scenarios.dataset import open_dataset
+    from vision.blobs import mark_prior
+
+    data = open_dataset(directory)
+    world, area, cam = data.world(), data.world().bounds(), data.cameras[0]
+    prior = mark_prior(data.camera(cam, 0), world.model.mark_radius, world.model.size, area.lo[:3], area.hi[:3])
+    return cv2.imread(str(data.image_path(cam, 0))), world, prior
+
+
 def _evopose(*args) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, "-m", "agents.cli", *map(str, args)], cwd=ROOT, capture_output=True,
                           text=True, timeout=300)
@@ -107,17 +120,9 @@ def test_train_scorer_on_a_missing_dataset_is_one_line_and_exit_2(tmp_path):
 
 def test_the_scorer_only_acts_on_spots_under_three_pixels():
     # at telephoto (marks of 3 px and more) the front-end with and without the scorer is the same front-end
-    import cv2
+    from vision.blobs import detect_contrast_marks
 
-    from vision.blobs import detect_contrast_marks, mark_prior
-    from scenarios.dataset import open_dataset
-
-    data = open_dataset(ROOT / "tests" / "data" / "photoreal" / "telephoto")
-    world = data.world()
-    area = world.bounds()
-    cam = data.cameras[0]
-    image = cv2.imread(str(data.image_path(cam, 0)))
-    prior = mark_prior(data.camera(cam, 0), world.model.mark_radius, world.model.size, area.lo[:3], area.hi[:3])
+    image, world, prior = _first_frame(ROOT / "tests" / "data" / "photoreal" / "telephoto")
     a = detect_contrast_marks(image, world.model.palette, prior, body=world.model.body_colour)
     b = detect_contrast_marks(image, world.model.palette, prior, body=world.model.body_colour, scorer=None)
     assert len(a) > 5 and a.features is None
@@ -171,18 +176,10 @@ def test_the_extractor_takes_the_scorer_it_is_given():
 
 
 def test_the_scorer_reads_the_paints_not_their_names_and_serves_a_palette_it_never_saw():
-    import cv2
-
-    from vision.blobs import detect_contrast_marks, mark_prior
-    from scenarios.dataset import open_dataset
+    from vision.blobs import detect_contrast_marks
 
     for fixture in (PAPER, PAPER.parent / "husky-paper"):   # the Pioneer's palette, and the Husky's (never fitted)
-        data = open_dataset(fixture)
-        world = data.world()
-        area = world.bounds()
-        cam = data.cameras[0]
-        image = cv2.imread(str(data.image_path(cam, 0)))
-        prior = mark_prior(data.camera(cam, 0), world.model.mark_radius, world.model.size, area.lo[:3], area.hi[:3])
+        image, world, prior = _first_frame(fixture)
         found = detect_contrast_marks(image, world.model.palette, prior, body=world.model.body_colour)
         renamed = {f"paint{i}": bgr for i, bgr in enumerate(world.model.palette.values())}  # the paints renamed
         again = detect_contrast_marks(image, renamed, prior, body=world.model.body_colour)
