@@ -71,9 +71,9 @@ TRAIN_LIGHTINGS = {
 }
 #: The second marked target's shipped worlds per scale (``--set husky``): the Pioneer's with the Husky-like UGV.
 HUSKY_SCALES = {"paper": "exp2-photoreal-husky", "telephoto": "exp2-photoreal-telephoto-husky"}
-#: World sets: folder, geometries, lightings (the training set only at the paper's scale).
+#: World sets: folder, geometries, lightings, scales.
 SETS = {"benchmark": (WORLDS, GEOMETRIES, LIGHTINGS, tuple(SCALES)),
-        "train": (ROOT / "benchmarks" / "worlds" / "photoreal-train", TRAIN_GEOMETRIES, TRAIN_LIGHTINGS, ("paper",)),
+        "train": (ROOT / "benchmarks" / "worlds" / "photoreal-train", TRAIN_GEOMETRIES, TRAIN_LIGHTINGS, tuple(SCALES)),
         "husky": (ROOT / "benchmarks" / "worlds" / "photoreal-husky", GEOMETRIES,
                   {k: LIGHTINGS[k] for k in ("high", "low")}, tuple(SCALES))}
 #: Per set: the shipped world each scale extends and the worlds' name prefix (default: SCALES, "photoreal").

@@ -164,6 +164,11 @@ def test_a_mark_on_a_face_is_ringed_by_paint_and_a_spot_on_or_beside_the_outline
                        [38.5, 15.0]])          # near the image's edge: outside the image is no paint
     share = paint_around(paint, points, np.array([2.0, 1.0, 1.0, 1.0]))
     assert share[0] == 1.0 and 0.3 < share[1] < 0.7 and share[2] < 0.1 and share[3] == 0.0
+    # a blurred mark's blend with the paint (2 px wide here) is no paint: the ring 1 px out misses the paint, 3 px
+    # out finds it
+    paint[11:19, 11:19] = False
+    blurred = [paint_around(paint, points[:1], np.array([2.0]), gap)[0] for gap in (1.0, 3.0)]
+    assert blurred[0] == 0.0 and blurred[1] == 1.0, blurred
 
 
 @pytest.mark.parametrize("name, rms_px", [("paper", 0.5), ("telephoto", 1.0)])
@@ -297,3 +302,43 @@ def test_a_mark_is_surrounded_by_one_paint_and_a_peak_on_an_edge_is_not():
     # blend) between them: no direction is its usual surroundings
     share = surrounded(lab, np.array([[30.0, 30.0], [79.5, 30.0]]), np.array([6.0, 4.0]))
     assert share[0] == 1.0 and share[1] < 0.5, share   # MIN_SURROUND is 0.5
+
+
+def _through_random_looks(name: str, seeds: tuple[int, ...]) -> tuple[int, int, int]:
+    """Marks found, visible and detections on a committed dataset's frames developed again (their sRGB as light)
+    through :func:`scenarios.looks.random_look` of each seed."""
+    from scenarios.camera_model import capture
+    from scenarios.dataset import open_dataset
+    from scenarios.looks import apply_look, random_look
+    from scenarios.photoreal.develop import camera_model_of, radiance_of_srgb
+    from vision.blobs import mark_prior
+
+    data = open_dataset(Path(__file__).parent / "data" / "photoreal" / name)
+    world, area = data.world(), data.world().bounds()
+    found = visible = detections = 0
+    for seed in seeds:
+        spec = apply_look(camera_model_of(world), random_look(np.random.default_rng(seed)))
+        for cam in data.cameras:
+            light = radiance_of_srgb(cv2.imread(str(data.image_path(cam, 0)), cv2.IMREAD_COLOR))
+            captured = capture(light, spec, np.random.default_rng(1))
+            image = cv2.imdecode(np.frombuffer(captured.encoded, np.uint8), cv2.IMREAD_COLOR)
+            prior = mark_prior(data.camera(cam, 0), world.model.mark_radius, world.model.size, area.lo[:3],
+                               area.hi[:3])
+            det = detect_contrast_marks(image, world.model.palette, prior, body=world.model.body_colour)
+            whole = np.array([m.uv for m in data.truth(0).cameras[cam].marks if m.fully_visible])
+            found += len(match_to_truth(det.points, whole, 3.0)[0])
+            visible, detections = visible + len(whole), detections + len(det.points)
+    return found, visible, detections
+
+
+def test_a_blurred_mark_ringed_by_its_blend_with_the_paint_is_found_and_a_sunlit_one_labelled(monkeypatch):
+    # two random looks that blur (1.2 and 1.4 px) and over-expose (+1.1, +1.2 EV): a cyan mark on the red paint
+    # blends to grey, which is neither, so its 1 px ring shows no paint and no one surroundings; a mark on the sunlit
+    # face is pulled toward white past a misfit of 0.35. Measured 45 of 46 marks; 42 with the 1 px ring and 0.35
+    import vision.blobs as blobs
+
+    found, visible, detections = _through_random_looks("telephoto", (7, 9))
+    assert found >= 44 and found / detections >= 0.9, (found, visible, detections)
+    monkeypatch.setattr(blobs, "RING_GAPS_PX", (1.0,))
+    monkeypatch.setattr(blobs, "MAX_LABEL_MISFIT", 0.35)
+    assert _through_random_looks("telephoto", (7, 9))[0] <= found - 2

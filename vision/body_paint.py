@@ -85,19 +85,19 @@ def body_paint(lin: np.ndarray, body_linear: np.ndarray) -> tuple[np.ndarray, np
     return sure, touching[patches]
 
 
-def paint_around(paint: np.ndarray, points: np.ndarray, radius: np.ndarray) -> np.ndarray:
-    """The share of the ring between ``radius`` + 1 and ``radius`` + 2 px around each point that is the body's
-    ``paint`` (bool (H, W)); outside the image counts as no paint. ``points`` (K, 2) (u, v) pixels, ``radius``
+def paint_around(paint: np.ndarray, points: np.ndarray, radius: np.ndarray, gap: float = 1.0) -> np.ndarray:
+    """The share of the ring between ``radius`` + ``gap`` and ``radius`` + ``gap`` + 1 px around each point that is
+    the body's ``paint`` (bool (H, W)); outside the image counts as no paint. ``points`` (K, 2) (u, v) pixels, ``radius``
     (K,) px. A mark on the body is ringed by paint (on a face's outline, about half of it); a spot on the body's
     outline or on the ground beside it is not (float (K,))."""
     h, w = paint.shape
     share = np.zeros(len(points))
     for i, ((u, v), r) in enumerate(zip(np.asarray(points, float), np.asarray(radius, float))):
-        reach = int(np.ceil(r + 2))
+        reach = int(np.ceil(r + gap + 1))
         yy, xx = np.mgrid[-reach:reach + 1, -reach:reach + 1]
         cu, cv = int(round(u)), int(round(v))
         d = np.hypot(xx + cu - u, yy + cv - v)
-        ring = (d >= r + 1) & (d <= r + 2)
+        ring = (d >= r + gap) & (d <= r + gap + 1)
         ys, xs = yy[ring] + cv, xx[ring] + cu
         inside = (ys >= 0) & (ys < h) & (xs >= 0) & (xs < w)
         share[i] = np.count_nonzero(paint[ys[inside], xs[inside]]) / max(int(ring.sum()), 1)
