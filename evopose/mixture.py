@@ -1,4 +1,4 @@
-"""The pose and its covariance without choosing the correspondences: eq. (1)'s marginal likelihood (issue 35).
+"""The covariance of a pose without choosing the correspondences: eq. (1)'s marginal likelihood (issue 35).
 
 Eq. (1) scores a pose by each image point's distance to its *nearest* projected mark, ``min_j |p_i - m_j(s)|``.
 That is the small-noise limit of a likelihood in which the correspondence is not known: image point ``p_i`` of
@@ -17,15 +17,20 @@ often not a point's own. Least squares on the nearest (or mutual nearest) pairs 
 * takes each pair as certain: the information a pair would give if its mark were known is counted in full, also
   for a point halfway between two marks, which tells the pose little.
 
-This module maximises the weighted sum over views of ``log L_i`` (eq. 4: view ``k`` weighted by ``W_k``) by EM
-(:func:`mixture_fit`): the E-step gives each point's responsibilities ``r_ij`` (and ``r_i0`` for the false-point
-component), the M-step one Gauss-Newton step of ``sum r_ij |p_i - m_j(s)|^2`` on the free parameters and the
-closed-form ``sigma^2`` and ``pi_k``. Its covariance (:func:`mixture_information`) is the inverse of the observed
-information of ``log L`` at the optimum by Louis' identity (Louis, JRSS B 1982): the complete-data information
-``sum r_ij J_j^T J_j / sigma^2`` minus the information lost to not knowing the correspondences, the covariance
-over ``j`` (under ``r_i.``) of each point's complete-data score ``g_ij = J_j^T (p_i - m_j) / sigma^2``. Where the
-marks are far apart beside the noise (``r_ij`` 0 or 1) both reduce to the Gauss-Newton covariance of
-:func:`evopose.covariance.covariance` on the pairs.
+This module keeps the pose the least-squares fit published (:func:`evopose.robust_fit.robust_fit`) and takes its
+covariance from the weighted sum over views of ``log L_i`` (eq. 4: view ``k`` weighted by ``W_k``). The noise
+``sigma`` comes from EM at that pose (:func:`mixture_fit`: the E-step gives each point's responsibilities ``r_ij``,
+and ``r_i0`` for the false-point component; the M-step ``sigma^2`` in closed form); the false shares ``pi_k`` are
+counted from eq. (1)'s one-to-one pairs (:func:`false_shares`). The covariance (:func:`mixture_covariance`) is the
+inverse of the observed information of ``log L`` by Louis' identity (Louis, JRSS B 1982): the complete-data
+information ``sum r_ij J_j^T J_j / sigma^2`` minus the information lost to not knowing the correspondences, the
+covariance over ``j`` (under ``r_i.``) of each point's complete-data score ``g_ij = J_j^T (p_i - m_j) / sigma^2``
+(:func:`mixture_information`), with the box and eq. (3) priors of :func:`evopose.covariance.covariance`. Where
+the marks are far apart beside the noise (``r_ij`` 0 or 1) it is the Gauss-Newton covariance on the pairs.
+
+With equal weights (the step rule's 0 or 1, the default) the weighted log-likelihood is the likelihood of the
+views kept; graded weights (``adaptive``) make it a pseudo-likelihood, whose inverse information is then only
+approximately the covariance (a sandwich would be exact).
 """
 
 from __future__ import annotations
@@ -36,13 +41,13 @@ import numpy as np
 
 from .covariance import JACOBIAN_STEP, CovarianceEstimate, Matches, from_information
 from .fitness import PoseObjective
-from .robust_fit import residual_scale
+from .robust_fit import MIN_SCALE_PX, residual_scale
 
 #: EM iterations at most, and the relative change of sigma^2 under which it has settled.
 MAX_ITERATIONS, SETTLED_RATIO = 30, 1e-4
 #: Least per-axis noise sigma (pixels) the fit may settle on: a sub-pixel centre of a 2-4 px mark
 #: (:data:`evopose.robust_fit.MIN_SCALE_PX`).
-MIN_SIGMA_PX = 0.35
+MIN_SIGMA_PX = MIN_SCALE_PX
 #: Least share of false points: a view whose points all look like marks still admits that one may not be.
 MIN_FALSE_SHARE = 0.01
 
@@ -71,7 +76,9 @@ class ViewTerms:
     area: float
 
 
-def _view_terms(objective: PoseObjective, pose: np.ndarray, k: int, free: np.ndarray) -> ViewTerms | None:
+def view_terms(objective: PoseObjective, pose: np.ndarray, k: int, free: np.ndarray) -> ViewTerms | None:
+    """View ``k``'s :class:`ViewTerms` at ``pose`` (6,), the Jacobian over the parameters ``free`` (6,) bool (central
+    differences, :data:`evopose.covariance.JACOBIAN_STEP`); None when no mark is visible or the view has no point."""
     view = objective.problem.views[k]
     probes = np.concatenate([pose[None], pose + np.diag(JACOBIAN_STEP), pose - np.diag(JACOBIAN_STEP)])
     proj = objective.project(k, probes)
@@ -128,13 +135,16 @@ class MixtureFit:
     log_likelihood: float
 
 
-def _statistics(terms: list[tuple[int, float, ViewTerms]], sigma2: float, shares: np.ndarray) -> list[tuple]:
-    """Per weighted view ``(k, W_k, terms, r, r0, log L)`` (:func:`_responsibilities`) at the pose of ``terms``."""
+def view_statistics(terms: list[tuple[int, float, ViewTerms]], sigma2: float, shares: np.ndarray) -> list[tuple]:
+    """For each ``(k, W_k, ViewTerms)`` of ``terms``: ``(k, W_k, terms, r, r0, log L)`` at noise ``sigma2`` (pixels^2
+    per axis) and false shares ``shares`` (V,): ``r`` (P_k, M_k) the responsibilities of the marks, ``r0`` (P_k,)
+    of a false point, ``log L`` (P_k,) each point's log-likelihood."""
     return [(k, w, t, *_responsibilities(t, sigma2, float(shares[k]))) for k, w, t in terms]
 
 
-def mixture_information(stats, sigma2: float, n_free: int) -> np.ndarray:
-    """Louis' observed information (n_free, n_free) of ``sum_k W_k sum_i log L_i`` (module docstring): the
+def mixture_information(stats: list[tuple], sigma2: float, n_free: int) -> np.ndarray:
+    """Louis' observed information (n_free, n_free) of ``sum_k W_k sum_i log L_i`` (module docstring) from
+    :func:`view_statistics` ``stats`` at noise ``sigma2``: the
     complete-data Gauss-Newton information less each point's variance, under its responsibilities, of the
     complete-data score (a false point's score is 0)."""
     info = np.zeros((n_free, n_free))
@@ -179,12 +189,12 @@ def mixture_fit(objective: PoseObjective, pose: np.ndarray, sigma: float, shares
     pose = np.asarray(pose, float).reshape(6)
     sigma2 = max(float(sigma), MIN_SIGMA_PX) ** 2
     shares = np.asarray(shares, float)
-    terms = [(k, float(objective.weights[k]), _view_terms(objective, pose, k, free))
+    terms = [(k, float(objective.weights[k]), view_terms(objective, pose, k, free))
              for k in range(objective.n_views) if objective.weights[k] > 0]
     terms = [(k, w, t) for k, w, t in terms if t is not None]
     if not terms or n_free == 0:
         return None
-    stats = _statistics(terms, sigma2, shares)
+    stats = view_statistics(terms, sigma2, shares)
     tau2 = float(np.average([objective.taus[k] ** 2 for k, _, _ in terms], weights=[w for _, w, _ in terms]))
     for _ in range(iterations):
         # M-step in closed form (EM: each raises the likelihood): sigma^2 the responsibility-weighted mean squared
@@ -198,7 +208,7 @@ def mixture_fit(objective: PoseObjective, pose: np.ndarray, sigma: float, shares
         new = float(np.clip(ss / (2 * wsum), MIN_SIGMA_PX ** 2, tau2))
         settled = abs(new - sigma2) < SETTLED_RATIO * sigma2
         sigma2 = new
-        stats = _statistics(terms, sigma2, shares)
+        stats = view_statistics(terms, sigma2, shares)
         if settled:
             break
     # the pose was fitted to these points: as s^2 of least squares, the residual coordinates less the free
@@ -207,7 +217,7 @@ def mixture_fit(objective: PoseObjective, pose: np.ndarray, sigma: float, shares
     if 2 * wsum <= n_free + 1:
         return None
     sigma2 = float(np.clip(sigma2 * 2 * wsum / (2 * wsum - n_free), MIN_SIGMA_PX ** 2, tau2))
-    stats = _statistics(terms, sigma2, shares)
+    stats = view_statistics(terms, sigma2, shares)
     weight = float(sum(w * (1 - r0).sum() for _, w, _, _, r0, _ in stats))
     total = float(sum(w * ll.sum() for _, w, _, _, _, ll in stats))
     return MixtureFit(pose.copy(), sigma2, mixture_information(stats, sigma2, n_free), weight, total)
@@ -237,4 +247,5 @@ def mixture_covariance(objective: PoseObjective, pose: np.ndarray, matches: Matc
     return from_information(objective, pose, information, fit.sigma2, int(round(2 * fit.weight)) - n_free)
 
 
-__all__ = ["MixtureFit", "ViewTerms", "false_shares", "mixture_covariance", "mixture_fit", "mixture_information"]
+__all__ = ["MixtureFit", "ViewTerms", "false_shares", "mixture_covariance", "mixture_fit", "mixture_information",
+           "view_statistics", "view_terms"]

@@ -8,8 +8,8 @@ import numpy as np
 from benchmarks.problems import make_paper_scale_problem, make_problem
 from evopose import PoseObjective, solve
 from evopose.covariance import covariance, mutual_matches
-from evopose.mixture import _statistics, _view_terms, false_shares, mixture_covariance, mixture_fit, \
-    mixture_information
+from evopose.mixture import (false_shares, mixture_covariance, mixture_fit, mixture_information, view_statistics,
+                             view_terms)
 
 
 def test_the_noise_is_not_understated_where_the_nearest_mark_is_often_not_the_points_own():
@@ -49,8 +49,8 @@ def test_unknown_correspondences_lose_information():
     sp = make_paper_scale_problem(np.random.default_rng([3, 1]), cameras=("H1", "H2"), noise=1.5, clutter=0.1)
     objective = PoseObjective(sp.problem)
     free = objective.problem.bounds.free
-    terms = [(k, 1.0, _view_terms(objective, sp.true_pose, k, free)) for k in range(objective.n_views)]
-    stats = _statistics(terms, 1.5 ** 2, np.full(objective.n_views, 0.1))
+    terms = [(k, 1.0, view_terms(objective, sp.true_pose, k, free)) for k in range(objective.n_views)]
+    stats = view_statistics(terms, 1.5 ** 2, np.full(objective.n_views, 0.1))
     observed = mixture_information(stats, 1.5 ** 2, int(free.sum()))
     complete = sum(np.einsum("pm,mai,maj->ij", r, t.jacobian, t.jacobian) for _, _, t, r, _, _ in stats) / 1.5 ** 2
     lost = np.linalg.eigvalsh(complete - observed)
