@@ -249,21 +249,32 @@ def covariance(objective: PoseObjective, pose: np.ndarray, matches: Matches | No
     tau2 = float(np.sum(w * objective.taus[matches.view[use]] ** 2) / np.sum(w))
     s2 = max(untruncated_variance(float(np.sum(w[:, None] * r ** 2)) / dof, tau2), MIN_RESIDUAL_VARIANCE)
     normal = np.einsum("m,mai,maj->ij", w, J, J)
+    return from_information(objective, pose, normal / s2, s2, dof)
+
+
+def from_information(objective: PoseObjective, pose: np.ndarray, information: np.ndarray, residual_variance: float,
+                     dof: int) -> CovarianceEstimate:
+    """The :class:`CovarianceEstimate` of ``pose`` (6,) whose points give ``information`` (n_free, n_free) about
+    the free parameters (e.g. ``J^T W J / s^2``), with the box / eq. (3) priors of :func:`covariance` added: the
+    likelihood truncated to the box (:func:`in_box_second_moment`), or the Gaussian stand-in ``12 / width^2`` where
+    that cannot be sampled; inf-filled when the result is singular."""
+    bounds = objective.problem.bounds
+    free = bounds.free
     width = bounds.width[free]
     prior = np.where(bounds.periodic[free], 0.0, 12.0 / np.maximum(width, 1e-300) ** 2)
-    information = normal / s2 + np.diag(prior)
+    total = information + np.diag(prior)
     try:
-        if np.linalg.cond(information) > 1e12:
+        if not np.all(np.isfinite(total)) or np.linalg.cond(total) > 1e12:
             return _unknown()
-        inner = np.linalg.inv(information)
+        inner = np.linalg.inv(total)
     except np.linalg.LinAlgError:
         return _unknown()
-    box = in_box_second_moment(np.asarray(pose, float).reshape(6)[free], normal / s2 + 0.01 * np.diag(prior),
+    box = in_box_second_moment(np.asarray(pose, float).reshape(6)[free], information + 0.01 * np.diag(prior),
                                bounds.lo[free], bounds.hi[free], bounds.periodic[free])
     inner = 0.5 * (inner + inner.T) if box is None else box
     full = np.zeros((6, 6))
     full[np.ix_(free, free)] = inner
-    return CovarianceEstimate(fixed_axis_covariance(full, pose), s2, dof, full)
+    return CovarianceEstimate(fixed_axis_covariance(full, pose), residual_variance, dof, full)
 
 
 #: Samples of the likelihood drawn by :func:`in_box_second_moment`, and how many must fall in the box.

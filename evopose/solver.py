@@ -19,6 +19,7 @@ from geometry import matrix_from_pose
 from .fitness import Match, PoseObjective
 from .local import LocalSearch
 from .loop import Evaluator, Run, evolve
+from .mixture import mixture_covariance
 from .options import SearchOptions
 from .problem import PoseProblem, View
 from .refine import TRACK_HARD_SCHEDULE, TRACK_SCHEDULE, annealing, refine
@@ -160,10 +161,12 @@ def published(objective: PoseObjective, basin: np.ndarray, verdict: Confidence) 
     """The pose (6,) to publish for the basin at ``basin`` (6,) that ``verdict`` judged, and the verdict with the
     covariance of that pose: the basin's pose fitted without the false points within tau
     (:func:`evopose.robust_fit.robust_fit`). Which basin, and how sure, is judged where the search and its
-    rivals were polished alike (least squares within tau); the covariance is the published pose's, over all its
-    pairs within tau (the false ones too: no tighter than the points allow)."""
+    rivals were polished alike (least squares within tau); the covariance is the published pose's under eq. (1)'s
+    marginal likelihood (:func:`evopose.mixture.mixture_covariance`: every image point against every visible mark,
+    the noise fitted by EM from the pairs' residual scale): the least-squares one on the nearest pairs takes each
+    pair as certain and, at the paper's scale, their residuals as the noise, which they understate."""
     pose, matches = robust_fit(objective, basin)
-    return pose, replace(verdict, covariance=covariance(objective, pose, matches))
+    return pose, replace(verdict, covariance=mixture_covariance(objective, pose, matches))
 
 
 def solution_of(problem: PoseProblem, options: SearchOptions, run: Run, seconds: float) -> Solution:

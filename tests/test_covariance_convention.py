@@ -16,6 +16,7 @@ from benchmarks.problems import make_problem
 from evopose import PoseObjective, solve
 from evopose.covariance import (covariance, deviation, fixed_axis_covariance, fixed_axis_jacobian,
                                 mutual_matches)
+from evopose.mixture import mixture_covariance
 from geometry import euler_from_rotation, rotation_from_euler
 from scipy.spatial.transform import Rotation
 
@@ -80,7 +81,7 @@ def test_deviation_is_position_difference_and_fixed_axis_rotation_vector():
 
 
 def test_the_solvers_covariance_is_gauss_newton_in_fixed_axis_coordinates():
-    """On a seeded problem: the covariance the solver reports equals ``s^2 (J^T W J + P)^-1`` with ``J`` the
+    """On a seeded problem: the covariance over the pairs equals ``s^2 (J^T W J + P)^-1`` with ``J`` the
     projection's derivative w.r.t. the position and a small rotation ``exp([omega]x) R`` about the fixed axes
     (central differences), and ``P`` the box prior of the position; the Euler one does not."""
     sp = make_problem("random", np.random.default_rng(41), noise=1.0, clutter=0.0, missing=0.0, size_px=200)
@@ -89,7 +90,9 @@ def test_the_solvers_covariance_is_gauss_newton_in_fixed_axis_coordinates():
     pose = np.asarray(solution.pose, float)
     estimate = covariance(objective, pose)
     assert estimate.ok
-    np.testing.assert_allclose(solution.covariance, estimate.matrix, rtol=1e-9, atol=0)
+    published = mixture_covariance(objective, pose, mutual_matches(objective, pose))  # what the solver publishes
+    np.testing.assert_allclose(solution.covariance, published.matrix, rtol=1e-9, atol=0)
+    np.testing.assert_allclose(published.matrix, fixed_axis_covariance(published.euler, pose), rtol=1e-12, atol=0)
     np.testing.assert_allclose(estimate.matrix, fixed_axis_covariance(estimate.euler, pose), rtol=1e-12, atol=0)
 
     matches = mutual_matches(objective, pose)

@@ -1,0 +1,66 @@
+"""The covariance under eq. (1)'s marginal likelihood (issue 35, :mod:`evopose.mixture`): the noise fitted over every
+point against every mark, and Louis' observed information, which keeps what the unknown correspondences cost."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from benchmarks.problems import make_paper_scale_problem, make_problem
+from evopose import PoseObjective, solve
+from evopose.covariance import covariance, mutual_matches
+from evopose.mixture import (false_shares, mixture_covariance, mixture_fit, mixture_information, view_statistics,
+                             view_terms)
+
+
+def test_the_noise_is_not_understated_where_the_nearest_mark_is_often_not_the_points_own():
+    """At the paper's scale (marks 3-5 px apart) with 1.8 px noise, at the true pose: the mutual pairs' residuals
+    understate the noise (a point pairs with whichever mark it fell nearest), the mixture's sigma does not."""
+    noise, pairs, mixture = 1.8, [], []
+    for i in range(12):
+        sp = make_paper_scale_problem(np.random.default_rng([3, i]), cameras=("H1", "H2"), noise=noise, clutter=0.15)
+        objective = PoseObjective(sp.problem)
+        matches = mutual_matches(objective, sp.true_pose)
+        pairs.append(np.mean(matches.residuals ** 2))
+        mixture.append(mixture_fit(objective, sp.true_pose, 1.0, false_shares(matches)).sigma2)
+    assert np.sqrt(np.mean(pairs)) < 0.85 * noise
+    assert abs(np.sqrt(np.mean(mixture)) / noise - 1) < 0.1, np.sqrt(np.mean(mixture))
+
+
+def test_marks_far_apart_give_the_gauss_newton_covariance():
+    """Marks 20+ px apart at 1 px noise, no false points: each point is its nearest mark's, the responsibilities
+    are 0 or 1, and the mixture's covariance is the least-squares one on the pairs (the same noise)."""
+    sp = make_problem("random", np.random.default_rng(41), noise=1.0, clutter=0.0, missing=0.0, size_px=200)
+    pose = solve(sp.problem, seed=0).pose
+    objective = PoseObjective(sp.problem)
+    matches = mutual_matches(objective, pose)
+    mixed = mixture_covariance(objective, pose, matches)
+    least_squares = covariance(objective, pose, matches)
+    assert mixed.ok and least_squares.ok
+    ratio = least_squares.residual_variance / mixed.residual_variance
+    assert 0.8 < ratio < 1.25  # both estimate the same 1 px noise
+    np.testing.assert_allclose(mixed.matrix * ratio, least_squares.matrix, rtol=0.02,
+                               atol=0.02 * np.sqrt(np.outer(np.diag(least_squares.matrix),
+                                                            np.diag(least_squares.matrix))).max())
+
+
+def test_unknown_correspondences_lose_information():
+    """Louis' identity: the observed information is the complete-data one less a covariance of scores, so never
+    more than the complete-data information, and less where points lie between marks (the paper's scale)."""
+    sp = make_paper_scale_problem(np.random.default_rng([3, 1]), cameras=("H1", "H2"), noise=1.5, clutter=0.1)
+    objective = PoseObjective(sp.problem)
+    free = objective.problem.bounds.free
+    terms = [(k, 1.0, view_terms(objective, sp.true_pose, k, free)) for k in range(objective.n_views)]
+    stats = view_statistics(terms, 1.5 ** 2, np.full(objective.n_views, 0.1))
+    observed = mixture_information(stats, 1.5 ** 2, int(free.sum()))
+    complete = sum(np.einsum("pm,mai,maj->ij", r, t.jacobian, t.jacobian) for _, _, t, r, _, _ in stats) / 1.5 ** 2
+    lost = np.linalg.eigvalsh(complete - observed)
+    assert lost.min() > -1e-9 * lost.max() and lost.max() > 0.05 * np.linalg.eigvalsh(complete).max()
+
+
+def test_the_solver_publishes_the_mixture_covariance():
+    """:func:`evopose.solver.published`: the covariance out of a solve is the mixture's at the published pose."""
+    sp = make_paper_scale_problem(np.random.default_rng([11, 1]), cameras=("H1", "H2"), noise=0.7, clutter=0.2)
+    solution = solve(sp.problem, seed=0)
+    objective = PoseObjective(sp.problem)
+    expected = mixture_covariance(objective, solution.pose, mutual_matches(objective, solution.pose))
+    np.testing.assert_allclose(solution.covariance, expected.matrix, rtol=1e-9, atol=0)
