@@ -210,19 +210,21 @@ def _contrast_counts(name: str, look) -> dict:
 
 @pytest.mark.parametrize("name, recall, precision", [
     ("paper-agx", 0.8, 0.75), ("telephoto-agx", 0.98, 0.95),          # measured 0.86 / 0.80, 1.00 / 1.00
-    ("paper-flat-cool", 0.6, 0.75), ("telephoto-flat-cool", 0.85, 0.75),   # 0.66 / 0.82, 0.90 / 0.83
+    ("paper-flat-cool", 0.6, 0.75), ("telephoto-flat-cool", 0.85, 0.75),   # 0.66 / 0.82, 0.95 / 0.80
 ])
 def test_through_looks_it_was_never_tuned_on_the_marks_are_found(name, recall, precision):
     # the Pioneer's g2 worlds (a geometry the committed reference-look frames do not have) developed through Blender's
     # AgX view (never looked at while developing) and a cold, flat, dark, JPEG-50 camera (scenarios/looks.py; seen on
     # telephoto-g1-high, not this g2 world, when the telephoto spot rules were chosen). The
     # flat camera halves the chroma and casts it blue: taken as the reference look shows it, the front-end is
-    # blind there (recall 0.25 and 0.03 measured), with the look estimated from the body it sees
+    # blind there at the paper's scale (recall 0.03 measured) and half blind at telephoto (0.57: its bleached colours,
+    # vision.blobs.bleached_misfit, read some desaturated marks; 0.25 without them), with the look estimated from the
+    # body it sees
     found = _contrast_counts(name, "auto")
     assert found["recall"] >= recall and found["precision"] >= precision, found
     if "flat-cool" in name:
         blind = _contrast_counts(name, None)
-        assert found["recall"] > 2 * blind["recall"], (found, blind)
+        assert found["recall"] > min(2 * blind["recall"], blind["recall"] + 0.3), (found, blind)
 
 
 def test_on_a_second_robot_it_was_never_tuned_on():
@@ -333,12 +335,28 @@ def _through_random_looks(name: str, seeds: tuple[int, ...]) -> tuple[int, int, 
 
 def test_a_blurred_mark_ringed_by_its_blend_with_the_paint_is_found_and_a_sunlit_one_labelled(monkeypatch):
     # two random looks that blur (1.2 and 1.4 px) and over-expose (+1.1, +1.2 EV): a cyan mark on the red paint
-    # blends to grey, which is neither, so its 1 px ring shows no paint and no one surroundings; a mark on the sunlit
-    # face is pulled toward white past a misfit of 0.35. Measured 45 of 46 marks; 42 with the 1 px ring and 0.35
+    # blends to grey, which is no paint, so its 1 px ring shows none; a mark on the sunlit face is bleached toward
+    # white past the blend's misfit. Measured: 44 of 46 marks; 42 with the 1 px ring alone and no
+    # bleached colours
     import vision.blobs as blobs
 
     found, visible, detections = _through_random_looks("telephoto", (7, 9))
     assert found >= 44 and found / detections >= 0.9, (found, visible, detections)
     monkeypatch.setattr(blobs, "RING_GAPS_PX", (1.0,))
-    monkeypatch.setattr(blobs, "MAX_LABEL_MISFIT", 0.35)
+    monkeypatch.setattr(blobs, "bleached_misfit", lambda spot, ring, palette, *_: np.full((len(spot), len(palette)),
+                                                                                          np.inf))
     assert _through_random_looks("telephoto", (7, 9))[0] <= found - 2
+
+
+def test_a_bright_mark_bleached_toward_white_fits_its_paint_and_a_glint_on_the_body_fits_none():
+    from vision.blobs import bleached_misfit
+
+    yellow_body = np.array([0.01, 0.5, 0.8])                            # linear BGR
+    palette = np.array([[0.007, 0.72, 0.87], [0.72, 0.64, 0.007], [0.02, 0.51, 0.02], [0.58, 0.02, 0.65]])
+    bleached_green = 0.6 * palette[2] + 0.3                             # a tone curve's highlight: paint + white
+    glint = yellow_body + 0.4                                           # the body's own paint + white
+    shadow = 0.3 * yellow_body
+    misfit = bleached_misfit(np.stack([bleached_green, glint, shadow]), np.stack([yellow_body * 0.5] * 3), palette)
+    assert np.argmin(misfit[0]) == 2 and misfit[0, 2] < 0.01
+    assert misfit[1, [1, 2, 3]].min() > 0.35    # only the body's own hue (yellow, a palette colour here) could fit
+    assert np.isinf(misfit[2]).all()            # darker than its ring: not bleached
