@@ -2,8 +2,9 @@
 
 What ``scipy.spatial.cKDTree`` gave the search (the truncation distance's spacing, the starts' local clusters, a
 grid's repeated steps, whether two poses show the same image), written here so that an agent does not import
-``scipy.spatial``: that package (with ``scipy.sparse``, ``scipy.linalg`` and ``scipy.special``, which it imports)
-held about 25 MB of a camera agent's resident memory (docs/design.md, "Lazy imports").
+``scipy.spatial``: that package, with the ``scipy.sparse`` and ``scipy.special`` it imports, held about 10 MB of a
+camera agent's resident memory (``scipy.linalg``, which it imports too, numba loads anyway; docs/design.md §2,
+"Lazy imports").
 
 Distances are the k-d tree's, to the bit: ``sqrt`` of the sum of squared coordinate differences, taken in
 coordinate order. Where the answer is an index, equally near points leave a choice that the tree made by its

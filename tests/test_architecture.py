@@ -210,8 +210,8 @@ def test_the_cli_imports_nothing_heavy_to_print_help():
     assert not loaded & {"numpy", "scipy", "numba", "cv2", "zenoh", "pydantic", "evopose", "scenarios", "geometry"}
 
 
-#: Packages a camera vehicle does not use, each some megabytes resident once imported (docs/design.md, "Lazy
-#: imports"). scipy.linalg is not among them: numba loads it for its BLAS and LAPACK at its first compiled kernel.
+#: Packages a camera vehicle does not use, each some megabytes resident once imported (docs/design.md §2,
+#: "Lazy imports"). scipy.linalg is not among them: numba loads it for its BLAS and LAPACK at its first compiled kernel.
 NOT_FOR_A_CAMERA_VEHICLE = {"scipy.spatial", "scipy.sparse", "scipy.special", "scipy.optimize", "scipy.stats",
                             "scipy.ndimage", "matplotlib", "PIL", "rosbags", "mcap", "foxglove", "websockets",
                             "cryptography", "agents.bridges", "agents.tools", "agents.experiments"}

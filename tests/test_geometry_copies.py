@@ -94,7 +94,7 @@ def test_pose_error_compares_the_same_rotation_written_two_ways():
 
 def test_rotation_vectors_agree_with_scipy():
     """geometry's rotation vectors are scipy's ``Rotation.from_rotvec`` / ``as_rotvec`` (which the covariance used
-    before; docs/design.md, "Lazy imports"), within rounding, down to tiny angles and up to a half turn."""
+    before; docs/design.md §2, "Lazy imports"), within rounding, down to tiny angles and up to a half turn."""
     from scipy.spatial.transform import Rotation
 
     rng = np.random.default_rng(8)

@@ -1,5 +1,5 @@
-"""evopose.neighbours answers as the k-d tree it replaces did, to the bit, ties included (docs/design.md, "Lazy
-imports"): the search's results do not depend on which of the two is used."""
+"""evopose.neighbours answers as the k-d tree it replaces did, to the bit, ties included (docs/design.md §2,
+"Lazy imports"): the search's results do not depend on which of the two is used."""
 
 from __future__ import annotations
 
