@@ -346,13 +346,15 @@ def markdown(results: list[dict], configs: list[Config], command: str, together:
         main = [k for k in sorted(r["sent"], key=r["sent"].get, reverse=True) if k not in ("stats", "pose")][:1]
         topic = main[0] if main else "-"
         rows.append([
-            r["config"], *([f"{r['code_label']} ({r['code']})"] if compared else []), r["vehicle"], f"{_count(r['frames'])} ({_count(r['late'])})",
+            r["config"], *([f"{r['code_label']} ({r['code']})"] if compared else []), r["vehicle"],
+            f"{_count(r['frames'])} ({_count(r['late'])})",
             f"{topic}: {_count(r['sent'].get(topic))} / {_count(r['received'].get(topic))}" if main else "?",
             f"{sum(r['sent'].values()):,} / {sum(r['received'].values()):,}",
             f"{r['startup_rss']:.0f}", f"{r['warm_rss']:.1f}", f"{r['final_rss']:.1f}", f"{r['max_rss']:.1f}",
             f"{r['peak_rss']:.1f}", f"{r['final_uss']:.0f} / {r['final_pss']:.0f}",
             f"{r['slope']:+.3f} ± {r['slope_se']:.3f}", f"{r['cpu']:.2f}", "PASS" if r["passed"] else "FAIL"])
-    header = ["config", *(["code"] if compared else []), "agent", "frames (late)", "main topic sent / received", "all messages sent / received",
+    header = ["config", *(["code"] if compared else []), "agent", "frames (late)", "main topic sent / received",
+              "all messages sent / received",
               "RSS at frame 0", "RSS at 30 s", "final RSS", "max RSS", "peak RSS (kernel)", "final USS / PSS",
               "slope (MB/min)", "CPU (cores)", "target"]
     table = results
@@ -401,7 +403,7 @@ def markdown(results: list[dict], configs: list[Config], command: str, together:
         "",
         *md_table(header, rows),
         "",
-        size[0].upper() + size[1:] + growth,
+        ("After (this checkout): " + size if compared else size[0].upper() + size[1:]) + growth,
         "",
         *([ratios(table), ""] if compared else []),
     ]
