@@ -61,6 +61,11 @@ WARM_UP_S = 30.0
 #: Frame 0 this long after the agents start (imports, numba cache load and the warm-up solve come first).
 EPOCH_LEAD_S = 15.0
 VEHICLES = ("H1", "H2")
+#: Minutes of the features and hint pairs in `make bench-footprint`; shorter runs say what their slope is not.
+FULL_RUN_MINUTES = 10.0
+SHORT_RUN_NOTE = ("These runs are shorter than `make bench-footprint`'s 10 minutes: their slope covers the first "
+                  "minutes after the warm-up, where RSS still settles (caches, buffers), and tells no leak from "
+                  "that; the RSS figures are what they compare.")
 
 
 @dataclass(frozen=True)
@@ -384,6 +389,7 @@ def markdown(results: list[dict], configs: list[Config], command: str, together:
     if compared:
         layout += ("; each configuration runs a pair of the code before (`--before`, a second checkout) and then "
                    "a pair of this checkout's; the verdict below is this checkout's")
+    short = min((c.minutes for c in configs if c.name != "raw"), default=FULL_RUN_MINUTES) < FULL_RUN_MINUTES
     codes = {label(c): r["code"] for c in configs for r in table
              if r["config"] == c.name and r["code_label"] == c.code_label}
     code = (f"code at commit {next(iter(codes.values()))}" if len(set(codes.values())) == 1 else
@@ -405,6 +411,7 @@ def markdown(results: list[dict], configs: list[Config], command: str, together:
         "",
         ("After (this checkout): " + size if compared else size[0].upper() + size[1:]) + growth,
         "",
+        *([SHORT_RUN_NOTE, ""] if short else []),
         *([ratios(table), ""] if compared else []),
     ]
     return "\n".join(lines)
