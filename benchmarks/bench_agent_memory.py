@@ -15,8 +15,9 @@ render and extract the first image, one search, tracking frames, a generation be
 first) or were compiled in the process (an empty ``NUMBA_CACHE_DIR``); *peak* is the kernel's high-water mark
 (``VmHWM``) so far: the renderer's one-off ground texture (made through FFTs, then freed) lifts it for a moment,
 here on top of numba's start; in an agent the texture comes before numba starts, and its peak is lower (the
-footprint section's *peak RSS*). The last table splits the final RSS by mapping (``/proc/self/smaps``): the libraries' code
-and data that were touched, and the anonymous memory (Python objects, numpy arrays, LLVM's and OpenCV's heaps).
+footprint section's *peak RSS*). The last table splits the final RSS by mapping (``/proc/self/smaps``): the
+libraries' code and data that were touched, and the anonymous memory (Python objects, numpy arrays, LLVM's and
+OpenCV's heaps).
 """
 
 from __future__ import annotations
@@ -147,8 +148,8 @@ def main(argv: list[str] | None = None) -> int:
     body = "\n".join([
         f"Produced by `.venv/bin/python -m benchmarks.bench_agent_memory`; {provenance()}.", "",
         next(part for part in __doc__.split("\n\n") if part.startswith("Each condition")).replace("\n", " "), "",
-        *md_table(["step", "RSS (MB), numba cache", "added (MB)", "peak so far (MB)", "RSS (MB), compiled in the process",
-                   "threads"], rows), "",
+        *md_table(["step", "RSS (MB), numba cache", "added (MB)", "peak so far (MB)",
+                   "RSS (MB), compiled in the process", "threads"], rows), "",
         "The final RSS (numba cache) by mapping:", "",
         *md_table(["mapping", "RSS (MB)"], split),
     ])
