@@ -3,6 +3,7 @@
 Run from the repository root::
 
     .venv/bin/python -m benchmarks.bench_footprint [--minutes 10] [--quick] [--out benchmarks/results/footprint.md]
+    .venv/bin/python -m benchmarks.bench_footprint --before ../main-checkout   # before/after, side by side
 
 Each configuration starts two UAV agents of scenario exp2 (H1 and H2) as real separate processes
 (``.venv/bin/evopose agent ...``), peers over loopback TCP (H1 listens on a free port, H2 connects;
@@ -21,6 +22,11 @@ VmRSS and VmHWM from ``/proc/PID/status`` and Pss and Private_* (USS) from ``/pr
 30 s after it. At the end the agents get SIGTERM and print their JSON summary (last line of stdout), whose
 ``traffic`` field gives the messages sent and received per topic.
 
+Every agent runs the code of its checkout (``PYTHONPATH`` set to it; the interpreter is this checkout's
+``.venv``). ``--before DIR`` names a second checkout (a git worktree of the code before a change, its numba cache
+warmed, or its agents compile at start-up): each configuration then runs a pair of that code and a pair of this
+one, one after the other, and the section gives both and their ratios.
+
 Targets (from the issue): max RSS < 200 MB and growth < 0.5 MB/min after warm-up (least-squares slope).
 MB here is 10^6 bytes. The benchmark asserts nothing; it prints PASS/FAIL lines and writes the section file.
 """
@@ -36,7 +42,7 @@ import subprocess
 import sys
 import tempfile
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -55,17 +61,25 @@ WARM_UP_S = 30.0
 #: Frame 0 this long after the agents start (imports, numba cache load and the warm-up solve come first).
 EPOCH_LEAD_S = 15.0
 VEHICLES = ("H1", "H2")
+#: Minutes of the features and hint pairs in `make bench-footprint`; shorter runs say what their slope is not.
+FULL_RUN_MINUTES = 10.0
+SHORT_RUN_NOTE = ("These runs are shorter than `make bench-footprint`'s 10 minutes: their slope covers the first "
+                  "minutes after the warm-up, where RSS still settles (caches, buffers), and tells no leak from "
+                  "that; the RSS figures are what they compare.")
 
 
 @dataclass(frozen=True)
 class Config:
-    """One pair of agents: what they share, at which camera rate, for how long."""
+    """One pair of agents: what they share, at which camera rate, for how long, and whose code."""
 
     name: str
     share: str
     fps: float
     minutes: float
     note: str
+    #: the checkout whose code the agents run, and its label in the results ("" without --before)
+    root: Path = ROOT
+    code_label: str = ""
 
 
 @dataclass
@@ -123,11 +137,24 @@ def read_memory(pid: int) -> tuple[float, float, float | None, float | None, flo
 
 # -- agents ---------------------------------------------------------------------------------------------
 
+def checkout_version(root: Path) -> str:
+    """The commit of a checkout, and whether its code has uncommitted changes (as :func:`code_version`)."""
+    if root == ROOT:
+        return code_version()
+    def git(*args: str) -> str:
+        done = subprocess.run(["git", "-C", str(root), *args], capture_output=True, text=True, timeout=30)
+        return done.stdout.strip()
+    dirty = git("status", "--porcelain", "--", "agents", "evopose", "geometry", "scenarios", "protocol", "vision")
+    return (git("rev-parse", "--short", "HEAD") or "unknown commit") + (" + uncommitted changes" if dirty else "")
+
+
 def start_pair(config: Config, logs: Path) -> list[Agent]:
     """Start H1 (listening) and H2 (connecting) sharing ``config.share``; frame 0 in EPOCH_LEAD_S seconds."""
-    code = code_version()
+    code = checkout_version(config.root)
     port = free_port()
-    fleet = f"footprint-{config.name}-{os.getpid()}-{port}"
+    tag = f"{config.name}-{config.code_label}" if config.code_label else config.name
+    fleet = f"footprint-{tag}-{os.getpid()}-{port}"
+    env = {**os.environ, "PYTHONPATH": str(config.root)}  # the checkout's code, not the editable install's
     epoch_s = time.time() + EPOCH_LEAD_S
     common = ["agent", "--fleet", fleet, "--scenario", "exp2", "--share", config.share, "--fps", f"{config.fps:g}",
               "--epoch-ns", str(int(epoch_s * 1e9)), "--no-multicast", "--json", "--wait-timeout", str(EPOCH_LEAD_S)]
@@ -136,10 +163,10 @@ def start_pair(config: Config, logs: Path) -> list[Agent]:
     for vehicle, link in zip(VEHICLES, (["--listen", endpoint], ["--connect", endpoint])):
         # the team-mate only (agents before 9d836ff waited out --wait-timeout when their own name was listed)
         mates = ",".join(v for v in VEHICLES if v != vehicle)
-        out, err = logs / f"{config.name}-{vehicle}.jsonl", logs / f"{config.name}-{vehicle}.err"
+        out, err = logs / f"{tag}-{vehicle}.jsonl", logs / f"{tag}-{vehicle}.err"
         with open(out, "wb") as fo, open(err, "wb") as fe:
             proc = subprocess.Popen([str(AGENT), *common, "--vehicle", vehicle, "--wait-for", mates, *link],
-                                    cwd=ROOT, stdin=subprocess.DEVNULL, stdout=fo, stderr=fe)
+                                    cwd=config.root, env=env, stdin=subprocess.DEVNULL, stdout=fo, stderr=fe)
         agents.append(Agent(config, vehicle, proc, out, err, epoch_s, code))
     return agents
 
@@ -220,22 +247,27 @@ def run(configs: list[Config], interval: float, logs: Path, started: list[Agent]
             dead = [a for a in pair if a.returncode is not None]
             if t >= pair[0].config.minutes * 60.0 or dead:
                 if dead:
-                    print(f"  {pair[0].config.name}: {', '.join(a.vehicle for a in dead)} exited early "
+                    print(f"  {label(pair[0].config)}: {', '.join(a.vehicle for a in dead)} exited early "
                           f"(code {dead[0].returncode}) at t = {t:.0f} s", flush=True)
                 stop(pair)
                 pending.remove(pair)
                 for a in pair:
                     print("  " + describe(a), flush=True)
                     print("    RSS by minute (MB): " + trail(a), flush=True)
-            elif t >= progress.get(pair[0].config.name, 0.0):
-                progress[pair[0].config.name] = t + 60.0
-                print(f"  {time.strftime('%H:%M:%S')} {pair[0].config.name} t = {t / 60:.1f} min: "
+            elif t >= progress.get(label(pair[0].config), 0.0):
+                progress[label(pair[0].config)] = t + 60.0
+                print(f"  {time.strftime('%H:%M:%S')} {label(pair[0].config)} t = {t / 60:.1f} min: "
                       + ", ".join(f"{a.vehicle} {a.samples[-1].rss / MB:.1f} MB" for a in pair if a.samples),
                       flush=True)
         next_sample += interval
         if pending:
             time.sleep(max(0.0, next_sample - time.monotonic()))
     return [a for pair in pairs for a in pair]
+
+
+def label(config: Config) -> str:
+    """A configuration's name, and its code's label when two checkouts are compared."""
+    return f"{config.name} ({config.code_label})" if config.code_label else config.name
 
 
 # -- results --------------------------------------------------------------------------------------------
@@ -245,7 +277,7 @@ def analyse(a: Agent) -> dict:
     s = a.samples
     after = [x for x in s if x.t >= WARM_UP_S]
     out = {"config": a.config.name, "vehicle": a.vehicle, "samples": len(s), "returncode": a.returncode,
-           "code": a.code,
+           "code": a.code, "code_label": a.config.code_label,
            "max_rss": max((x.rss for x in s), default=float("nan")) / MB,
            "peak_rss": max((x.hwm for x in s), default=float("nan")) / MB,
            "startup_rss": next((x.rss for x in reversed(s) if x.t < 0), float("nan")) / MB,
@@ -275,7 +307,7 @@ def describe(a: Agent) -> str:
     r = analyse(a)
     topics = ", ".join(f"{k} {r['sent'].get(k, 0)}/{r['received'].get(k, 0)}"
                        for k in sorted(set(r["sent"]) | set(r["received"])))
-    return (f"{r['config']:8s} {r['vehicle']}: RSS at frame 0 {r['startup_rss']:.1f}, at 30 s {r['warm_rss']:.1f}, "
+    return (f"{label(a.config):8s} {r['vehicle']}: RSS at frame 0 {r['startup_rss']:.1f}, at 30 s {r['warm_rss']:.1f}, "
             f"final {r['final_rss']:.1f}, max {r['max_rss']:.1f} (peak {r['peak_rss']:.1f}) MB, "
             f"USS {r['final_uss']:.1f} PSS {r['final_pss']:.1f} MB, slope {r['slope']:+.3f} "
             f"± {r['slope_se']:.3f} MB/min, CPU {r['cpu']:.2f} cores, frames {r['frames']} ({r['late']} late), "
@@ -297,21 +329,41 @@ def _count(n: int | None) -> str:
     return "?" if n is None else f"{n:,}"
 
 
+def ratios(results: list[dict]) -> str:
+    """This checkout's figures over the --before checkout's, per configuration (the mean of its two agents)."""
+    parts = []
+    for name in dict.fromkeys(r["config"] for r in results):
+        before = [r for r in results if r["config"] == name and r["code_label"] == "before"]
+        after = [r for r in results if r["config"] == name and r["code_label"] == "after"]
+        if not before or not after:
+            continue
+        def ratio(key: str) -> str:
+            return f"x{np.mean([r[key] for r in after]) / np.mean([r[key] for r in before]):.2f}"
+        parts.append(f"*{name}*: RSS at frame 0 {ratio('startup_rss')}, at 30 s {ratio('warm_rss')}, max RSS "
+                     f"{ratio('max_rss')}, final USS {ratio('final_uss')}")
+    return "After over before (the mean of each pair's two agents): " + "; ".join(parts) + "." if parts else ""
+
+
 def markdown(results: list[dict], configs: list[Config], command: str, together: bool) -> str:
     rows = []
+    compared = any(r["code_label"] for r in results)
     for r in results:
         main = [k for k in sorted(r["sent"], key=r["sent"].get, reverse=True) if k not in ("stats", "pose")][:1]
         topic = main[0] if main else "-"
         rows.append([
-            r["config"], r["vehicle"], f"{_count(r['frames'])} ({_count(r['late'])})",
+            r["config"], *([f"{r['code_label']} ({r['code']})"] if compared else []), r["vehicle"],
+            f"{_count(r['frames'])} ({_count(r['late'])})",
             f"{topic}: {_count(r['sent'].get(topic))} / {_count(r['received'].get(topic))}" if main else "?",
             f"{sum(r['sent'].values()):,} / {sum(r['received'].values()):,}",
             f"{r['startup_rss']:.0f}", f"{r['warm_rss']:.1f}", f"{r['final_rss']:.1f}", f"{r['max_rss']:.1f}",
             f"{r['peak_rss']:.1f}", f"{r['final_uss']:.0f} / {r['final_pss']:.0f}",
             f"{r['slope']:+.3f} ± {r['slope_se']:.3f}", f"{r['cpu']:.2f}", "PASS" if r["passed"] else "FAIL"])
-    header = ["config", "agent", "frames (late)", "main topic sent / received", "all messages sent / received",
+    header = ["config", *(["code"] if compared else []), "agent", "frames (late)", "main topic sent / received",
+              "all messages sent / received",
               "RSS at frame 0", "RSS at 30 s", "final RSS", "max RSS", "peak RSS (kernel)", "final USS / PSS",
               "slope (MB/min)", "CPU (cores)", "target"]
+    table = results
+    results = [r for r in results if r["code_label"] in ("", "after")]  # the verdict is this checkout's
     worst_rss = max(r["max_rss"] for r in results)
     worst = max(results, key=lambda r: r["slope"])
     mean_warm = float(np.nanmean([r["warm_rss"] for r in results]))
@@ -334,7 +386,12 @@ def markdown(results: list[dict], configs: list[Config], command: str, together:
     else:
         growth = f"and memory grows with the run ({steepest})."
     layout = ("features and hint side by side, then raw" if together else "one configuration at a time")
-    codes = {r["config"]: r["code"] for r in results}
+    if compared:
+        layout += ("; each configuration runs a pair of the code before (`--before`, a second checkout) and then "
+                   "a pair of this checkout's; the verdict below is this checkout's")
+    short = min((c.minutes for c in configs if c.name != "raw"), default=FULL_RUN_MINUTES) < FULL_RUN_MINUTES
+    codes = {label(c): r["code"] for c in configs for r in table
+             if r["config"] == c.name and r["code_label"] == c.code_label}
     code = (f"code at commit {next(iter(codes.values()))}" if len(set(codes.values())) == 1 else
             "code at " + ", ".join(f"{v} ({k})" for k, v in codes.items()))
     lines = [
@@ -343,7 +400,7 @@ def markdown(results: list[dict], configs: list[Config], command: str, together:
         "",
         "Two UAV agents of exp2 (H1, H2) as separate `evopose agent` processes, peers over loopback TCP "
         "(multicast off), per configuration: "
-        + "; ".join(f"*{c.name}*: {c.note}, {c.minutes:g} min" for c in configs)
+        + "; ".join(dict.fromkeys(f"*{c.name}*: {c.note}, {c.minutes:g} min" for c in configs))
         + f"; {layout}. RSS (VmRSS), USS (private pages) and PSS from /proc every few seconds; "
         "MB = 10^6 bytes; times from frame 0; *RSS at 30 s* is the first sample after the 30 s warm-up, and the "
         "slope a least-squares fit over the samples after it (± its standard error); *peak RSS* is the "
@@ -352,8 +409,10 @@ def markdown(results: list[dict], configs: list[Config], command: str, together:
         "",
         *md_table(header, rows),
         "",
-        size[0].upper() + size[1:] + growth,
+        ("After (this checkout): " + size if compared else size[0].upper() + size[1:]) + growth,
         "",
+        *([SHORT_RUN_NOTE, ""] if short else []),
+        *([ratios(table), ""] if compared else []),
     ]
     return "\n".join(lines)
 
@@ -376,8 +435,15 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--together", action="store_true", help="run the features and hint pairs side by side")
     parser.add_argument("--logs", type=Path, default=None, help="keep the agents' stdout/stderr and the samples "
                                                                   "in this folder")
+    parser.add_argument("--before", type=Path, default=None,
+                        help="a second checkout (the code before a change): each configuration runs a pair of its "
+                             "code, then a pair of this checkout's")
     parser.add_argument("--out", type=Path, default=DEFAULT_OUT)
     args = parser.parse_args(argv)
+    if args.before is not None and args.together:
+        parser.error("--before runs one pair at a time: no --together")
+    if args.before is not None and not (args.before / "agents" / "cli").is_dir():
+        parser.error(f"--before {args.before}: not a checkout of this project")
     minutes = 1.0 if args.quick else args.minutes
     raw_minutes = args.raw_minutes if args.raw_minutes is not None else (
         1.0 if args.quick else max(1.0, round(0.3 * minutes, 1)))
@@ -389,6 +455,9 @@ def main(argv: list[str] | None = None) -> int:
     configs = [c for c in configs if c.minutes > 0 and c.name in wanted]
     if not configs:
         parser.error(f"--configs: nothing to run in {args.configs!r} (features, hint, raw)")
+    if args.before is not None:
+        configs = [replace(c, root=root, code_label=code_label) for c in configs
+                   for root, code_label in ((args.before.resolve(), "before"), (ROOT, "after"))]
     side_by_side = [c for c in configs if c.name in ("features", "hint")]
     batches = ([side_by_side, [c for c in configs if c not in side_by_side]] if args.together
                else [[c] for c in configs])
@@ -404,7 +473,7 @@ def main(argv: list[str] | None = None) -> int:
         try:
             for batch in [b for b in batches if b]:
                 total = max(c.minutes for c in batch)
-                print(f"{time.strftime('%H:%M:%S')} running {', '.join(c.name for c in batch)} for {total:g} min "
+                print(f"{time.strftime('%H:%M:%S')} running {', '.join(label(c) for c in batch)} for {total:g} min "
                       f"(+{EPOCH_LEAD_S:.0f} s start-up), a sample every {interval:g} s", flush=True)
                 done += run(batch, interval, logs, started)
         except KeyboardInterrupt:
@@ -414,21 +483,25 @@ def main(argv: list[str] | None = None) -> int:
             kill_all(started)
         if args.logs:
             for a in done:
-                (logs / f"{a.config.name}-{a.vehicle}.samples.json").write_text(json.dumps(
+                (logs / f"{label(a.config)}-{a.vehicle}.samples.json").write_text(json.dumps(
                     [vars(x) for x in a.samples]))
         for a in done:
             if a.summary is None:
-                print(f"--- {a.config.name} {a.vehicle} stderr (tail) ---\n"
+                print(f"--- {label(a.config)} {a.vehicle} stderr (tail) ---\n"
                       + a.stderr.read_text(errors="replace")[-2000:], file=sys.stderr)
 
     results = [analyse(a) for a in done]
     print()
     for r in results:
         verdict = "PASS" if r["passed"] else "FAIL"
-        print(f"{verdict}: {r['config']} {r['vehicle']}: max RSS {r['max_rss']:.1f} MB (target < {MAX_RSS_MB:.0f}), "
-              f"slope {r['slope']:+.3f} MB/min (target < {MAX_SLOPE_MB_MIN})")
-    overall = all(r["passed"] for r in results)
-    print(f"{'PASS' if overall else 'FAIL'}: agent footprint, {len(results)} agents "
+        code = f" ({r['code_label']})" if r["code_label"] else ""
+        print(f"{verdict}: {r['config']}{code} {r['vehicle']}: max RSS {r['max_rss']:.1f} MB (target < "
+              f"{MAX_RSS_MB:.0f}), slope {r['slope']:+.3f} MB/min (target < {MAX_SLOPE_MB_MIN})")
+    judged = [r for r in results if r["code_label"] in ("", "after")]  # this checkout's
+    overall = all(r["passed"] for r in judged)
+    if args.before is not None:
+        print(ratios(results))
+    print(f"{'PASS' if overall else 'FAIL'}: agent footprint, {len(judged)} agents "
           f"(max RSS < {MAX_RSS_MB:.0f} MB and slope < {MAX_SLOPE_MB_MIN} MB/min)")
 
     argv_text = " ".join(argv if argv is not None else sys.argv[1:])

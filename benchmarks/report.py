@@ -19,7 +19,7 @@ RESULTS = Path(__file__).resolve().parent / "results"
 ROOT = Path(__file__).resolve().parents[1]
 #: Order of the sections in BENCHMARKS.md (others follow alphabetically).
 ORDER = ("solvers", "solver_regression", "softposit", "solver_phases", "confidence", "weights", "kernels", "features", "fleet", "frame_path", "latency", "capacity",
-         "footprint", "photoreal_features", "photoreal_features_sweep", "photoreal_features_telephoto_sweep",
+         "footprint", "agent_memory", "photoreal_features", "photoreal_features_sweep", "photoreal_features_telephoto_sweep",
          "photoreal_features_opencv_camera", "photoreal_features_train",
          "photoreal_fleet", "photoreal_fleet_long", "photoreal_fleet_paper_long", "photoreal_tracking",
          "photoreal_encoding", "photoreal_looks", "photoreal_looks_husky", "photoreal_fleet_looks",

@@ -17,9 +17,8 @@ from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
-from geometry import rotation_from_euler
+from geometry import rotation_from_euler, rotvec_from_rotation
 
 from .fitness import POINT_NOISE_PX, PoseObjective, matches
 
@@ -153,7 +152,7 @@ def deviation(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     out = np.empty(a.shape)
     out[..., :3] = a[..., :3] - b[..., :3]
     relative = rotation_from_euler(a[..., 3:]) @ np.swapaxes(rotation_from_euler(b[..., 3:]), -1, -2)
-    out[..., 3:] = Rotation.from_matrix(relative.reshape(-1, 3, 3)).as_rotvec().reshape(a.shape[:-1] + (3,))
+    out[..., 3:] = rotvec_from_rotation(relative)
     return out
 
 

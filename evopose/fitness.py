@@ -36,9 +36,9 @@ from functools import cached_property
 from typing import Literal
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from .kernels import MUTUAL, PAPER, ROBUST, chamfer_matches, view_terms
+from .neighbours import nearest_distance
 from .problem import Model, PoseProblem, View, label_coordinates
 from .projection import project_poses
 
@@ -69,8 +69,8 @@ def auto_tau(points: np.ndarray, noise: float = POINT_NOISE_PX) -> float:
     """
     if len(points) < 2:
         return 10.0
-    d, _ = cKDTree(points).query(points, k=2)
-    return float(np.clip(0.5 * np.median(d[:, 1]), TAU_NOISE_SIGMAS * noise, TAU_MAX_PX))
+    d = nearest_distance(points, points, exclude_self=True)
+    return float(np.clip(0.5 * np.median(d), TAU_NOISE_SIGMAS * noise, TAU_MAX_PX))
 
 
 def image_spread(points: np.ndarray) -> float:

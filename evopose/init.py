@@ -17,10 +17,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from scipy.spatial import cKDTree
-
 from geometry import random_rotations, rotation_from_euler
 
+from .neighbours import k_nearest
 from .problem import Bounds, PoseProblem, View
 
 #: Fraction of the guided starts that moment-match a local cluster of image points rather than all of them.
@@ -71,11 +70,10 @@ def image_regions(points: np.ndarray, n: int, n_model: int, rng: np.random.Gener
     spreads = np.full(n, spread)
     n_local = int(round(local_fraction * n))
     if n_local and len(points) > n_model:
-        tree = cKDTree(points)
         k_max = min(len(points), max(n_model, 2))
         seeds = rng.integers(0, len(points), n_local)
         ks = rng.integers(max(int(0.4 * n_model), 2), k_max + 1, n_local)
-        _, neighbours = tree.query(points[seeds], k=k_max)  # only the seeds' (all points' cost O(P k) memory)
+        neighbours = k_nearest(points[seeds], points, k_max)  # only the seeds' (all points' cost O(P k) memory)
         cluster = points[neighbours]  # (n_local, k_max, 2), nearest first
         member = np.arange(k_max)[None, :] < ks[:, None]
         cu = _masked_median(cluster[..., 0], member, ks)

@@ -12,7 +12,6 @@ from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from geometry import matrix_from_pose
 
@@ -20,6 +19,7 @@ from .fitness import Match, PoseObjective
 from .local import LocalSearch
 from .loop import Evaluator, Run, evolve
 from .mixture import mixture_covariance
+from .neighbours import nearest_other
 from .options import SearchOptions
 from .problem import PoseProblem, View
 from .refine import TRACK_HARD_SCHEDULE, TRACK_SCHEDULE, annealing, refine
@@ -214,8 +214,7 @@ def repeated_displacements(points: np.ndarray, count: int = SHIFT_DIRECTIONS) ->
     points = np.asarray(points, float)
     if len(points) < 3:
         return np.zeros((0, 3))
-    _, nearest = cKDTree(points).query(points, k=2)
-    steps = points[nearest[:, 1]] - points
+    steps = points[nearest_other(points)] - points
     steps = np.where(_sign(steps)[:, None] < 0, -steps, steps)  # d and -d are one direction
     scale = max(float(np.median(np.linalg.norm(steps, axis=1))), 1e-12)
     _, first, counts = np.unique(np.round(steps / (0.05 * scale)).astype(np.int64), axis=0, return_index=True,

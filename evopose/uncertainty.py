@@ -19,14 +19,13 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 
 import numpy as np
-from scipy.spatial import cKDTree
-from scipy.spatial.transform import Rotation
 
-from geometry import euler_from_rotation, rotation_from_euler
+from geometry import euler_from_rotation, rotation_from_euler, rotation_from_rotvec
 
 from .covariance import (CovarianceEstimate, Matches, covariance, deviation, in_box_second_moment, mutual_matches,
                          projection_jacobian, untruncated_variance)
 from .fitness import POINT_NOISE_PX, PoseObjective
+from .neighbours import nearest_distance
 
 __all__ = ["CovarianceEstimate", "Matches", "covariance", "deviation", "in_box_second_moment", "mahalanobis",
            "mutual_matches", "projection_jacobian", "rotation_sigma", "same_image", "shared_pairs", "sum_of_squares",
@@ -99,12 +98,9 @@ def same_image(objective: PoseObjective, a: np.ndarray, b: np.ndarray, tolerance
         ua, ub = proj.uv[0][proj.usable[0]], proj.uv[1][proj.usable[1]]
         if len(ua) != len(ub):
             return False
-        if len(ua):  # each mark within tolerance of the other pose's nearest (k-d trees: no K x K matrix)
-            a_to_b, _ = cKDTree(ub).query(ua, distance_upper_bound=tolerance * (1 + 1e-9))
-            if not np.all(np.isfinite(a_to_b)):
-                return False
-            b_to_a, _ = cKDTree(ua).query(ub, distance_upper_bound=tolerance * (1 + 1e-9))
-            if not np.all(np.isfinite(b_to_a)):
+        if len(ua):  # each mark within tolerance of the other pose's nearest (a sweep: no K x K matrix)
+            bound = tolerance * (1 + 1e-9)  # within the tolerance, rounding aside
+            if not np.all(nearest_distance(ua, ub) < bound) or not np.all(nearest_distance(ub, ua) < bound):
                 return False
     return True
 
@@ -157,7 +153,7 @@ class TrackReference:
         P, C = self.covariance, np.asarray(cov, float)
         gain = P @ np.linalg.pinv(P + C, rcond=1e-12, hermitian=True)
         step = gain @ deviation(pose, self.pose)
-        rotation = Rotation.from_rotvec(step[3:]).as_matrix() @ rotation_from_euler(self.pose[3:])
+        rotation = rotation_from_rotvec(step[3:]) @ rotation_from_euler(self.pose[3:])
         fused = np.concatenate([self.pose[:3] + step[:3], euler_from_rotation(rotation)])
         cov_fused = (np.eye(6) - gain) @ P
         return TrackReference(fused, 0.5 * (cov_fused + cov_fused.T), self.frames + 1, 0)

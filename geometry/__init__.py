@@ -152,6 +152,56 @@ def quaternion_from_rotation(R: np.ndarray) -> np.ndarray:
     return np.where(q[..., 3:4] < 0, -q, q)
 
 
+def rotation_from_quaternion(q: np.ndarray) -> np.ndarray:
+    """Rotation matrices of unit quaternions ``(x, y, z, w)`` (either sign): (..., 4) -> (..., 3, 3)."""
+    q = np.asarray(q, dtype=float)
+    if q.shape[-1:] != (4,):
+        raise ValueError(f"expected (..., 4) quaternions, got shape {q.shape}")
+    x, y, z, w = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
+    R = np.empty(q.shape[:-1] + (3, 3))
+    R[..., 0, 0] = 1 - 2 * (y * y + z * z)
+    R[..., 0, 1] = 2 * (x * y - z * w)
+    R[..., 0, 2] = 2 * (x * z + y * w)
+    R[..., 1, 0] = 2 * (x * y + z * w)
+    R[..., 1, 1] = 1 - 2 * (x * x + z * z)
+    R[..., 1, 2] = 2 * (y * z - x * w)
+    R[..., 2, 0] = 2 * (x * z - y * w)
+    R[..., 2, 1] = 2 * (y * z + x * w)
+    R[..., 2, 2] = 1 - 2 * (x * x + y * y)
+    return R
+
+
+#: Below this angle (radians) the rotation vector's scale comes from its Taylor series (as scipy's ``Rotation``).
+SMALL_ROTATION = 1e-3
+
+
+def rotation_from_rotvec(v: np.ndarray) -> np.ndarray:
+    """Rotation matrices of rotation vectors (axis times angle, radians; about fixed axes): (..., 3) -> (..., 3, 3).
+    The formulas of scipy's ``Rotation.from_rotvec(v).as_matrix()``, through the unit quaternion."""
+    v = np.asarray(v, dtype=float)
+    if v.shape[-1:] != (3,):
+        raise ValueError(f"expected (..., 3) rotation vectors, got shape {v.shape}")
+    angle = np.sqrt(np.sum(v * v, axis=-1))
+    small = angle <= SMALL_ROTATION
+    with np.errstate(invalid="ignore", divide="ignore"):  # the branch not taken at angle 0
+        scale = np.where(small, 0.5 - angle ** 2 / 48 + angle ** 4 / 3840, np.sin(angle / 2) / angle)
+    q = np.concatenate([scale[..., None] * v, np.cos(angle / 2)[..., None]], axis=-1)
+    return rotation_from_quaternion(q)
+
+
+def rotvec_from_rotation(R: np.ndarray) -> np.ndarray:
+    """Rotation vectors (axis times angle, angle in [0, pi]) of rotation matrices: (..., 3, 3) -> (..., 3). The
+    formulas of scipy's ``Rotation.from_matrix(R).as_rotvec()`` from :func:`quaternion_from_rotation`'s
+    quaternion (``w >= 0``)."""
+    q = quaternion_from_rotation(R)
+    xyz, w = q[..., :3], q[..., 3]
+    angle = 2 * np.arctan2(np.sqrt(np.sum(xyz * xyz, axis=-1)), w)
+    small = angle <= SMALL_ROTATION
+    with np.errstate(invalid="ignore", divide="ignore"):  # the branch not taken at angle 0
+        scale = np.where(small, 2 + angle ** 2 / 12 + 7 * angle ** 4 / 2880, angle / np.sin(angle / 2))
+    return scale[..., None] * xyz
+
+
 def rotation_angle(R_a: np.ndarray, R_b: np.ndarray) -> np.ndarray:
     """Geodesic angle (radians) between rotations, shapes (..., 3, 3) -> (...)."""
     R_a, R_b = np.asarray(R_a, float), np.asarray(R_b, float)
@@ -201,21 +251,11 @@ def random_rotations(n: int, rng: np.random.Generator) -> np.ndarray:
     """``n`` rotations drawn uniformly on SO(3) as roll/pitch/yaw, shape (n, 3)."""
     q = rng.standard_normal((n, 4))
     q /= np.linalg.norm(q, axis=1, keepdims=True)
-    x, y, z, w = q.T
-    R = np.empty((n, 3, 3))
-    R[:, 0, 0] = 1 - 2 * (y * y + z * z)
-    R[:, 0, 1] = 2 * (x * y - z * w)
-    R[:, 0, 2] = 2 * (x * z + y * w)
-    R[:, 1, 0] = 2 * (x * y + z * w)
-    R[:, 1, 1] = 1 - 2 * (x * x + z * z)
-    R[:, 1, 2] = 2 * (y * z - x * w)
-    R[:, 2, 0] = 2 * (x * z - y * w)
-    R[:, 2, 1] = 2 * (y * z + x * w)
-    R[:, 2, 2] = 1 - 2 * (x * x + y * y)
-    return euler_from_rotation(R)
+    return euler_from_rotation(rotation_from_quaternion(q))
 
 
 __all__ = ["ANGLE_PARAMS", "PARAM_NAMES", "angle_difference", "canonical_pose", "euler_from_quaternion",
            "euler_from_rotation", "invert_transform", "matrix_from_pose", "pose_difference", "pose_error",
            "pose_from_matrix", "quaternion_from_euler", "quaternion_from_rotation", "random_rotations",
-           "rotation_angle", "rotation_entries", "rotation_error", "rotation_from_euler", "wrap_angle"]
+           "rotation_angle", "rotation_entries", "rotation_error", "rotation_from_euler", "rotation_from_quaternion",
+           "rotation_from_rotvec", "rotvec_from_rotation", "wrap_angle"]

@@ -210,6 +210,26 @@ def test_the_cli_imports_nothing_heavy_to_print_help():
     assert not loaded & {"numpy", "scipy", "numba", "cv2", "zenoh", "pydantic", "evopose", "scenarios", "geometry"}
 
 
+#: Packages a camera vehicle does not use, each some megabytes resident once imported (docs/design.md §2,
+#: "Lazy imports"). scipy.linalg is not among them: numba loads it for its BLAS and LAPACK at its first compiled kernel.
+NOT_FOR_A_CAMERA_VEHICLE = {"scipy.spatial", "scipy.sparse", "scipy.special", "scipy.optimize", "scipy.stats",
+                            "scipy.ndimage", "matplotlib", "PIL", "rosbags", "mcap", "foxglove", "websockets",
+                            "cryptography", "agents.bridges", "agents.tools", "agents.experiments"}
+
+
+def test_a_camera_vehicle_warmed_up_has_imported_nothing_it_does_not_use():
+    """Its warm-up runs every path a frame takes (render, extract, search, tracking, a generation between frames),
+    so a heavy import that crept into any of them shows here."""
+    loaded = _loaded_after("from agents.vehicle.agent import load_world; "
+                           "from agents.vehicle.config import AgentConfig; "
+                           "from agents.vehicle.roles import CameraVehicle; "
+                           "config = AgentConfig(fleet='lazy', vehicle='H1', scenario='exp2', share='features'); "
+                           "CameraVehicle.warm_up(config, load_world(config))")
+    assert "evopose.solver" in loaded and "cv2" in loaded  # it did run
+    assert not {m for m in loaded if m in NOT_FOR_A_CAMERA_VEHICLE or m.split(".")[0] in NOT_FOR_A_CAMERA_VEHICLE
+                or ".".join(m.split(".")[:2]) in NOT_FOR_A_CAMERA_VEHICLE}
+
+
 def test_the_problem_file_contract_does_not_pull_in_the_renderer():
     loaded = _loaded_after("import agents.problem.problem_file, agents.problem.solve")
     assert "scenarios.render" not in loaded and "zenoh" not in loaded

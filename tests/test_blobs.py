@@ -9,7 +9,8 @@ import cv2
 import numpy as np
 import pytest
 
-from vision.blobs import MarkPrior, detect_contrast_marks, label_colours, mark_prior
+from vision.blobs import MarkPrior, detect_contrast_marks, mark_prior
+from vision.spot_label import label_colours
 from vision.features import match_to_truth
 from scenarios.render import render_frame
 from scenarios.world import load_scenario
@@ -339,17 +340,18 @@ def test_a_blurred_mark_ringed_by_its_blend_with_the_paint_is_found_and_a_sunlit
     # white past the blend's misfit. Measured: 44 of 46 marks; 42 with the 1 px ring alone and no
     # bleached colours
     import vision.blobs as blobs
+    import vision.spot_label as spot_label
 
     found, visible, detections = _through_random_looks("telephoto", (7, 9))
     assert found >= 44 and found / detections >= 0.9, (found, visible, detections)
     monkeypatch.setattr(blobs, "RING_GAPS_PX", (1.0,))
-    monkeypatch.setattr(blobs, "bleached_misfit", lambda spot, ring, palette, *_: np.full((len(spot), len(palette)),
-                                                                                          np.inf))
+    monkeypatch.setattr(spot_label, "bleached_misfit",
+                        lambda spot, ring, palette, *_: np.full((len(spot), len(palette)), np.inf))
     assert _through_random_looks("telephoto", (7, 9))[0] <= found - 2
 
 
 def test_a_bright_mark_bleached_toward_white_fits_its_paint_and_a_glint_on_the_body_fits_none():
-    from vision.blobs import bleached_misfit
+    from vision.spot_label import bleached_misfit
 
     yellow_body = np.array([0.01, 0.5, 0.8])                            # linear BGR
     palette = np.array([[0.007, 0.72, 0.87], [0.72, 0.64, 0.007], [0.02, 0.51, 0.02], [0.58, 0.02, 0.65]])

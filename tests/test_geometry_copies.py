@@ -90,3 +90,22 @@ def test_pose_error_compares_the_same_rotation_written_two_ways():
     assert float(geometry.rotation_error(other_triple, pose)) < 1e-7
     moved = geometry.pose_error(pose + [0.3, 0.4, 0, 0, 0, np.radians(2)], pose)
     assert moved["position"] == pytest.approx(0.5) and moved["yaw"] == pytest.approx(2.0)
+
+
+def test_rotation_vectors_agree_with_scipy():
+    """geometry's rotation vectors are scipy's ``Rotation.from_rotvec`` / ``as_rotvec`` (which the covariance used
+    before; docs/design.md §2, "Lazy imports"), within rounding, down to tiny angles and up to a half turn."""
+    from scipy.spatial.transform import Rotation
+
+    rng = np.random.default_rng(8)
+    axes = rng.normal(size=(600, 3))
+    axes /= np.linalg.norm(axes, axis=1, keepdims=True)
+    angles = np.concatenate([[0.0, 1e-12, 1e-4, 1e-3, 1.0001e-3], rng.uniform(0, np.pi - 1e-3, 590),
+                             np.pi - rng.uniform(1e-9, 1e-4, 5)])
+    v = axes * angles[:, None]
+    np.testing.assert_allclose(geometry.rotation_from_rotvec(v), Rotation.from_rotvec(v).as_matrix(), atol=1e-14)
+    R = geometry.rotation_from_euler(geometry.random_rotations(500, rng))
+    np.testing.assert_allclose(geometry.rotvec_from_rotation(R), Rotation.from_matrix(R).as_rotvec(), atol=1e-13)
+    np.testing.assert_allclose(geometry.rotvec_from_rotation(geometry.rotation_from_rotvec(v[:-5])), v[:-5],
+                               atol=1e-12)
+    assert geometry.rotvec_from_rotation(np.eye(3)).shape == (3,)

@@ -35,8 +35,8 @@ from cryptography.x509.oid import NameOID
 from agents.cli.main import main
 from agents.runs import pose_rows
 from agents.transport.credentials import create_credentials, fleet_keys
-from agents.transport.session import (MAX_MESSAGE_BYTES, PEER_LISTEN, ROUTER_LISTEN, SessionOptions,
-                                     listen_endpoints, make_config)
+from agents.transport.session import (MAX_MESSAGE_BYTES, PEER_LISTEN, ROUTER_LISTEN, SHARED_MEMORY_KEY,
+                                     SessionOptions, listen_endpoints, make_config)
 from tests.fleet_procs import ROOT, Proc, free_port
 
 VEHICLES = ("H1", "H2", "pioneer")
@@ -264,6 +264,14 @@ def test_defaults_listen_on_loopback_with_multicast_off(tmp_path: Path) -> None:
     key = "transport/link/rx/max_message_size"
     assert json.loads(make_config(SessionOptions(config_file=chosen)).get_json(key)) == 65536
     assert json.loads(make_config(router).get_json(key)) == MAX_MESSAGE_BYTES == 16 * 2**20
+
+
+def test_shared_memory_is_off_unless_the_file_sets_it(tmp_path: Path) -> None:
+    """Zenoh's shared-memory pools held ~45 MB of each agent sharing raw images (agents/transport/session.py)."""
+    assert json.loads(make_config(SessionOptions()).get_json(f"{SHARED_MEMORY_KEY}/enabled")) is False
+    chosen = tmp_path / "z.json5"
+    chosen.write_text('{transport: {shared_memory: {enabled: true, mode: "init"}}}')
+    assert json.loads(make_config(SessionOptions(config_file=chosen)).get_json(f"{SHARED_MEMORY_KEY}/enabled")) is True
 
 
 def _listening(pid: int) -> set[tuple[str, int]]:

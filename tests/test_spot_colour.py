@@ -8,7 +8,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from vision.blobs import _srgb_to_linear, label_colours
+from vision.blobs import _srgb_to_linear
+from vision.spot_label import label_colours
 from vision.spot_colour import chroma_420, label_small_spots
 
 PALETTE = {"yellow": (20, 220, 240), "cyan": (220, 210, 20), "green": (40, 190, 40), "magenta": (200, 40, 210)}
@@ -33,7 +34,7 @@ def _body_with_marks(quality: int = 90, spots: tuple = ()) -> np.ndarray:
 
 
 def _rgb_labels(image: np.ndarray) -> list[str]:
-    """The linear-RGB blend fit (vision.blobs.label_colours) at the same centres: spot pixel and ring median."""
+    """The linear-RGB blend fit (vision.spot_label.label_colours) at the same centres: spot pixel and ring median."""
     lin = _srgb_to_linear(image.astype(np.float32) / 255).astype(float)
     yy, xx = np.mgrid[:image.shape[0], :image.shape[1]]
     spots, rings = [], []

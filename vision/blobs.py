@@ -17,17 +17,19 @@ scale a mark has at the target's distance. So (docs/design.md, "The feature fron
    outline, a wheel, a shadow's border) and whose scale fits a mark, not the body.
 3. **Position** from the response's sub-pixel peak (a quadratic through the 3 x 3 neighbourhood), where the
    luminance carries the full resolution.
-4. **Label** (:func:`label_colours`): which of the model's colours, seen under an unknown brightness ``s``,
-   lies on the line from the background through the observed spot (a blend ``p = a c + (1 - a) b``), in
-   linear light; a confidence from the margin to the second colour. A spot that fits no paint colour (a
-   body corner, a shadow) is dropped. Spots under :data:`SMALL_SPOT_PX` on a body take their label from
+4. **Label** (:func:`vision.spot_label.label_colours`): which of the model's colours, seen under an unknown
+   brightness ``s``, lies on the line from the background through the observed spot (a blend
+   ``p = a c + (1 - a) b``), in linear light; where marks are 3 px and more, a bright spot may also be its colour
+   bleached toward white (a tone curve's highlights); a confidence from the margin to the second colour. A spot
+   that fits no paint colour (a body corner, a shadow) is dropped. Spots under :data:`SMALL_SPOT_PX` on a body take their label from
    :mod:`vision.spot_colour` instead, which models the encoder's 4:2:0 chroma, and drop a spot whose colour
    explains too little of it (the body's own shading).
 5. **Context**: the marks lie on the target's body. Given the body's paint colour (the model's), a candidate
    must lie on or inside a patch of that paint seen under any light (:mod:`vision.body_paint`: the dichromatic
    reflection model, paint plus the light's own colour, and glossy faces touching it); clutter in the marks' own
    hues lies on the ground and is dropped, and so is a spot on the body's outline, which paint does not ring
-   (:data:`MIN_PAINT_AROUND`). Where marks are 3 px and more, a mark is also ringed by *one* paint it stands out
+   (:data:`MIN_PAINT_AROUND`; at 3 px and more, looked for up to :data:`RING_GAPS_PX` out, past a lens's blend of
+   mark and paint). Where marks are 3 px and more, a mark is also ringed by *one* paint it stands out
    from on every side (:data:`MIN_SURROUND`); a contrast peak on an outline (a blend of two paints) is not.
    The scale space is then built only around the body (2.8-3.4x faster on a 640 x 480 frame) and its threshold
    taken from the ground beside it.
@@ -53,6 +55,7 @@ from .mark_scorer import MarkScorer, candidate_features, feature_names, shipped
 from .mark_selection import densest_cluster, one_per_disc, one_scale, same_spots, surrounded
 from .spot_colour import label_small_spots, labels_of, ring_colours, spot_misfits
 from .spot_position import SMALL_SPOT_PX, coverage_centroids, round_peaks
+from .spot_label import label_colours
 
 #: Scale steps per octave of the scale space.
 STEPS_PER_OCTAVE = 3
@@ -69,16 +72,9 @@ MAX_EDGE_RATIO = 40.0
 #: a looser bar instead (0.45 for every spot) gave 0.976 / 0.965 and took the second robot's low-sun precision from
 #: 0.78 to 0.57 (its telephoto g1-low benchmark world; the bleached model leaves it as it was).
 MAX_LABEL_MISFIT = 0.35
-#: Largest blend factor t = 1 / coverage: a spot shows at least 1/MAX_BLEND of its mark's contrast to the ring.
-MAX_BLEND = 6.0
-#: How far below black (linear light) an extrapolated mark colour may reach (noise).
-BLACK_SLACK = 0.02
 #: Least brightness (channel sum, linear) of a fitted mark colour, relative to the image's median brightness (a
 #: mark in the shade of its own body, lit by the sky alone, keeps ~0.25 of a sunlit ground's).
 MIN_RELATIVE_BRIGHTNESS = 0.2
-#: A paint colour whose linear channel sum is under this is a dark paint (black: 0.04): the lit-paint rule of
-#: MIN_RELATIVE_BRIGHTNESS does not apply to it.
-DARK_PAINT = 0.15
 #: Least difference sigma (px) a scale-space level is blurred from the one below by (:func:`contrast_responses`).
 INCREMENTAL_SIGMA = 1.5
 #: Weight of the chroma axes against lightness in the response (CIE Lab units).
@@ -176,80 +172,6 @@ def contrast_responses(lab: np.ndarray, sigmas: np.ndarray) -> np.ndarray:
 def _magnitude(dog: np.ndarray) -> np.ndarray:
     w = np.float32(CHROMA_WEIGHT)
     return np.sqrt(dog[..., 0] ** 2 + w * w * (dog[..., 1] ** 2 + dog[..., 2] ** 2))
-
-
-def bleached_misfit(spot: np.ndarray, ring: np.ndarray, palette_linear: np.ndarray,
-                    min_brightness: float = 0.0) -> np.ndarray:
-    """The misfit (K, C) of each spot (K, 3) brighter than its ring (K, 3) as each paint colour (C, 3) bleached
-    toward white, linear BGR: ``spot = s c + g (1, 1, 1)``, ``s, g >= 0`` (least squares), the residual over
-    ``|s c|``; inf for a spot no brighter than its ring. A film-like tone curve compresses a bright mark's channels
-    toward one another (its highlights lose chroma) as the light's own colour does on a glossy face (the
-    dichromatic model of :mod:`vision.body_paint`); a glint, the ring plus white, is not a paint plus white."""
-    k, c = len(spot), len(palette_linear)
-    misfit = np.full((k, c), np.inf)
-    bright = spot.sum(axis=1) > ring.sum(axis=1)
-    if not bright.any():
-        return misfit
-    p = spot[bright]
-    ones = np.ones(3)
-    for j, colour in enumerate(palette_linear):
-        basis = np.stack([colour, ones], axis=1)                          # (3, 2): [c, w]
-        coef = p @ np.linalg.pinv(basis).T                                # (B, 2)
-        alone = np.maximum(p @ colour / max(float(colour @ colour), 1e-12), 0.0)   # g < 0: the colour alone
-        white = np.maximum(p.mean(axis=1), 0.0)                                     # s < 0: white alone
-        s_ = np.where(coef[:, 1] < 0, alone, np.maximum(coef[:, 0], 0.0))
-        g_ = np.where(coef[:, 1] < 0, 0.0, np.where(coef[:, 0] < 0, white, coef[:, 1]))
-        resid = p - s_[:, None] * colour - g_[:, None]
-        m = np.linalg.norm(resid, axis=1) / np.maximum(s_ * np.linalg.norm(colour), 1e-6)
-        if colour.sum() >= DARK_PAINT:
-            m[s_ * colour.sum() < min_brightness] = np.inf
-        misfit[bright, j] = m
-    return misfit
-
-
-def label_colours(spot: np.ndarray, ring: np.ndarray, palette_linear: np.ndarray,
-                  min_brightness: float = 0.0, bleached: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Which paint colour each spot is (linear BGR): ``spot`` (K, 3) the colour at its centre, ``ring`` (K, 3) its
-    surroundings, ``palette_linear`` (C, 3) the model's colours. A spot blends its mark's colour ``s c`` (``s``
-    the unknown light on it) with the ring: ``ring + t (spot - ring) = s c`` for some ``t >= 1``. Least squares in
-    ``(t, s)`` per colour; the misfit is the residual over ``|s c|``. Returns ``label`` (K,), ``misfit`` (K,) of
-    the best colour and ``confidence`` (K,) in [0, 1]: 1 - best misfit / second misfit. A fitted colour whose
-    brightness (channel sum, linear) is under ``min_brightness`` fits no paint. ``bleached``: a spot brighter than
-    its ring may also be its colour bleached toward white (:func:`bleached_misfit`), where marks are large enough
-    that their centre is the mark's own colour."""
-    k, c = len(spot), len(palette_linear)
-    if k == 0:
-        return np.zeros(0, int), np.zeros(0), np.zeros(0)
-    u = spot - ring                                          # (K, 3)
-    misfit = np.full((k, c), np.inf)
-    for j, colour in enumerate(palette_linear):
-        a = np.stack([u, np.broadcast_to(-colour, u.shape)], axis=2)     # (K, 3, 2): [u, -c] [t, s] = -ring
-        ata = np.einsum("kij,kil->kjl", a, a)
-        atb = np.einsum("kij,ki->kj", a, -ring)
-        det = ata[:, 0, 0] * ata[:, 1, 1] - ata[:, 0, 1] ** 2
-        ok = np.abs(det) > 1e-12
-        t = np.where(ok, (ata[:, 1, 1] * atb[:, 0] - ata[:, 0, 1] * atb[:, 1]) / np.where(ok, det, 1), 0)
-        s = np.where(ok, (ata[:, 0, 0] * atb[:, 1] - ata[:, 0, 1] * atb[:, 0]) / np.where(ok, det, 1), 0)
-        # the mark is at least as far from the ring as the spot (t >= 1), shows it at least MAX_BLEND of its contrast,
-        # and is a colour: no channel below black (a spot darker than a red ring is not cyan)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            to_black = np.where(u < 0, (ring + BLACK_SLACK) / -u, np.inf).min(axis=1)
-        t = np.clip(t, 1.0, np.maximum(np.minimum(to_black, MAX_BLEND), 1.0))
-        s = np.maximum(np.einsum("ki,i->k", ring + t[:, None] * u, colour) / max(float(colour @ colour), 1e-12), 0)
-        resid = ring + t[:, None] * u - s[:, None] * colour
-        misfit[:, j] = np.linalg.norm(resid, axis=1) / np.maximum(s * np.linalg.norm(colour), 1e-6)
-        # lit paint: a spot whose fitted colour is near black is a shadow, a hole, a wheel (any colour fits black at
-        # a small enough s); a dark paint (black marks: the Husky's) is that dark lit, so the rule is not its
-        if colour.sum() >= DARK_PAINT:
-            misfit[s * colour.sum() < min_brightness, j] = np.inf
-    if bleached:
-        misfit = np.minimum(misfit, bleached_misfit(spot, ring, palette_linear, min_brightness))
-    order = np.argsort(misfit, axis=1)
-    best = misfit[np.arange(k), order[:, 0]]
-    second = misfit[np.arange(k), order[:, 1]] if c > 1 else np.full(k, np.inf)
-    with np.errstate(invalid="ignore"):
-        confidence = np.where(np.isfinite(best), np.clip(1.0 - best / np.maximum(second, 1e-9), 0.0, 1.0), 0.0)
-    return order[:, 0], best, confidence
 
 
 @dataclass(frozen=True)
@@ -476,5 +398,5 @@ def _detect(bgr: np.ndarray, lin: np.ndarray, names: tuple[str, ...], palette: M
                          None if features is None else features[order])
 
 
-__all__ = ["ContrastMarks", "MarkPrior", "contrast_responses", "detect_contrast_marks", "label_colours", "mark_prior",
+__all__ = ["ContrastMarks", "MarkPrior", "contrast_responses", "detect_contrast_marks", "mark_prior",
            "one_per_disc", "one_scale", "scales"]

@@ -27,6 +27,13 @@ was found up to 4 s later; :data:`CONNECT_RETRY` (unless the file sets ``connect
 0.25-1 s, so agents are back within about a second of their router. ``connect/timeout_ms`` and
 ``exit_on_failure`` concern the first connection only (a client still fails at once when its router is
 not there at start: Zenoh's default, kept).
+
+Shared memory: Zenoh 1.x by default copies every message over 3 KB into a 16 MiB shared-memory pool of the
+sender, which a peer on the same host maps too. Two agents sharing raw images held both pools resident, about
+45 MB of each agent (``benchmarks/bench_footprint.py``, ``--share raw``: 290 MB at 30 s with it, 245 MB without,
+the same images sent and received). Agents of a fleet run on separate vehicles, where shared memory is not used,
+so sessions turn it off (:data:`SHARED_MEMORY_KEY`) unless the file changes anything in that section (a file
+that sets ``mode: "init"`` or its own ``pool_size`` keeps it on).
 """
 
 from __future__ import annotations
@@ -57,6 +64,8 @@ CONNECT_RETRY = {"period_init_ms": 250, "period_max_ms": 1000, "period_increase_
 #: attachments and other Zenoh traffic of the same size class, e.g. a ROS 2 mirror's image).
 MAX_MESSAGE_BYTES = 2 * max(SIZE_LIMITS.values())
 _MAX_MESSAGE_KEY = "transport/link/rx/max_message_size"
+#: Zenoh's shared-memory section: off unless the file changed it (module doc).
+SHARED_MEMORY_KEY = "transport/shared_memory"
 _ENDPOINT = re.compile(r"[a-z][a-z0-9\-]*/\S+")
 
 
@@ -149,6 +158,8 @@ def make_config(options: SessionOptions) -> zenoh.Config:
     _insert(config, "scouting/multicast/enabled", bool(options.multicast), "multicast")
     if _left_default(config, _MAX_MESSAGE_KEY):
         _insert(config, _MAX_MESSAGE_KEY, MAX_MESSAGE_BYTES, _MAX_MESSAGE_KEY)
+    if _left_default(config, SHARED_MEMORY_KEY):  # the file did not choose: no pools (module doc)
+        _insert(config, f"{SHARED_MEMORY_KEY}/enabled", False, f"{SHARED_MEMORY_KEY}/enabled")
     if _get(config, "connect/retry") is None:  # the file did not choose
         _insert(config, "connect/retry", CONNECT_RETRY, "connect/retry")
     for key, value in options.extra.items():
