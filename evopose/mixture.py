@@ -240,7 +240,7 @@ def mixture_covariance(objective: PoseObjective, pose: np.ndarray, matches: Matc
         return CovarianceEstimate(np.zeros((6, 6)), 0.0, 0, np.zeros((6, 6)))
     sigma = residual_scale(np.linalg.norm(matches.residuals, axis=1), n_free)
     fit = mixture_fit(objective, pose, sigma, false_shares(matches))
-    if fit is None:
+    if fit is None or not np.all(np.isfinite(fit.information)):   # no noise fitted, or no finite information
         return CovarianceEstimate(np.full((6, 6), np.inf), np.inf, 0, np.full((6, 6), np.inf))
     values, vectors = np.linalg.eigh(fit.information)
     information = (vectors * np.clip(values, 0.0, None)) @ vectors.T

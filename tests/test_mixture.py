@@ -3,6 +3,8 @@ point against every mark, and Louis' observed information, which keeps what the 
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 
 from benchmarks.problems import make_paper_scale_problem, make_problem
@@ -64,3 +66,17 @@ def test_the_solver_publishes_the_mixture_covariance():
     objective = PoseObjective(sp.problem)
     expected = mixture_covariance(objective, solution.pose, mutual_matches(objective, solution.pose))
     np.testing.assert_allclose(solution.covariance, expected.matrix, rtol=1e-9, atol=0)
+
+
+def test_information_that_is_not_finite_gives_no_covariance_instead_of_an_error(monkeypatch):
+    """An agent on an unlabelled paper-scale frame once died in ``eigh`` (``LinAlgError: Eigenvalues did not
+    converge``): a fit whose information is not finite now gives no covariance (infinite: not precise, not good)."""
+    import evopose.mixture as mixture
+
+    sp = make_problem("random", np.random.default_rng(41), noise=1.0, clutter=0.0, missing=0.0, size_px=200)
+    objective = PoseObjective(sp.problem)
+    fitted = mixture.mixture_fit
+    monkeypatch.setattr(mixture, "mixture_fit", lambda *args: dataclasses.replace(
+        fitted(*args), information=np.full((6, 6), np.nan)))
+    estimate = mixture_covariance(objective, sp.true_pose, mutual_matches(objective, sp.true_pose))
+    assert not estimate.ok and np.isinf(estimate.matrix).all()

@@ -19,6 +19,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from evopose.cooperative import Cooperation, Estimate, EstimatorState, Knowledge
+from evopose.label_trust import LabelTrust
 from evopose.pose_filter import PoseFilter
 from evopose.trust import judge
 from geometry import canonical_pose, pose_error
@@ -114,6 +115,8 @@ class VehicleState:
     #: the fleet clock's period: the track ages by the frames between the instants its images were taken (None: by
     #: the frame numbers, for a state without a clock)
     frame_period_s: float | None = None
+    #: whose point labels go into eq. (1): their agreement with the good poses so far (evopose/label_trust.py)
+    labels: LabelTrust = field(default_factory=LabelTrust)
 
     @property
     def best(self) -> np.ndarray | None:
@@ -198,7 +201,9 @@ def step(state: VehicleState, inputs: FrameInputs) -> tuple[VehicleState, list[M
     resumed later and its best so far is published, not good.
     """
     own, policy = inputs.own, state.policy
-    views, used = build_views([own, *inputs.mates])
+    sent = [own, *inputs.mates]
+    views, used = build_views([v if v.labels is None or state.labels.labelled(v.vehicle) else replace(v, labels=None)
+                               for v in sent])
     if not views:
         return state, [], FrameEvent.none(state.vehicle, inputs.index, len(own.points), "too few image points")
     t0 = inputs.clock()
@@ -216,8 +221,10 @@ def step(state: VehicleState, inputs: FrameInputs) -> tuple[VehicleState, list[M
     published = state.published or PoseFilter.of_rules(state.cooperation.options.confidence)
     taken = inputs.index if state.frame_period_s is None else own.stamp_ns / (state.frame_period_s * 1e9)
     published, out = published.step(taken, sol.pose, sol.covariance, judge(sol).good)
-    state = replace(state, estimator=estimator, published=published)
     trust = judge(sol, searching=estimator.searching, published=out)
+    labelled, _ = build_views(sent)   # the labels as sent, measured against a good pose
+    state = replace(state, estimator=estimator, published=published,
+                    labels=state.labels.after(state.cooperation.model, labelled, used, out.pose, trust.good))
     pose = canonical_pose(out.pose)  # pitch within +-90 deg
     mates = tuple(v for v in used if v != state.vehicle)
     messages: list[Message | Hint] = [PoseEstimate(
