@@ -46,6 +46,9 @@ from .report import provenance
 
 DEFAULT_OUT = Path(__file__).resolve().parent / "results" / "photoreal_looks.md"
 FRONT_ENDS = ("contrast", "contrast-fixed", "marks")
+#: A look named ``random-<seed>`` is :func:`scenarios.looks.random_look` of that seed (for the training worlds,
+#: where rules are chosen: ``--random-looks 16`` takes seeds 0-15).
+RANDOM = "random-"
 
 
 def _scale_of(world_name: str) -> str:
@@ -60,14 +63,16 @@ def evaluate(directory: Path, look: str, front_ends: tuple[str, ...] = FRONT_END
     from vision.blobs import SMALL_SPOT_PX, detect_contrast_marks, mark_prior
     from vision.features import colour_ranges, detect_colour_marks, match_to_truth
     from scenarios.dataset import open_dataset
-    from scenarios.looks import look_spec
+    from scenarios.looks import apply_look, look_spec, random_look
     from scenarios.photoreal.develop import camera_model_of
 
     cv2.setNumThreads(1)
     dataset = open_dataset(directory)
     world = dataset.world()
     area = world.bounds()
-    spec = look_spec(camera_model_of(world), look)
+    base = camera_model_of(world)
+    spec = (apply_look(base, random_look(np.random.default_rng(int(look.removeprefix(RANDOM)))))
+            if look.startswith(RANDOM) else look_spec(base, look))
     counts = {name: np.zeros(5, int) for name in front_ends}
     seconds = {name: 0.0 for name in front_ends}
     for cam in dataset.cameras:
@@ -154,13 +159,17 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("datasets", nargs="+", type=Path, help="Cycles dataset directories with raw/*.exr")
     parser.add_argument("--looks", default=",".join(LOOKS), help="comma-separated look names (default: all)")
+    parser.add_argument("--random-looks", type=int, default=0,
+                        help="instead of the named looks, this many random looks (seeds 0..N-1: random-<seed>)")
     parser.add_argument("--front-ends", default=",".join(FRONT_ENDS))
     parser.add_argument("--jobs", type=int, default=2)
     parser.add_argument("--frames", type=int, default=None, help="the first N frames of each dataset (default: all)")
     parser.add_argument("--out", type=Path, default=DEFAULT_OUT)
     args = parser.parse_args(argv)
     looks = [lk.strip() for lk in args.looks.split(",") if lk.strip()]
-    unknown = [lk for lk in looks if lk not in LOOKS]
+    if args.random_looks > 0:
+        looks = [f"{RANDOM}{seed}" for seed in range(args.random_looks)]
+    unknown = [lk for lk in looks if lk not in LOOKS and not lk.startswith(RANDOM)]
     if unknown:
         parser.error(f"unknown look(s) {', '.join(unknown)}; known: {', '.join(LOOKS)}")
     front_ends = tuple(f.strip() for f in args.front_ends.split(",") if f.strip())
