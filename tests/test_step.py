@@ -249,3 +249,20 @@ def test_slot_schedule_keeps_the_rate_and_makes_up_at_most_a_burst():
     assert sum(schedule.due(10.0) for _ in range(100)) == 20
     plain = SlotSchedule(200.0)  # burst 1: a late call does not lower the rate, and nothing is made up
     assert plain.due(0.0) and plain.due(0.007) and not plain.due(0.008) and plain.due(0.010)
+
+
+def test_a_source_whose_labels_disagreed_with_the_good_poses_goes_into_eq_1_unlabelled(paper_scale):
+    # evopose/label_trust.py: H2's labels were measured wrong at earlier good poses; H1's right
+    from evopose.label_trust import LabelTrust
+
+    scenario, frames = paper_scale
+    f1, f2 = frames["H1"][0], frames["H2"][0]
+    own = own_view("H1", f1.stamp_ns, f1.camera, f1.points, f1.labels)
+    mate = own_view("H2", f2.stamp_ns, f2.camera, f2.points, f2.labels)
+    inputs = FrameInputs(0, own, mates=(mate,))
+    measured = LabelTrust(right={"H1": 30, "H2": 5}, matched={"H1": 30, "H2": 30})
+    _, _, event = step(replace(_state(scenario, "H1", "features"), labels=measured), inputs)
+    assert event.views == ("H1", "H2") and event.unlabelled == ("H2",)
+    assert event.to_json()["unlabelled"] == ["H2"]
+    _, _, trusting = step(_state(scenario, "H1", "features"), inputs)     # unmeasured: both used
+    assert trusting.unlabelled == () and trusting.to_json()["unlabelled"] == []

@@ -35,6 +35,9 @@ class FrameEvent:
     stamp_ns: int = 0
     views: tuple[str, ...] = ()
     views_of_this_instant: bool = True
+    #: the views whose point labels did not go into eq. (1) (their source's labels disagreed with the team's good
+    #: poses, or none came while the search stalled: evopose/label_trust.py)
+    unlabelled: tuple[str, ...] = ()
     knowledge: tuple[str, ...] = ()
     pose: tuple[float, ...] | None = None
     fitness: float = float("nan")
@@ -72,7 +75,8 @@ class FrameEvent:
         else:
             out = {"event": "frame", "vehicle": self.vehicle, "frame": self.frame, "stamp_ns": self.stamp_ns,
                    "points": self.points, "views": list(self.views),
-                   "views_of_this_instant": self.views_of_this_instant, "knowledge": list(self.knowledge),
+                   "views_of_this_instant": self.views_of_this_instant, "unlabelled": list(self.unlabelled),
+                   "knowledge": list(self.knowledge),
                    "pose": pose_dict(self.pose), "fitness": self.fitness, "mismatch": self.mismatch,
                    "trust": self.trust.level, "good": self.trust.good, "converged": self.trust.converged,
                    "confident": self.trust.confident, "precise": self.trust.precise,

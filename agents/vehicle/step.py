@@ -202,8 +202,8 @@ def step(state: VehicleState, inputs: FrameInputs) -> tuple[VehicleState, list[M
     """
     own, policy = inputs.own, state.policy
     sent = [own, *inputs.mates]
-    views, used = build_views([v if v.labels is None or state.labels.labelled(v.vehicle) else replace(v, labels=None)
-                               for v in sent])
+    dropped = {v.vehicle for v in sent if v.labels is not None and not state.labels.labelled(v.vehicle)}
+    views, used = build_views([replace(v, labels=None) if v.vehicle in dropped else v for v in sent])
     if not views:
         return state, [], FrameEvent.none(state.vehicle, inputs.index, len(own.points), "too few image points")
     t0 = inputs.clock()
@@ -238,6 +238,7 @@ def step(state: VehicleState, inputs: FrameInputs) -> tuple[VehicleState, list[M
         vehicle=state.vehicle, frame=inputs.index, points=len(own.points), stamp_ns=own.stamp_ns, views=tuple(used),
         # a team-mate's view of an earlier instant (it was late) differs from the one its owner used
         views_of_this_instant=all(m.stamp_ns == own.stamp_ns for m in inputs.mates if m.vehicle in used),
+        unlabelled=tuple(v for v in used if v in dropped),
         knowledge=tuple(k.name for k in inputs.knowledge), pose=tuple(float(v) for v in pose),
         fitness=float(sol.fitness), mismatch=estimate.mismatch, trust=trust, solved=estimate.solved,
         from_hint=bool(sol.from_hint), seconds=seconds,
