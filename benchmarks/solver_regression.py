@@ -82,8 +82,8 @@ def side_by_side(commit: str, repeats: int, progress=print) -> dict[str, dict]:
     """This code's solve times against ``commit``'s on the same suite, alternating child processes: per group the
     ratio of the suite's total time (each problem's least time over the repeats, summed), and the noise (spread of
     the repeats' own ratios). Not the ratio of the medians: a group's solve times fall in clusters (problems solved
-    at once, problems that restart), and a cost of 0.4 ms a problem (the marginal likelihood's covariance, 7242962)
-    moved the median problem from one cluster to the next, 47 -> 55 ms, while the suite took 1.05x as long."""
+    at once, problems that restart), and a cost of 0.4 ms a problem can move the median problem from one cluster to
+    the next (47 to 55 ms on the telephoto boxes) while the suite takes 1.05x as long."""
     tmp = Path(tempfile.mkdtemp(prefix="solver-regression-"))
     tree = tmp / "reference"
     subprocess.run(["git", "worktree", "add", "--detach", str(tree), commit], cwd=ROOT, check=True,

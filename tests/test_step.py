@@ -264,5 +264,9 @@ def test_a_source_whose_labels_disagreed_with_the_good_poses_goes_into_eq_1_unla
     _, _, event = step(replace(_state(scenario, "H1", "features"), labels=measured), inputs)
     assert event.views == ("H1", "H2") and event.unlabelled == ("H2",)
     assert event.to_json()["unlabelled"] == ["H2"]
+    # the same search as on H2's points sent without labels
+    _, _, untyped = step(_state(scenario, "H1", "features"), replace(inputs, mates=(replace(mate, labels=None),)))
+    assert event.fitness == untyped.fitness and event.pose == untyped.pose
     _, _, trusting = step(_state(scenario, "H1", "features"), inputs)     # unmeasured: both used
     assert trusting.unlabelled == () and trusting.to_json()["unlabelled"] == []
+    assert trusting.fitness != untyped.fitness                              # H2's labels do change the search

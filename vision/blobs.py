@@ -65,9 +65,10 @@ K_SIGMA = 6.0
 MAX_EDGE_RATIO = 40.0
 #: Largest misfit of a label: distance of the fitted paint colour from the line through background and spot,
 #: as a fraction of the colour's brightness. Where marks are 3 px and more, a spot brighter than its ring may also be
-#: its paint bleached toward white (:func:`bleached_misfit`): a film-like tone curve pulls bright marks' channels
+#: its paint bleached toward white (:func:`vision.spot_label.bleached_misfit`): a film-like tone curve pulls bright marks' channels
 #: together (highlights lose chroma) past what the look's estimate undoes. Through 16 random looks
-#: (scenarios.looks.random_look, seeds 0-15) on the telephoto training worlds t1 and t2 (never the benchmark's), with
+#: (`bench_photoreal_looks --random-looks 16 --frames 2` on the telephoto training worlds t1 and t2, never the
+#: benchmark's; the alternatives set by hand), with
 #: RING_GAPS_PX: recall / precision 0.962 / 0.973 without it, 0.978 / 0.971 with it (the worst look 0.875 -> 0.924);
 #: a looser bar instead (0.45 for every spot) gave 0.976 / 0.965 and took the second robot's low-sun precision from
 #: 0.78 to 0.57 (its telephoto g1-low benchmark world; the bleached model leaves it as it was).
@@ -112,8 +113,9 @@ MIN_SURROUND = 0.5
 #: Where marks are 3 px and more, the ring of MIN_PAINT_AROUND is looked for this many pixels out (the best of them
 #: counts): a lens's blur rings a mark with its blend with the paint first (a cyan mark on red paint blends to grey,
 #: which is no paint), then with the paint. Through 16 random looks (lens blur 0-1.5 px; the telephoto training
-#: worlds t1, t2, seeds 0-15; never the benchmark's) recall / precision 0.943 / 0.972 at 1 px alone, 0.962 / 0.973
-#: at 1, 2 and 3 px (the worst look 0.769 -> 0.875). The surround rule's ring (MIN_SURROUND) stays at 2 px: looked
+#: worlds t1, t2: `bench_photoreal_looks --random-looks 16 --frames 2` with the constants set by hand; never the
+#: benchmark's worlds) recall / precision 0.943 / 0.972 at 1 px alone, 0.962 / 0.973 at 1, 2 and 3 px (the worst
+#: look 0.769 -> 0.875). The surround rule's ring (MIN_SURROUND) stays at 2 px: looked
 #: for further out too, it let through peaks where the second robot's body meets its black plate (its committed
 #: telephoto frames, precision 0.90 -> 0.82; the same veto that kept MIN_PAINT_AROUND), so that robot is not held
 #: out from this choice.

@@ -201,9 +201,9 @@ def step(state: VehicleState, inputs: FrameInputs) -> tuple[VehicleState, list[M
     resumed later and its best so far is published, not good.
     """
     own, policy = inputs.own, state.policy
-    sent = [own, *inputs.mates]
-    dropped = {v.vehicle for v in sent if v.labels is not None and not state.labels.labelled(v.vehicle)}
-    views, used = build_views([replace(v, labels=None) if v.vehicle in dropped else v for v in sent])
+    labelled, used = build_views([own, *inputs.mates])   # the labels as sent: measured against a good pose
+    dropped = {v for v, view in zip(used, labelled) if view.labels is not None and not state.labels.labelled(v)}
+    views = [replace(view, labels=None) if v in dropped else view for v, view in zip(used, labelled)]
     if not views:
         return state, [], FrameEvent.none(state.vehicle, inputs.index, len(own.points), "too few image points")
     t0 = inputs.clock()
@@ -222,7 +222,6 @@ def step(state: VehicleState, inputs: FrameInputs) -> tuple[VehicleState, list[M
     taken = inputs.index if state.frame_period_s is None else own.stamp_ns / (state.frame_period_s * 1e9)
     published, out = published.step(taken, sol.pose, sol.covariance, judge(sol).good)
     trust = judge(sol, searching=estimator.searching, published=out)
-    labelled, _ = build_views(sent)   # the labels as sent, measured against a good pose
     state = replace(state, estimator=estimator, published=published,
                     labels=state.labels.after(state.cooperation.model, labelled, used, out.pose, trust.good))
     pose = canonical_pose(out.pose)  # pitch within +-90 deg
