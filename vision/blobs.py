@@ -21,9 +21,9 @@ scale a mark has at the target's distance. So (docs/design.md, "The feature fron
    brightness ``s``, lies on the line from the background through the observed spot (a blend
    ``p = a c + (1 - a) b``), in linear light; where marks are 3 px and more, a bright spot may also be its colour
    bleached toward white (a tone curve's highlights); a confidence from the margin to the second colour. A spot
-   that fits no paint colour (a body corner, a shadow) is dropped. Spots under :data:`SMALL_SPOT_PX` on a body take their label from
-   :mod:`vision.spot_colour` instead, which models the encoder's 4:2:0 chroma, and drop a spot whose colour
-   explains too little of it (the body's own shading).
+   that fits no paint colour (a body corner, a shadow) is dropped. Spots under :data:`SMALL_SPOT_PX` on a body
+   take their label from :mod:`vision.spot_colour` instead, which models the encoder's 4:2:0 chroma, and drop a
+   spot whose colour explains too little of it (the body's own shading).
 5. **Context**: the marks lie on the target's body. Given the body's paint colour (the model's), a candidate
    must lie on or inside a patch of that paint seen under any light (:mod:`vision.body_paint`: the dichromatic
    reflection model, paint plus the light's own colour, and glossy faces touching it); clutter in the marks' own
@@ -65,8 +65,8 @@ K_SIGMA = 6.0
 MAX_EDGE_RATIO = 40.0
 #: Largest misfit of a label: distance of the fitted paint colour from the line through background and spot,
 #: as a fraction of the colour's brightness. Where marks are 3 px and more, a spot brighter than its ring may also be
-#: its paint bleached toward white (:func:`vision.spot_label.bleached_misfit`): a film-like tone curve pulls bright marks' channels
-#: together (highlights lose chroma) past what the look's estimate undoes. Through 16 random looks
+#: its paint bleached toward white (:func:`vision.spot_label.bleached_misfit`): a film-like tone curve pulls bright
+#: marks' channels together (highlights lose chroma) past what the look's estimate undoes. Through 16 random looks
 #: (`bench_photoreal_looks --random-looks 16 --frames 2` on the telephoto training worlds t1 and t2, never the
 #: benchmark's; the alternatives set by hand), with
 #: RING_GAPS_PX: recall / precision 0.962 / 0.973 without it, 0.978 / 0.971 with it (the worst look 0.875 -> 0.924);
