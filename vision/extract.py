@@ -23,8 +23,10 @@ import numpy as np
 from evopose import Bounds, Camera
 from vision.blobs import MarkPrior, detect_contrast_marks, mark_prior
 from vision.camera_look import LookTracker, estimate_look
+from vision.label_chroma import LabelChromaGate, spot_chroma
 from vision.features import colour_ranges, detect_colour_marks, detect_corners, x_junctions
 from vision.mark_scorer import MarkScorer, feature_names
+from vision.spot_position import SMALL_SPOT_PX
 from scenarios.fleet import FEATURE_KINDS
 from scenarios.target import TargetModel
 
@@ -70,7 +72,8 @@ def feature_extractor(kind: str, target: TargetModel, area: Bounds | None = None
                       scorer: MarkScorer | None = None) -> FeatureExtractor:
     """The :class:`FeatureExtractor` of ``kind`` (one of :data:`FEATURE_KINDS`) for ``target``: ``marks`` and
     ``contrast`` label each mark with its colour's index in the model's palette (the order of
-    :meth:`scenarios.target.TargetModel.colour_labels`); ``area`` is the operating area (world x, y, z bounds of
+    :meth:`scenarios.target.TargetModel.colour_labels`), except where a camera's 2-4 px marks keep too little of
+    their colour for a label (``contrast``: :class:`vision.label_chroma.LabelChromaGate`, labels None); ``area`` is the operating area (world x, y, z bounds of
     the target) from which ``contrast`` derives the marks' size in each camera's image. ``scorer``: the mark scorer
     ``contrast`` takes for 2-4 px marks (default: the shipped one, :mod:`vision.mark_scorer`, for any palette);
     ValueError when it was fitted on other features than the front-end computes."""
@@ -94,6 +97,7 @@ def feature_extractor(kind: str, target: TargetModel, area: Bounds | None = None
                          f"{', '.join(feature_names(tuple(palette)))}")
 
     looks: dict[tuple, LookTracker] = {}   # per camera (its intrinsics): a camera keeps its look
+    gates: dict[tuple, LabelChromaGate] = {}   # and its encoder: whether its 2-4 px marks keep their colour
 
     def contrast_marks(image: np.ndarray, camera: Camera | None = None) -> tuple[np.ndarray, np.ndarray]:
         prior = MarkPrior() if camera is None or area is None else mark_prior(
@@ -102,7 +106,11 @@ def feature_extractor(kind: str, target: TargetModel, area: Bounds | None = None
         tracker = looks.setdefault(key, LookTracker(every=LOOK_EVERY))
         look = tracker.update(estimate_look(image, body, prior.extent_px)) if tracker.due() else tracker.current()
         found = detect_contrast_marks(image, palette, prior, body=body, scorer=scorer or "shipped", look=look)
-        return found.points, found.labels
+        if prior.radius_px[1] >= SMALL_SPOT_PX:
+            return found.points, found.labels
+        gate = gates.setdefault(key, LabelChromaGate())
+        carried = gate.update(spot_chroma(image, found.points, found.radius, look))
+        return found.points, found.labels if carried else None
 
     return contrast_marks
 
