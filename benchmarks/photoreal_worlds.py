@@ -22,6 +22,12 @@ robot, their gimbals on it (``look_at``), the crate and the clutter:
 and the lightings high and low at both scales, extending ``exp2-photoreal-husky`` and
 ``exp2-photoreal-telephoto-husky`` (the Pioneer's worlds with only the target's model changed).
 
+``--set palettes`` writes 12 *training* worlds of recoloured robots at the paper's scale (the training geometries
+t1-t6 under the mid and dawn suns): each world's robot has the Pioneer's shape and marks, a body paint and four mark
+paints of its own (:func:`random_paints`, seeded by the world; its model file beside the world in ``models/``), so
+that what is fitted at the paper's scale (the mark scorer) sees other bodies and palettes than the Pioneer's. Neither
+the Pioneer's benchmark worlds nor the second robot are among them.
+
 ``--render`` renders every world (``<out>/<world name>/``, the Cycles engine) and, per scale, the g1-high world
 without its target (``<out>/<scale>-absent/``, absent-target frames; for ``--set husky`` too: the same scene, its
 ``model.yaml`` the Husky's, so a front-end looks there for the Husky's palette). Each dataset resumes where it stopped, so an
@@ -31,11 +37,13 @@ interrupted run is continued by running the command again. A line per dataset re
 from __future__ import annotations
 
 import argparse
+import colorsys
 import math
 import sys
 import time
 from pathlib import Path
 
+import numpy as np
 import yaml
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -71,13 +79,17 @@ TRAIN_LIGHTINGS = {
 }
 #: The second marked target's shipped worlds per scale (``--set husky``): the Pioneer's with the Husky-like UGV.
 HUSKY_SCALES = {"paper": "exp2-photoreal-husky", "telephoto": "exp2-photoreal-telephoto-husky"}
+#: The recoloured training robots' folder (``--set palettes``), the model they recolour and the Pioneer's body paint.
+PALETTE_WORLDS = ROOT / "benchmarks" / "worlds" / "photoreal-palettes"
+PALETTE_BASE_MODEL = ROOT / "scenarios" / "models" / "pioneer.yaml"
 #: World sets: folder, geometries, lightings, scales.
 SETS = {"benchmark": (WORLDS, GEOMETRIES, LIGHTINGS, tuple(SCALES)),
         "train": (ROOT / "benchmarks" / "worlds" / "photoreal-train", TRAIN_GEOMETRIES, TRAIN_LIGHTINGS, tuple(SCALES)),
         "husky": (ROOT / "benchmarks" / "worlds" / "photoreal-husky", GEOMETRIES,
-                  {k: LIGHTINGS[k] for k in ("high", "low")}, tuple(SCALES))}
+                  {k: LIGHTINGS[k] for k in ("high", "low")}, tuple(SCALES)),
+        "palettes": (PALETTE_WORLDS, TRAIN_GEOMETRIES, {k: TRAIN_LIGHTINGS[k] for k in ("mid", "dawn")}, ("paper",))}
 #: Per set: the shipped world each scale extends and the worlds' name prefix (default: SCALES, "photoreal").
-SET_BASES = {"husky": (HUSKY_SCALES, "photoreal-husky")}
+SET_BASES = {"husky": (HUSKY_SCALES, "photoreal-husky"), "palettes": (SCALES, "photoreal-palettes")}
 #: The sets whose ``--render`` adds, per scale, the g1-high world without its target.
 ABSENT_SETS = ("benchmark", "husky")
 #: The gimbals' aim (the robot's centre).
@@ -96,6 +108,49 @@ def _vehicle(name: str, rng_m: float, elevation_deg: float, azimuth_deg: float) 
     return {"name": name, "trajectory": {"start": {"x": x, "y": y, "z": z, "yaw": yaw}}}
 
 
+def _bgr(hue: float, saturation: float, value: float) -> list[int]:
+    r, g, b = colorsys.hsv_to_rgb(hue % 1.0, saturation, value)
+    return [int(round(255 * b)), int(round(255 * g)), int(round(255 * r))]
+
+
+def random_paints(seed: int) -> tuple[list[int], list[list[int]]]:
+    """A body paint and four mark paints (BGR), seeded: the body any hue, saturation 0.45-0.9, value 0.45-0.95; the
+    marks' hues at least 45 deg from the body's and from one another, saturation 0.55-1, value 0.55-1, one of them
+    black or white in a quarter of the robots (labs mark with those too)."""
+    rng = np.random.default_rng([32, seed])
+    body_hue = float(rng.uniform())
+    body = _bgr(body_hue, float(rng.uniform(0.45, 0.9)), float(rng.uniform(0.45, 0.95)))
+    hues: list[float] = []
+    while len(hues) < 4:
+        h = float(rng.uniform())
+        if all(min(abs(h - o) % 1.0, 1 - abs(h - o) % 1.0) >= 45 / 360 for o in [body_hue, *hues]):
+            hues.append(h)
+        elif len(hues) < 4 and rng.uniform() < 0.02:   # a crowded wheel: settle for a nearer hue
+            hues.append(h)
+    marks = [_bgr(h, float(rng.uniform(0.55, 1.0)), float(rng.uniform(0.55, 1.0))) for h in hues]
+    if rng.uniform() < 0.25:
+        marks[int(rng.integers(4))] = [30, 30, 30] if rng.uniform() < 0.5 else [235, 235, 235]
+    return body, marks
+
+
+def recoloured_model(seed: int) -> dict:
+    """The Pioneer's model file (shape, parts, marks) with :func:`random_paints` ``seed``'s body and mark paints
+    (marks named ``paint0``-``paint3`` in the Pioneer's colour order)."""
+    doc = yaml.safe_load(PALETTE_BASE_MODEL.read_text(encoding="utf-8"))
+    body, marks = random_paints(seed)
+    names = {old: f"paint{i}" for i, old in enumerate(doc["colours"])}
+    old_body = doc["parts"][0]["colour"]
+    doc["name"] = f"recoloured-{seed}"
+    doc["description"] = f"the Pioneer-2 DX's shape and marks recoloured (benchmarks/photoreal_worlds.py, seed {seed})"
+    doc["colours"] = {names[old]: colour for old, colour in zip(doc["colours"], marks)}
+    for part in doc["parts"]:
+        if part["colour"] == old_body:
+            part["colour"] = body
+    for mark in doc["marks"]:
+        mark["colour"] = names[mark["colour"]]
+    return doc
+
+
 def world_document(scale: str, geometry: str, lighting: str, world_set: str = "benchmark") -> dict:
     """The world file of one combination (a mapping that ``extends`` the scale's shipped world)."""
     _, geometries, lightings, _ = SETS[world_set]
@@ -110,6 +165,8 @@ def world_document(scale: str, geometry: str, lighting: str, world_set: str = "b
     if g is not None:
         doc["target"] = {"trajectory": {"start": {"yaw": g["yaw"]}}}
         doc["vehicles"] = [_vehicle(v, *g[v]) for v in ("H1", "H2")]
+    if world_set == "palettes":
+        doc.setdefault("target", {})["model"] = f"models/{name}.yaml"
     return doc
 
 
@@ -125,6 +182,11 @@ def write_worlds(world_set: str = "benchmark") -> list[Path]:
                 doc = world_document(scale, geometry, lighting, world_set)
                 path = folder / f"{doc['name']}.yaml"
                 header = "# Generated by benchmarks/photoreal_worlds.py: edit that, not this.\n"
+                if world_set == "palettes":
+                    model = folder / doc["target"]["model"]
+                    model.parent.mkdir(parents=True, exist_ok=True)
+                    model.write_text(header + yaml.safe_dump(recoloured_model(len(paths)), sort_keys=False, width=120,
+                                                             default_flow_style=None), encoding="utf-8")
                 path.write_text(header + yaml.safe_dump(doc, sort_keys=False, width=120, default_flow_style=None), encoding="utf-8")
                 paths.append(path)
     return paths
@@ -139,7 +201,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--only", default="", help="render only the worlds whose name contains this")
     parser.add_argument("--set", dest="world_set", choices=tuple(SETS), default="benchmark",
                         help="the benchmark's worlds, the training worlds (other geometries and suns), or the second "
-                             "marked target's (husky: the Husky-like UGV, high and low sun)")
+                             "marked target's (husky: the Husky-like UGV, high and low sun), or recoloured training "
+                             "robots (palettes)")
     args = parser.parse_args(argv)
     paths = write_worlds(args.world_set)
     folder, _, _, scales = SETS[args.world_set]
