@@ -55,10 +55,12 @@ def _scale_of(world_name: str) -> str:
     return "telephoto" if "telephoto" in world_name else "paper"
 
 
-def evaluate(directory: Path, look: str, front_ends: tuple[str, ...] = FRONT_ENDS, frames: int | None = None) -> dict:
+def evaluate(directory: Path, look: str, front_ends: tuple[str, ...] = FRONT_ENDS, frames: int | None = None,
+             scorer: Path | None = None) -> dict:
     """Counts ``{front_end: [visible marks, found, detections, correct, right labels]}`` of one dataset developed
     through ``look`` (its first ``frames`` frames; None: all), with the dataset's world name, scale and the seconds
-    per front-end."""
+    per front-end. ``scorer``: a mark scorer file the contrast front-ends take (None: the shipped one)."""
+    from vision import mark_scorer
     from scenarios.photoreal.develop import develop_exr
     from vision.blobs import SMALL_SPOT_PX, detect_contrast_marks, mark_prior
     from vision.features import colour_ranges, detect_colour_marks, match_to_truth
@@ -75,6 +77,7 @@ def evaluate(directory: Path, look: str, front_ends: tuple[str, ...] = FRONT_END
             if look.startswith(RANDOM) else look_spec(base, look))
     counts = {name: np.zeros(5, int) for name in front_ends}
     seconds = {name: 0.0 for name in front_ends}
+    fitted = "shipped" if scorer is None else mark_scorer.load(scorer)
     for cam in dataset.cameras:
         for k in range(dataset.frames if frames is None else min(frames, dataset.frames)):
             exr = Path(directory) / cam / "raw" / f"{k:06d}.exr"
@@ -92,7 +95,7 @@ def evaluate(directory: Path, look: str, front_ends: tuple[str, ...] = FRONT_END
                     det = detect_colour_marks(image, colour_ranges(world.model.palette))
                 else:
                     det = detect_contrast_marks(image, world.model.palette, prior, body=world.model.body_colour,
-                                                look="auto" if name == "contrast" else None)
+                                                look="auto" if name == "contrast" else None, scorer=fitted)
                 seconds[name] += time.perf_counter() - start
                 found, _ = match_to_truth(det.points, uv[whole], match_px)
                 correct, _ = match_to_truth(det.points, uv, match_px)
@@ -165,7 +168,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--jobs", type=int, default=2)
     parser.add_argument("--frames", type=int, default=None, help="the first N frames of each dataset (default: all)")
     parser.add_argument("--out", type=Path, default=DEFAULT_OUT)
+    parser.add_argument("--scorer", type=Path, default=None,
+                        help="a mark scorer file (evopose train-scorer) for the contrast front-ends (default: shipped)")
     args = parser.parse_args(argv)
+    if args.scorer is not None and not args.scorer.is_file():
+        parser.error(f"--scorer: no file {args.scorer}")
     looks = [lk.strip() for lk in args.looks.split(",") if lk.strip()]
     if args.random_looks > 0:
         looks = [f"{RANDOM}{seed}" for seed in range(args.random_looks)]
@@ -181,7 +188,8 @@ def main(argv: list[str] | None = None) -> int:
     jobs = [(d, lk) for lk in looks for d in args.datasets]
     rows = []
     with ProcessPoolExecutor(max_workers=max(1, args.jobs)) as pool:
-        for row in pool.map(evaluate, *zip(*jobs), [front_ends] * len(jobs), [args.frames] * len(jobs)):
+        for row in pool.map(evaluate, *zip(*jobs), [front_ends] * len(jobs), [args.frames] * len(jobs),
+                            [args.scorer] * len(jobs)):
             rows.append(row)
             print(f"{row['dataset']:34s} {row['look']:12s} " + "  ".join(
                 "{} {:.2f}/{:.2f}/{:.2f}".format(n, *_rates(row["counts"][n])) for n in front_ends), flush=True)
