@@ -137,14 +137,12 @@ def body_chroma(q: np.ndarray, usable: np.ndarray, neutral: np.ndarray, spread: 
         return None, 0
     closed = cv2.morphologyEx(mask.astype(np.uint8), cv2.MORPH_CLOSE, np.ones((3, 3), np.uint8))
     count, labels, stats, _ = cv2.connectedComponentsWithStats(closed, connectivity=8)
-    best, best_n = 0, 0
-    for j in range(1, count):
-        x, y, w, h, _ = stats[j]
-        if extent_px is not None and max(w, h) > 2.0 * extent_px + 8:
-            continue   # larger than the target can be: a wall, a floor in the body's hue
-        n = int(np.count_nonzero(mask & (labels == j)))
-        if n > best_n:
-            best, best_n = j, n
+    pixels = np.bincount(labels[mask], minlength=count)   # each patch's own pixels (the closing's left out)
+    pixels[0] = 0
+    if extent_px is not None:   # larger than the target can be: a wall, a floor in the body's hue
+        pixels[np.maximum(stats[:, cv2.CC_STAT_WIDTH], stats[:, cv2.CC_STAT_HEIGHT]) > 2.0 * extent_px + 8] = 0
+    best = int(np.argmax(pixels))   # the first of the largest
+    best_n = int(pixels[best])
     if best_n < MIN_BODY_PIXELS:
         return None, 0
     patch = mask & (labels == best)
