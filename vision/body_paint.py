@@ -91,16 +91,21 @@ def paint_around(paint: np.ndarray, points: np.ndarray, radius: np.ndarray, gap:
     (K,) px. A mark on the body is ringed by paint (on a face's outline, about half of it); a spot on the body's
     outline or on the ground beside it is not (float (K,))."""
     h, w = paint.shape
+    points, radius = np.asarray(points, float).reshape(-1, 2), np.asarray(radius, float).reshape(-1)
     share = np.zeros(len(points))
-    for i, ((u, v), r) in enumerate(zip(np.asarray(points, float), np.asarray(radius, float))):
-        reach = int(np.ceil(r + gap + 1))
-        yy, xx = np.mgrid[-reach:reach + 1, -reach:reach + 1]
-        cu, cv = int(round(u)), int(round(v))
-        d = np.hypot(xx + cu - u, yy + cv - v)
-        ring = (d >= r + gap) & (d <= r + gap + 1)
-        ys, xs = yy[ring] + cv, xx[ring] + cu
-        inside = (ys >= 0) & (ys < h) & (xs >= 0) & (xs < w)
-        share[i] = np.count_nonzero(paint[ys[inside], xs[inside]]) / max(int(ring.sum()), 1)
+    reach = np.ceil(radius + gap + 1).astype(int)
+    for n in np.unique(reach):   # the points whose window has one size together
+        at = np.flatnonzero(reach == n)
+        u, v = points[at, 0, None, None], points[at, 1, None, None]
+        cu, cv = np.rint(u).astype(int), np.rint(v).astype(int)
+        yy, xx = np.mgrid[-n:n + 1, -n:n + 1]
+        d = np.hypot(xx + cu - u, yy + cv - v)                                       # (N, 2n + 1, 2n + 1)
+        inner = radius[at, None, None] + gap
+        ring = (d >= inner) & (d <= inner + 1)
+        ys, xs = yy + cv, xx + cu
+        inside = ring & (ys >= 0) & (ys < h) & (xs >= 0) & (xs < w)
+        painted = inside & (paint[np.clip(ys, 0, h - 1), np.clip(xs, 0, w - 1)] != 0)
+        share[at] = np.count_nonzero(painted, axis=(1, 2)) / np.maximum(np.count_nonzero(ring, axis=(1, 2)), 1)
     return share
 
 
