@@ -38,10 +38,13 @@ def paint_share(lin: np.ndarray, body_linear: np.ndarray) -> np.ndarray:
     # b < 0: the best fit without gloss is the paint alone
     alone = np.maximum((lin @ c) / max(float(c @ c), 1e-12), 0)
     a, b = np.where(b < 0, alone, a), np.maximum(b, 0)
-    fit = a[..., None] * c + b[..., None]
+    off = np.multiply(a[..., None], c)                                          # the fit, then the pixel's offset
+    off += b[..., None]
+    np.subtract(lin, off, out=off)
     norm = np.sqrt(np.einsum("hwc,hwc->hw", lin, lin))
-    residual = np.sqrt(np.einsum("hwc,hwc->hw", lin - fit, lin - fit))
-    share = a * float(c.sum()) / np.maximum(a * float(c.sum()) + 3 * b, 1e-9)
+    residual = np.sqrt(np.einsum("hwc,hwc->hw", off, off))
+    paint = a * float(c.sum())
+    share = paint / np.maximum(paint + 3 * b, 1e-9)
     fits = (a > 0) & (residual <= PAINT_RESIDUAL * norm + PAINT_NOISE) & (norm > 0.005)
     return np.where(fits, share, np.float32(-1)).astype(np.float32)
 

@@ -96,9 +96,11 @@ def chroma_of(bgr: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Luma ``Y`` (H, W) float32 and chroma over luma ``q`` (H, W, 2) float32 ((Cr - 128, Cb - 128) / Y) of a BGR
     uint8 image (or of palette colours, shape (..., 3))."""
     a = np.asarray(bgr, np.uint8)
-    ycc = cv2.cvtColor(a.reshape(-1, 1, 3), cv2.COLOR_BGR2YCrCb).reshape(a.shape).astype(np.float32)
-    y = ycc[..., 0]
-    return y, (ycc[..., 1:] - 128.0) / np.maximum(y, 1.0)[..., None]
+    ycc = cv2.cvtColor(a.reshape(-1, 1, 3), cv2.COLOR_BGR2YCrCb).reshape(a.shape)
+    y = ycc[..., 0].astype(np.float32)
+    q = np.subtract(ycc[..., 1:], np.float32(128.0), dtype=np.float32)
+    q /= np.maximum(y, 1.0)[..., None]
+    return y, q
 
 
 def neutral_chroma(q: np.ndarray, usable: np.ndarray) -> tuple[np.ndarray, float]:
