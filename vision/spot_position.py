@@ -87,6 +87,19 @@ def _recentred(lin: np.ndarray, peaks: np.ndarray, radius: np.ndarray, spot: np.
     h, w = lin.shape[:2]
     centre = peaks.astype(float)
     reach = radius + 1.5
+    # each spot's coverage once, over a window every re-centred one lies in (the centre stays within the radius of
+    # the peak): a pixel's coverage is its own, wherever the window lies
+    levels, level = np.unique(radius, return_inverse=True)
+    coverage, origin, slot = [], np.zeros((len(peaks), 2), int), np.zeros(len(peaks), int)
+    for n, r in enumerate(levels):
+        at = np.flatnonzero(level == n)
+        margin = int(np.ceil(2 * r + 1.5)) + 2
+        origin[at] = np.floor(peaks[at]).astype(int) - margin
+        slot[at] = np.arange(len(at))
+        xs = np.clip(origin[at, 0, None] + np.arange(2 * margin + 2), 0, w - 1)          # (N, 2 margin + 2)
+        ys = np.clip(origin[at, 1, None] + np.arange(2 * margin + 2), 0, h - 1)
+        window = lin[ys[:, :, None], xs[:, None, :]] - ring[at, None, None, :]
+        coverage.append(mark_coverage(window, (spot[at] - ring[at])[:, None, None, :]))
     moving = np.arange(len(peaks))
     for _ in range(CENTROID_STEPS):
         if not len(moving):
@@ -96,7 +109,7 @@ def _recentred(lin: np.ndarray, peaks: np.ndarray, radius: np.ndarray, spot: np.
         x1 = np.minimum(np.ceil(u + reach[moving]).astype(int) + 1, w)
         y0 = np.maximum(np.floor(v - reach[moving]).astype(int), 0)
         y1 = np.minimum(np.ceil(v + reach[moving]).astype(int) + 1, h)
-        shape = (y1 - y0) * (w + 1) + (x1 - x0)
+        shape = ((y1 - y0) * (w + 1) + (x1 - x0)) * len(levels) + level[moving]
         still = np.zeros(len(moving), bool)
         for s in np.unique(shape):
             at = np.flatnonzero(shape == s)
@@ -105,8 +118,8 @@ def _recentred(lin: np.ndarray, peaks: np.ndarray, radius: np.ndarray, spot: np.
             yy = y0[at, None] + np.arange(y1[at[0]] - y0[at[0]])[None, :]                # (N, h)
             xg, yg = xx[:, None, :], yy[:, :, None]
             inside = np.hypot(xg - u[at, None, None], yg - v[at, None, None]) <= reach[i, None, None]
-            window = lin[yg, xg] - ring[i, None, None, :]                                  # (N, h, w, 3)
-            a = mark_coverage(window, (spot[i] - ring[i])[:, None, None, :]) * inside
+            a = coverage[level[i[0]]][slot[i, None, None], yg - origin[i, 1, None, None],
+                                      xg - origin[i, 0, None, None]] * inside
             total = a.sum(axis=(1, 2))
             found = total > 1e-6
             total = np.where(found, total, 1.0)
