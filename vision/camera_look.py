@@ -211,10 +211,17 @@ def to_reference_look(bgr: np.ndarray, look: Look) -> np.ndarray:
     c, s = np.cos(-turn), np.sin(-turn)
     m = np.array([[c, -s], [s, c]], np.float32) / np.float32(gain)
     neutral = np.asarray(look.neutral, np.float32)
-    q = (ycc[..., 1:] - 128.0) / np.maximum(y, 1.0)[..., None] - neutral
-    q = q @ m.T + neutral - shift.astype(np.float32)
-    ycc[..., 1:] = 128.0 + q * y[..., None]
-    return cv2.cvtColor(np.clip(ycc + 0.5, 0, 255).astype(np.uint8), cv2.COLOR_YCrCb2BGR)
+    q = np.subtract(ycc[..., 1:], np.float32(128.0))   # the same operations as q = (c - 128) / y - neutral, ...
+    q /= np.maximum(y, 1.0)[..., None]                   # in place
+    q -= neutral
+    q = q @ m.T
+    q += neutral
+    q -= shift.astype(np.float32)
+    q *= y[..., None]
+    q += np.float32(128.0)
+    ycc[..., 1:] = q
+    ycc += np.float32(0.5)
+    return cv2.cvtColor(np.clip(ycc, 0, 255, out=ycc).astype(np.uint8), cv2.COLOR_YCrCb2BGR)
 
 
 
