@@ -100,10 +100,11 @@ def ring_colours(image: np.ndarray, points: np.ndarray, radius: np.ndarray) -> n
 def _median_of_numbers(values: np.ndarray) -> np.ndarray:
     """``np.nanmedian(values, axis=1)`` of (N, M, C) values with at least one number per row (N, C), by one sort
     (NaN sorts last) instead of a masked median per row."""
-    ordered = np.sort(values, axis=1)
-    count = np.count_nonzero(~np.isnan(values), axis=1)                      # (N, C)
-    lo = np.take_along_axis(ordered, ((count - 1) // 2)[:, None, :], axis=1)[:, 0]
-    hi = np.take_along_axis(ordered, (count // 2)[:, None, :], axis=1)[:, 0]
+    ordered = np.ascontiguousarray(values.transpose(0, 2, 1))               # (N, C, M): sorted along memory
+    ordered.sort(axis=2)
+    count = np.count_nonzero(~np.isnan(ordered), axis=2)                     # (N, C)
+    lo = np.take_along_axis(ordered, ((count - 1) // 2)[:, :, None], axis=2)[:, :, 0]
+    hi = np.take_along_axis(ordered, (count // 2)[:, :, None], axis=2)[:, :, 0]
     return (lo + hi) / 2
 
 
