@@ -47,7 +47,7 @@ from dataclasses import dataclass, replace
 import cv2
 import numpy as np
 
-from .body_paint import body_paint, body_region, body_silhouette, paint_around
+from .body_paint import body_paint, body_region, body_silhouette, paint_around, pixel_box
 from .camera_look import Look, estimate_look, to_reference_look
 from .features import MarkDetections, to_bgr
 from .mark_prior import MarkPrior, mark_prior
@@ -253,13 +253,13 @@ def detect_contrast_marks(image_bgr: np.ndarray, palette: Mapping[str, tuple[int
     sure, paint = body_paint(lin, body_linear)
     silhouette = body_silhouette(paint, prior.radius_px[1], gap)
     region = body_region(silhouette, prior.radius_px[1])
-    if not region.any():
+    box = pixel_box(region)
+    if box is None:
         return _detect(bgr[:0, :0], lin[:0, :0], names, palette, prior, region[:0, :0], **settings)
-    ys, xs = np.nonzero(region)
     margin = max(int(np.ceil(3 * scales(prior)[-1])) + 2, MIN_MARGIN_PX)
     # the crop starts on even coordinates: the encoder's 2 x 2 chroma blocks stay aligned (vision.spot_colour)
-    y0, y1 = max(int(ys.min()) - margin, 0) // 2 * 2, min(int(ys.max()) + margin + 1, bgr.shape[0])
-    x0, x1 = max(int(xs.min()) - margin, 0) // 2 * 2, min(int(xs.max()) + margin + 1, bgr.shape[1])
+    y0, y1 = max(box[0] - margin, 0) // 2 * 2, min(box[1] + margin + 1, bgr.shape[0])
+    x0, x1 = max(box[2] - margin, 0) // 2 * 2, min(box[3] + margin + 1, bgr.shape[1])
     found = _detect(bgr[y0:y1, x0:x1], lin[y0:y1, x0:x1], names, palette, prior, region[y0:y1, x0:x1], **settings,
                     body=body, paint=paint[y0:y1, x0:x1], sure=sure[y0:y1, x0:x1],
                     silhouette=silhouette[y0:y1, x0:x1])

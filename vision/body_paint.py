@@ -117,6 +117,16 @@ def paint_around(paint: np.ndarray, points: np.ndarray, radius: np.ndarray, gap:
     return share
 
 
+def pixel_box(mask: np.ndarray) -> tuple[int, int, int, int] | None:
+    """The first and last row and the first and last column (inclusive) holding a set pixel of ``mask`` (H, W), or
+    None (none set): the box of ``np.nonzero(mask)`` without listing the pixels."""
+    rows = np.flatnonzero(mask.any(axis=1))
+    if not len(rows):
+        return None
+    cols = np.flatnonzero(mask.any(axis=0))
+    return int(rows[0]), int(rows[-1]), int(cols[0]), int(cols[-1])
+
+
 def body_silhouette(paint: np.ndarray, mark_px: float, gap_px: float = 0.0) -> np.ndarray:
     """The body's silhouette (bool (H, W)): its ``paint`` (bool (H, W): :func:`body_paint`'s sure pixels, or with the
     glossy faces) less single specks, closed with a disc of the largest mark's radius ``mark_px`` (or ``gap_px``, if
@@ -125,15 +135,15 @@ def body_silhouette(paint: np.ndarray, mark_px: float, gap_px: float = 0.0) -> n
     paint = cv2.morphologyEx(paint.astype(np.uint8), cv2.MORPH_OPEN,
                              np.ones((2, 2), np.uint8))
     silhouette = np.zeros(paint.shape, bool)
-    ys, xs = np.nonzero(paint)
-    if not len(ys):
+    box = pixel_box(paint)
+    if box is None:
         return silhouette
     r = max(int(np.ceil(max(mark_px, gap_px))), 1)
     # the rest runs on the paint's box with a margin the closing cannot reach past (the same result, at a fraction
     # of the cost: a telephoto body fills ~5 % of the frame)
     m = 2 * r + 2
-    y0, y1 = max(int(ys.min()) - m, 0), min(int(ys.max()) + m + 1, paint.shape[0])
-    x0, x1 = max(int(xs.min()) - m, 0), min(int(xs.max()) + m + 1, paint.shape[1])
+    y0, y1 = max(box[0] - m, 0), min(box[1] + m + 1, paint.shape[0])
+    x0, x1 = max(box[2] - m, 0), min(box[3] + m + 1, paint.shape[1])
     disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * r + 1, 2 * r + 1))
     # cv2.morphologyEx(..., cv2.MORPH_CLOSE, disc), in a time that does not grow with the disc (r = 20-60 px at
     # telephoto): the erosion is the dilation of the complement, the image's outside counting as paint
@@ -178,16 +188,16 @@ def body_region(silhouette: np.ndarray, mark_px: float) -> np.ndarray:
     largest mark's radius ``mark_px``, at least 2 px (a mark on the outline of a face lies half outside its paint; a
     2-3 px mark's pixels are mixed with what lies beside the body)."""
     region = np.zeros(silhouette.shape, bool)
-    ys, xs = np.nonzero(silhouette)
-    if not len(ys):
+    box = pixel_box(silhouette)
+    if box is None:
         return region
     g = max(2, int(np.ceil(mark_px / 2)))
-    y0, y1 = max(int(ys.min()) - g, 0), min(int(ys.max()) + g + 1, silhouette.shape[0])
-    x0, x1 = max(int(xs.min()) - g, 0), min(int(xs.max()) + g + 1, silhouette.shape[1])
+    y0, y1 = max(box[0] - g, 0), min(box[1] + g + 1, silhouette.shape[0])
+    x0, x1 = max(box[2] - g, 0), min(box[3] + g + 1, silhouette.shape[1])
     disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * g + 1, 2 * g + 1))
     region[y0:y1, x0:x1] = cv2.dilate(silhouette[y0:y1, x0:x1].astype(np.uint8), disc) > 0
     return region
 
 
 __all__ = ["PAINT_SHARE", "PAINT_SHARE_CONNECTED", "body_paint", "body_region", "body_silhouette", "connected_paint",
-           "dilate_disc", "paint_around", "paint_pixels", "paint_share"]
+           "dilate_disc", "paint_around", "paint_pixels", "paint_share", "pixel_box"]
