@@ -36,6 +36,8 @@ import numpy as np
 
 from geometry import angle_difference, wrap_angle
 
+from .body_paint import pixel_box
+
 #: Pixels whose luma is outside this range carry no chroma worth measuring (black, or clipped).
 LUMA_RANGE = (24.0, 245.0)
 #: The neutral is the median chroma of this share of the pixels nearest it (iterated from the image's median).
@@ -107,14 +109,17 @@ def neutral_chroma(q: np.ndarray, usable: np.ndarray) -> tuple[np.ndarray, float
     """The image's neutral (2,) and the spread of chroma about it (1.4826 MAD of the distance, float): the median
     of the :data:`NEUTRAL_SHARE` of usable pixels nearest the estimate, three times from the median of all."""
     at = np.flatnonzero(usable)
-    pts = q.reshape(-1, 2)[at[::max(1, len(at) // 40000)]]
-    if not len(pts):
+    at = at[::max(1, len(at) // 40000)]
+    if not len(at):
         return np.array(REFERENCE_NEUTRAL, np.float32), 0.02
-    n = np.median(pts, axis=0)
+    # the two chroma axes as contiguous columns: a median per axis is the (N, 2) median's, in less time
+    qa, qb = q[..., 0].reshape(-1)[at], q[..., 1].reshape(-1)[at]
+    n = np.array([np.median(qa), np.median(qb)], q.dtype)
     for _ in range(3):
-        d = np.hypot(*(pts - n).T)
-        n = np.median(pts[d <= np.quantile(d, NEUTRAL_SHARE)], axis=0)
-    d = np.hypot(*(pts - n).T)
+        d = np.hypot(qa - n[0], qb - n[1])
+        near = d <= np.quantile(d, NEUTRAL_SHARE)
+        n = np.array([np.median(qa[near]), np.median(qb[near])], q.dtype)
+    d = np.hypot(qa - n[0], qb - n[1])
     near = d[d <= np.quantile(d, NEUTRAL_SHARE)]
     return n.astype(np.float32), float(max(1.4826 * np.median(np.abs(near - np.median(near))), 0.005))
 
@@ -137,6 +142,11 @@ def body_chroma(q: np.ndarray, usable: np.ndarray, neutral: np.ndarray, spread: 
     mask.reshape(-1)[at[off > np.radians(BODY_TURN_DEG)]] = False
     if mask.sum() < MIN_BODY_PIXELS:
         return None, 0
+    # the patches within the mask's box and 2 px around it (the closing reaches 1 px out), the box starting on even
+    # coordinates (the labelling scans 2 x 2 blocks): the same patches, numbered in the same order, as over the image
+    y0, y1, x0, x1 = pixel_box(mask)
+    y0, x0, y1, x1 = max(y0 - 2, 0) // 2 * 2, max(x0 - 2, 0) // 2 * 2, y1 + 3, x1 + 3
+    mask, r, rel = mask[y0:y1, x0:x1], r[y0:y1, x0:x1], rel[y0:y1, x0:x1]
     closed = cv2.morphologyEx(mask.astype(np.uint8), cv2.MORPH_CLOSE, np.ones((3, 3), np.uint8))
     count, labels, stats, _ = cv2.connectedComponentsWithStats(closed, connectivity=8)
     pixels = np.bincount(labels[mask], minlength=count)   # each patch's own pixels (the closing's left out)
