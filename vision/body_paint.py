@@ -169,8 +169,8 @@ def dilate_disc(mask: np.ndarray, disc: np.ndarray) -> np.ndarray:
     # reach[k]: the farthest row offset whose row's half width is k or more (none: a sentinel no row reaches
     # from); k = r + 1 stands for farther
     none = -(h + 2)
-    reach = np.array([max((abs(dy) for dy in range(-r, r + 1) if half[dy + r] >= k), default=none)
-                      for k in range(r + 2)], np.int32)
+    rows_at_least = np.count_nonzero(half[None, :] >= np.arange(r + 2)[:, None], axis=1)   # (r + 2,): 2 dy + 1
+    reach = np.where(rows_at_least > 0, (rows_at_least - 1) // 2, none).astype(np.int32)
     far = np.int32(w + r + 2)
     cols = np.arange(w, dtype=np.int32)
     left = np.maximum.accumulate(np.where(mask, cols, -far), axis=1)
