@@ -47,7 +47,7 @@ from dataclasses import dataclass, replace
 import cv2
 import numpy as np
 
-from .body_paint import body_paint, body_region, body_silhouette, paint_around
+from .body_paint import body_paint, body_region, body_silhouette, paint_around, pixel_box
 from .camera_look import Look, estimate_look, to_reference_look
 from .features import MarkDetections, to_bgr
 from .mark_prior import MarkPrior, mark_prior
@@ -162,18 +162,26 @@ def contrast_responses(lab: np.ndarray, sigmas: np.ndarray) -> np.ndarray:
     # a kernel 0.6 the size of blurring the image at s_i+1 itself; where d is under INCREMENTAL_SIGMA px a sampled
     # kernel is no Gaussian, and the image is blurred directly
     levels = np.empty((len(sigmas), *lab.shape), np.float32)
-    for i, s in enumerate(sigmas):
+    for i, s in enumerate(sigmas):   # each level blurred straight into the stack (no copy)
         d = float(np.sqrt(s ** 2 - sigmas[i - 1] ** 2)) if i else 0.0
-        levels[i] = cv2.GaussianBlur(levels[i - 1], (0, 0), d) if d >= INCREMENTAL_SIGMA \
-            else cv2.GaussianBlur(lab, (0, 0), float(s))
+        if d >= INCREMENTAL_SIGMA:
+            cv2.GaussianBlur(levels[i - 1], (0, 0), d, dst=levels[i])
+        else:
+            cv2.GaussianBlur(lab, (0, 0), float(s), dst=levels[i])
     k = sigmas[1] / sigmas[0]
-    dog = (levels[1:] - levels[:-1]) / np.float32(k - 1)
+    dog = np.subtract(levels[1:], levels[:-1])
+    dog /= np.float32(k - 1)
     return dog
 
 
 def _magnitude(dog: np.ndarray) -> np.ndarray:
+    """sqrt(L^2 + w^2 (a^2 + b^2)) of a (..., 3) stack, (...): the same operations, in place."""
     w = np.float32(CHROMA_WEIGHT)
-    return np.sqrt(dog[..., 0] ** 2 + w * w * (dog[..., 1] ** 2 + dog[..., 2] ** 2))
+    out = np.square(dog[..., 1])
+    out += np.square(dog[..., 2])
+    out *= w * w
+    out += np.square(dog[..., 0])
+    return np.sqrt(out, out=out)
 
 
 @dataclass(frozen=True)
@@ -245,13 +253,13 @@ def detect_contrast_marks(image_bgr: np.ndarray, palette: Mapping[str, tuple[int
     sure, paint = body_paint(lin, body_linear)
     silhouette = body_silhouette(paint, prior.radius_px[1], gap)
     region = body_region(silhouette, prior.radius_px[1])
-    if not region.any():
+    box = pixel_box(region)
+    if box is None:
         return _detect(bgr[:0, :0], lin[:0, :0], names, palette, prior, region[:0, :0], **settings)
-    ys, xs = np.nonzero(region)
     margin = max(int(np.ceil(3 * scales(prior)[-1])) + 2, MIN_MARGIN_PX)
     # the crop starts on even coordinates: the encoder's 2 x 2 chroma blocks stay aligned (vision.spot_colour)
-    y0, y1 = max(int(ys.min()) - margin, 0) // 2 * 2, min(int(ys.max()) + margin + 1, bgr.shape[0])
-    x0, x1 = max(int(xs.min()) - margin, 0) // 2 * 2, min(int(xs.max()) + margin + 1, bgr.shape[1])
+    y0, y1 = max(box[0] - margin, 0) // 2 * 2, min(box[1] + margin + 1, bgr.shape[0])
+    x0, x1 = max(box[2] - margin, 0) // 2 * 2, min(box[3] + margin + 1, bgr.shape[1])
     found = _detect(bgr[y0:y1, x0:x1], lin[y0:y1, x0:x1], names, palette, prior, region[y0:y1, x0:x1], **settings,
                     body=body, paint=paint[y0:y1, x0:x1], sure=sure[y0:y1, x0:x1],
                     silhouette=silhouette[y0:y1, x0:x1])
@@ -277,6 +285,13 @@ def _detect(bgr: np.ndarray, lin: np.ndarray, names: tuple[str, ...], palette: M
     img = bgr.astype(np.float32) / 255.0
     lab = cv2.cvtColor(img, cv2.COLOR_BGR2Lab)
     sigmas = scales(prior)
+    level_radius = np.sqrt(sigmas[:-1] * sigmas[1:]) * np.sqrt(2)
+    step = 2 ** (1 / STEPS_PER_OCTAVE)
+    fits = (level_radius >= prior.radius_px[0] / step) & (level_radius <= prior.radius_px[1] * step)
+    # only the levels up to the last whose scale fits a mark are built: a level that fits none is never a peak's,
+    # nor its neighbour's (its dilation counts as zero), so the coarsest blurs, the costliest, are left out
+    used = int(np.flatnonzero(fits)[-1]) + 1 if fits.any() else 1
+    sigmas, level_radius, fits = sigmas[:used + 1], level_radius[:used], fits[:used]
     dog = contrast_responses(lab, sigmas)
     mag = _magnitude(dog)                                                # (S - 1, H, W)
     # threshold per level: robust spread of the response over the image (texture and noise); around a body, over
@@ -298,16 +313,12 @@ def _detect(bgr: np.ndarray, lin: np.ndarray, names: tuple[str, ...], palette: M
     # a spot's peaks at several scales is kept, :func:`_same_spot`). Cycles paper-scale sweep: of 317 visible marks
     # missed, 123 had no maximum; recall 0.680 -> 0.789, precision 0.595 -> 0.514 (before MIN_EXPLAINED 0.2). At
     # telephoto scale it only added false spots (recall 0.966 -> 0.913, precision 0.547 -> 0.312)
-    level_radius = np.sqrt(sigmas[:-1] * sigmas[1:]) * np.sqrt(2)
-    step = 2 ** (1 / STEPS_PER_OCTAVE)
-    fits = (level_radius >= prior.radius_px[0] / step) & (level_radius <= prior.radius_px[1] * step)
     kernel = np.ones((3, 3), np.uint8)
     dil = np.stack([cv2.dilate(m, kernel) if ok else np.zeros_like(m) for m, ok in zip(mag, fits)])
-    up = np.concatenate([dil[1:], np.zeros_like(dil[:1])])     # a fitting level's neighbours in scale; at the ends
-    down = np.concatenate([np.zeros_like(dil[:1]), dil[:-1]])  # of the fitting range the response may still grow
     peak = (mag >= dil) & (mag > thresh[:, None, None]) & fits[:, None, None]
-    if prior.radius_px[1] >= SMALL_SPOT_PX:
-        peak &= (mag >= up) & (mag >= down)
+    if prior.radius_px[1] >= SMALL_SPOT_PX:   # a fitting level's neighbours in scale (past the ends: zero, which
+        peak[:-1] &= mag[:-1] >= dil[1:]      # the response never falls below; at the ends of the fitting range
+        peak[1:] &= mag[1:] >= dil[:-1]       # it may still grow)
     elif scoring and CHANNEL_PEAKS:
         for c in range(3):
             for sign in (1.0, -1.0):

@@ -36,6 +36,8 @@ import numpy as np
 
 from geometry import angle_difference, wrap_angle
 
+from .body_paint import pixel_box
+
 #: Pixels whose luma is outside this range carry no chroma worth measuring (black, or clipped).
 LUMA_RANGE = (24.0, 245.0)
 #: The neutral is the median chroma of this share of the pixels nearest it (iterated from the image's median).
@@ -96,23 +98,28 @@ def chroma_of(bgr: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Luma ``Y`` (H, W) float32 and chroma over luma ``q`` (H, W, 2) float32 ((Cr - 128, Cb - 128) / Y) of a BGR
     uint8 image (or of palette colours, shape (..., 3))."""
     a = np.asarray(bgr, np.uint8)
-    ycc = cv2.cvtColor(a.reshape(-1, 1, 3), cv2.COLOR_BGR2YCrCb).reshape(a.shape).astype(np.float32)
-    y = ycc[..., 0]
-    return y, (ycc[..., 1:] - 128.0) / np.maximum(y, 1.0)[..., None]
+    ycc = cv2.cvtColor(a.reshape(-1, 1, 3), cv2.COLOR_BGR2YCrCb).reshape(a.shape)
+    y = ycc[..., 0].astype(np.float32)
+    q = np.subtract(ycc[..., 1:], np.float32(128.0), dtype=np.float32)
+    q /= np.maximum(y, 1.0)[..., None]
+    return y, q
 
 
 def neutral_chroma(q: np.ndarray, usable: np.ndarray) -> tuple[np.ndarray, float]:
     """The image's neutral (2,) and the spread of chroma about it (1.4826 MAD of the distance, float): the median
     of the :data:`NEUTRAL_SHARE` of usable pixels nearest the estimate, three times from the median of all."""
     at = np.flatnonzero(usable)
-    pts = q.reshape(-1, 2)[at[::max(1, len(at) // 40000)]]
-    if not len(pts):
+    at = at[::max(1, len(at) // 40000)]
+    if not len(at):
         return np.array(REFERENCE_NEUTRAL, np.float32), 0.02
-    n = np.median(pts, axis=0)
+    # the two chroma axes as contiguous columns: a median per axis is the (N, 2) median's, in less time
+    qa, qb = q[..., 0].reshape(-1)[at], q[..., 1].reshape(-1)[at]
+    n = np.array([np.median(qa), np.median(qb)], q.dtype)
     for _ in range(3):
-        d = np.hypot(*(pts - n).T)
-        n = np.median(pts[d <= np.quantile(d, NEUTRAL_SHARE)], axis=0)
-    d = np.hypot(*(pts - n).T)
+        d = np.hypot(qa - n[0], qb - n[1])
+        near = d <= np.quantile(d, NEUTRAL_SHARE)
+        n = np.array([np.median(qa[near]), np.median(qb[near])], q.dtype)
+    d = np.hypot(qa - n[0], qb - n[1])
     near = d[d <= np.quantile(d, NEUTRAL_SHARE)]
     return n.astype(np.float32), float(max(1.4826 * np.median(np.abs(near - np.median(near))), 0.005))
 
@@ -135,16 +142,19 @@ def body_chroma(q: np.ndarray, usable: np.ndarray, neutral: np.ndarray, spread: 
     mask.reshape(-1)[at[off > np.radians(BODY_TURN_DEG)]] = False
     if mask.sum() < MIN_BODY_PIXELS:
         return None, 0
+    # the patches within the mask's box and 2 px around it (the closing reaches 1 px out), the box starting on even
+    # coordinates (the labelling scans 2 x 2 blocks): the same patches, numbered in the same order, as over the image
+    y0, y1, x0, x1 = pixel_box(mask)
+    y0, x0, y1, x1 = max(y0 - 2, 0) // 2 * 2, max(x0 - 2, 0) // 2 * 2, y1 + 3, x1 + 3
+    mask, r, rel = mask[y0:y1, x0:x1], r[y0:y1, x0:x1], rel[y0:y1, x0:x1]
     closed = cv2.morphologyEx(mask.astype(np.uint8), cv2.MORPH_CLOSE, np.ones((3, 3), np.uint8))
     count, labels, stats, _ = cv2.connectedComponentsWithStats(closed, connectivity=8)
-    best, best_n = 0, 0
-    for j in range(1, count):
-        x, y, w, h, _ = stats[j]
-        if extent_px is not None and max(w, h) > 2.0 * extent_px + 8:
-            continue   # larger than the target can be: a wall, a floor in the body's hue
-        n = int(np.count_nonzero(mask & (labels == j)))
-        if n > best_n:
-            best, best_n = j, n
+    pixels = np.bincount(labels[mask], minlength=count)   # each patch's own pixels (the closing's left out)
+    pixels[0] = 0
+    if extent_px is not None:   # larger than the target can be: a wall, a floor in the body's hue
+        pixels[np.maximum(stats[:, cv2.CC_STAT_WIDTH], stats[:, cv2.CC_STAT_HEIGHT]) > 2.0 * extent_px + 8] = 0
+    best = int(np.argmax(pixels))   # the first of the largest
+    best_n = int(pixels[best])
     if best_n < MIN_BODY_PIXELS:
         return None, 0
     patch = mask & (labels == best)
@@ -211,10 +221,17 @@ def to_reference_look(bgr: np.ndarray, look: Look) -> np.ndarray:
     c, s = np.cos(-turn), np.sin(-turn)
     m = np.array([[c, -s], [s, c]], np.float32) / np.float32(gain)
     neutral = np.asarray(look.neutral, np.float32)
-    q = (ycc[..., 1:] - 128.0) / np.maximum(y, 1.0)[..., None] - neutral
-    q = q @ m.T + neutral - shift.astype(np.float32)
-    ycc[..., 1:] = 128.0 + q * y[..., None]
-    return cv2.cvtColor(np.clip(ycc + 0.5, 0, 255).astype(np.uint8), cv2.COLOR_YCrCb2BGR)
+    q = np.subtract(ycc[..., 1:], np.float32(128.0))   # the same operations as q = (c - 128) / y - neutral, ...
+    q /= np.maximum(y, 1.0)[..., None]                   # in place
+    q -= neutral
+    q = q @ m.T
+    q += neutral
+    q -= shift.astype(np.float32)
+    q *= y[..., None]
+    q += np.float32(128.0)
+    ycc[..., 1:] = q
+    ycc += np.float32(0.5)
+    return cv2.cvtColor(np.clip(ycc, 0, 255, out=ycc).astype(np.uint8), cv2.COLOR_YCrCb2BGR)
 
 
 

@@ -100,10 +100,11 @@ def ring_colours(image: np.ndarray, points: np.ndarray, radius: np.ndarray) -> n
 def _median_of_numbers(values: np.ndarray) -> np.ndarray:
     """``np.nanmedian(values, axis=1)`` of (N, M, C) values with at least one number per row (N, C), by one sort
     (NaN sorts last) instead of a masked median per row."""
-    ordered = np.sort(values, axis=1)
-    count = np.count_nonzero(~np.isnan(values), axis=1)                      # (N, C)
-    lo = np.take_along_axis(ordered, ((count - 1) // 2)[:, None, :], axis=1)[:, 0]
-    hi = np.take_along_axis(ordered, (count // 2)[:, None, :], axis=1)[:, 0]
+    ordered = np.ascontiguousarray(values.transpose(0, 2, 1))               # (N, C, M): sorted along memory
+    ordered.sort(axis=2)
+    count = np.count_nonzero(~np.isnan(ordered), axis=2)                     # (N, C)
+    lo = np.take_along_axis(ordered, ((count - 1) // 2)[:, :, None], axis=2)[:, :, 0]
+    hi = np.take_along_axis(ordered, (count // 2)[:, :, None], axis=2)[:, :, 0]
     return (lo + hi) / 2
 
 
@@ -119,28 +120,21 @@ def spot_misfits(image_bgr: np.ndarray, points: np.ndarray, radius: np.ndarray, 
       or the body's shading beside the spot weighs little), the model fitted under those weights (0 at the
       border): whether the spot is a colour at all (:data:`MIN_EXPLAINED`)."""
     ycc = to_ycrcb(image_bgr)
-    h, w = ycc.shape[:2]
     palette = to_ycrcb(np.asarray(palette_bgr, np.uint8).reshape(-1, 3))            # (C, 3)
     pal_y, pal_c = palette[:, 0], palette[:, 1:] - 128.0
     ring = ring_colours(ycc, points, radius)
     body_y = None if body_bgr is None else float(to_ycrcb(np.array([body_bgr], np.uint8))[0, 0])
     out, explained = np.full((len(points), len(palette)), np.inf), np.zeros((len(points), len(palette)))
-    span = 2 * PATCH_HALF + 1
-    for i, ((u, v), r) in enumerate(zip(points, radius)):
-        x0, y0 = int(round(u)) - PATCH_HALF, int(round(v)) - PATCH_HALF
-        if x0 < 0 or y0 < 0 or x0 + span > w or y0 + span > h:
-            continue
-        yy, xx = np.mgrid[y0:y0 + span, x0:x0 + span]
-        sigma = max(r / np.sqrt(2), 0.6)
-        g = np.exp(-((xx - u) ** 2 + (yy - v) ** 2) / (2 * sigma * sigma))
-        sg = chroma_420(g, x0, y0)
-        inner = (np.abs(xx - int(round(u))) <= FIT_HALF) & (np.abs(yy - int(round(v))) <= FIT_HALF)
-        d = ycc[y0:y0 + span, x0:x0 + span][inner] - ring[i]                          # (N, 3)
-        gi, si = g[inner], sg[inner]
+    windows = _spot_windows(ycc, points, radius, ring)
+    if windows is None:
+        return out, explained
+    spots, g_inner, sg_inner, d_inner = windows
+    ring_ys = ring[spots, 0]
+    lo, hi = (np.full(len(spots), FREE_BRIGHTNESS[0]), np.full(len(spots), FREE_BRIGHTNESS[1])) if not body_y else \
+        (ring_ys / body_y / BRIGHTNESS_SPAN, ring_ys / body_y * BRIGHTNESS_SPAN)
+    brightness = np.geomspace(np.maximum(lo, 1e-3), np.maximum(hi, 2e-3), BRIGHTNESS_STEPS, axis=1)   # (K', G)
+    for i, gi, si, d, ks in zip(spots.tolist(), g_inner, sg_inner, d_inner, brightness):
         ring_y, ring_c = ring[i, 0], ring[i, 1:] - 128.0
-        lo, hi = FREE_BRIGHTNESS if not body_y else (ring_y / body_y / BRIGHTNESS_SPAN,
-                                                     ring_y / body_y * BRIGHTNESS_SPAN)
-        ks = np.geomspace(max(lo, 1e-3), max(hi, 2e-3), BRIGHTNESS_STEPS)             # (G,)
         obs = np.concatenate([d[:, 0], d[:, 1], d[:, 2]])                              # (3N,)
         weight = np.sqrt(np.concatenate([gi, si, si]))                                 # (3N,)
         deviation = float(np.sum((obs * weight) ** 2))
@@ -153,6 +147,42 @@ def spot_misfits(image_bgr: np.ndarray, points: np.ndarray, radius: np.ndarray, 
         if deviation > 0:
             explained[i] = 1.0 - _least_residual(model * weight, obs * weight) / deviation
     return out, explained
+
+
+def _spot_windows(ycc: np.ndarray, points: np.ndarray, radius: np.ndarray, ring: np.ndarray
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
+    """What :func:`spot_misfits` fits, for every spot whose window lies in the image at once: the spots' indices
+    (K',), their profiles ``g`` and ``S[g]`` over the fit's window (K', N) and the window's deviation from the ring
+    (K', N, 3) (N = (2 FIT_HALF + 1)^2, row by row); None: no such spot. The same values as one window at a time."""
+    h, w = ycc.shape[:2]
+    points, radius = np.asarray(points, float).reshape(-1, 2), np.asarray(radius, float).reshape(-1)
+    span = 2 * PATCH_HALF + 1
+    cu, cv = np.rint(points[:, 0]).astype(int), np.rint(points[:, 1]).astype(int)
+    x0, y0 = cu - PATCH_HALF, cv - PATCH_HALF
+    spots = np.flatnonzero((x0 >= 0) & (y0 >= 0) & (x0 + span <= w) & (y0 + span <= h))
+    if not len(spots):
+        return None
+    x0, y0, u, v = x0[spots], y0[spots], points[spots, 0, None, None], points[spots, 1, None, None]
+    xx, yy = x0[:, None, None] + np.arange(span)[None, None, :], y0[:, None, None] + np.arange(span)[None, :, None]
+    sigma = np.maximum(radius[spots] / np.sqrt(2), 0.6)[:, None, None]
+    g = np.exp(-((xx - u) ** 2 + (yy - v) ** 2) / (2 * sigma * sigma))                 # (K', span, span)
+    sg = np.empty_like(g)
+    for ox in (0, 1):   # chroma_420 of the windows of one parity together (the same block means, upsampled alike)
+        for oy in (0, 1):
+            at = np.flatnonzero((x0 % 2 == ox) & (y0 % 2 == oy))
+            if not len(at):
+                continue
+            padded = np.pad(g[at], ((0, 0), (oy, (span + oy) % 2), (ox, (span + ox) % 2)), mode="edge")
+            n, ph, pw = padded.shape
+            blocks = padded.reshape(n, ph // 2, 2, pw // 2, 2).mean(axis=(2, 4))
+            for j, block in zip(at.tolist(), blocks):
+                sg[j] = cv2.resize(block, (pw, ph), interpolation=cv2.INTER_LINEAR)[oy:oy + span, ox:ox + span]
+    inner = slice(PATCH_HALF - FIT_HALF, PATCH_HALF + FIT_HALF + 1)
+    fit = 2 * FIT_HALF + 1
+    ys = (y0 + PATCH_HALF - FIT_HALF)[:, None, None] + np.arange(fit)[None, :, None]
+    xs = (x0 + PATCH_HALF - FIT_HALF)[:, None, None] + np.arange(fit)[None, None, :]
+    d = ycc[ys, xs].reshape(len(spots), fit * fit, 3) - ring[spots, None, :]
+    return (spots, g[:, inner, inner].reshape(len(spots), -1), sg[:, inner, inner].reshape(len(spots), -1), d)
 
 
 def _least_residual(model: np.ndarray, obs: np.ndarray) -> np.ndarray:

@@ -72,30 +72,66 @@ def coverage_centroids(lin: np.ndarray, pts: np.ndarray, radius: np.ndarray, spo
         cx = (a * xs[:, None, :]).sum(axis=(1, 2)) / np.where(some, total, 1.0)
         cy = (a * ys[:, :, None]).sum(axis=(1, 2)) / np.where(some, total, 1.0)
         out[at[some]] = np.stack([cx, cy], axis=1)[some]
-    for i, (peak, r) in enumerate(zip(pts, radius)):
-        if r < SMALL_SPOT_PX:
-            continue
-        reach = r + 1.5
-        centre = peak
-        steps = CENTROID_STEPS if r >= SMALL_SPOT_PX else 1
-        for _ in range(steps):
-            u, v = centre
-            x0, x1 = max(int(np.floor(u - reach)), 0), min(int(np.ceil(u + reach)) + 1, w)
-            y0, y1 = max(int(np.floor(v - reach)), 0), min(int(np.ceil(v + reach)) + 1, h)
-            yy, xx = np.mgrid[y0:y1, x0:x1]
-            inside = np.hypot(xx - u, yy - v) <= reach
-            a = mark_coverage(lin[y0:y1, x0:x1] - ring[i], (spot[i] - ring[i])[None, None, :]) * inside
-            if a.sum() <= 1e-6:
-                break
-            moved = np.array([(a * xx).sum() / a.sum(), (a * yy).sum() / a.sum()])
-            if steps > 1:  # re-centring: never farther than the spot's radius from its peak (its own spot)
-                offset = moved - peak
-                moved = peak + offset * min(1.0, r / max(float(np.hypot(*offset)), 1e-9))
-            step, centre = float(np.hypot(*(moved - centre))), moved
-            if step < 0.05:
-                break
-        out[i] = centre
+    large = np.flatnonzero(~small)
+    if len(large):
+        out[large] = _recentred(lin, pts[large], radius[large], spot[large], ring[large])
     return out
+
+
+def _recentred(lin: np.ndarray, peaks: np.ndarray, radius: np.ndarray, spot: np.ndarray, ring: np.ndarray
+               ) -> np.ndarray:
+    """:func:`coverage_centroids` of spots of :data:`SMALL_SPOT_PX` and more (K, 2): each window re-centred on its
+    coverage's centroid, never farther than the spot's radius from its peak, until it moves under 0.05 px or after
+    :data:`CENTROID_STEPS`. All spots take each step together, those whose window has one shape in one array (the
+    same sums, in the same order, as one window at a time: the same positions to the bit)."""
+    h, w = lin.shape[:2]
+    centre = peaks.astype(float)
+    reach = radius + 1.5
+    # each spot's coverage once, over a window every re-centred one lies in (the centre stays within the radius of
+    # the peak): a pixel's coverage is its own, wherever the window lies
+    levels, level = np.unique(radius, return_inverse=True)
+    coverage, origin, slot = [], np.zeros((len(peaks), 2), int), np.zeros(len(peaks), int)
+    for n, r in enumerate(levels):
+        at = np.flatnonzero(level == n)
+        margin = int(np.ceil(2 * r + 1.5)) + 2
+        origin[at] = np.floor(peaks[at]).astype(int) - margin
+        slot[at] = np.arange(len(at))
+        xs = np.clip(origin[at, 0, None] + np.arange(2 * margin + 2), 0, w - 1)          # (N, 2 margin + 2)
+        ys = np.clip(origin[at, 1, None] + np.arange(2 * margin + 2), 0, h - 1)
+        window = lin[ys[:, :, None], xs[:, None, :]] - ring[at, None, None, :]
+        coverage.append(mark_coverage(window, (spot[at] - ring[at])[:, None, None, :]))
+    moving = np.arange(len(peaks))
+    for _ in range(CENTROID_STEPS):
+        if not len(moving):
+            break
+        u, v = centre[moving, 0], centre[moving, 1]
+        x0 = np.maximum(np.floor(u - reach[moving]).astype(int), 0)
+        x1 = np.minimum(np.ceil(u + reach[moving]).astype(int) + 1, w)
+        y0 = np.maximum(np.floor(v - reach[moving]).astype(int), 0)
+        y1 = np.minimum(np.ceil(v + reach[moving]).astype(int) + 1, h)
+        shape = ((y1 - y0) * (w + 1) + (x1 - x0)) * len(levels) + level[moving]
+        still = np.zeros(len(moving), bool)
+        for s in np.unique(shape):
+            at = np.flatnonzero(shape == s)
+            i = moving[at]
+            xx = x0[at, None] + np.arange(x1[at[0]] - x0[at[0]])[None, :]                # (N, w)
+            yy = y0[at, None] + np.arange(y1[at[0]] - y0[at[0]])[None, :]                # (N, h)
+            xg, yg = xx[:, None, :], yy[:, :, None]
+            inside = np.hypot(xg - u[at, None, None], yg - v[at, None, None]) <= reach[i, None, None]
+            a = coverage[level[i[0]]][slot[i, None, None], yg - origin[i, 1, None, None],
+                                      xg - origin[i, 0, None, None]] * inside
+            total = a.sum(axis=(1, 2))
+            found = total > 1e-6
+            total = np.where(found, total, 1.0)
+            moved = np.stack([(a * xg).sum(axis=(1, 2)) / total, (a * yg).sum(axis=(1, 2)) / total], axis=1)
+            offset = moved - peaks[i]
+            moved = peaks[i] + offset * np.minimum(1.0, radius[i] / np.maximum(np.hypot(offset[:, 0], offset[:, 1]),
+                                                                               1e-9))[:, None]
+            step = np.hypot(*(moved - centre[i]).T)
+            centre[i[found]] = moved[found]
+            still[at] = found & (step >= 0.05)
+        moving = moving[still]
+    return centre
 
 
 __all__ = ["CENTROID_STEPS", "SMALL_SPOT_PX", "coverage_centroids", "round_peaks"]
