@@ -7,16 +7,17 @@ Run from the repository root (a few seconds per condition)::
 Each condition is a fresh interpreter that does what ``evopose agent --scenario exp2 --vehicle H1`` does before
 its first frame, one step at a time, and reads its own ``VmRSS`` (``/proc/self/status``) after each step: the
 imports in the order an agent needs them (each row's libraries on top of the rows above: the figure is what that
-import adds to a process that has the others), then numba's own start at the first compiled kernel, split in two
-(numba imports ``scipy.linalg`` for its BLAS and LAPACK; then it loads its implementation registries and starts
-LLVM's code generator; these three rows add nothing with the kernels compiled ahead of time), then the camera vehicle's warm-up as ``CameraVehicle.warm_up`` runs it (open the camera,
-render and extract the first image, one search, tracking frames, a generation between frames). MB = 10^6 bytes.
+import adds to a process that has the others), the world, then numba's own start at the first kernel through its
+JIT, in three rows (``import numba``; numba imports ``scipy.linalg`` for its BLAS and LAPACK; then it loads its
+implementation registries and starts LLVM's code generator), which add nothing with the kernels compiled ahead of
+time, then the camera vehicle's warm-up as ``CameraVehicle.warm_up`` runs it (open the camera, render and extract
+the first image, one search, tracking frames, a generation between frames). MB = 10^6 bytes.
 *compiled ahead of time* runs the kernels of ``evopose.kernels_aot`` (``make install`` builds it; docs/design.md §2,
 "Compiled kernels"), as agents run when it is built; the *JIT* conditions run the same kernels through numba's JIT
 (``EVOPOSE_KERNELS=jit``), their code from numba's on-disk cache (``cache=True``; warmed first) or compiled in the
 process (an empty ``NUMBA_CACHE_DIR``); *peak* is the kernel's high-water mark
 (``VmHWM``) so far: the renderer's one-off ground texture (made through FFTs, then freed) lifts it for a moment,
-here on top of numba's start; in an agent the texture comes before numba starts, and its peak is lower (the
+here on top of numba's start (JIT); in an agent the texture comes before numba starts, and its peak is lower (the
 footprint section's *peak RSS*). The last table splits the final RSS by mapping (``/proc/self/smaps``): the
 libraries' code and data that were touched, and the anonymous memory (Python objects, numpy arrays, LLVM's and
 OpenCV's heaps).

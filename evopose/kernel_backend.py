@@ -117,7 +117,8 @@ def _typed(name: str, args: tuple) -> list:
     spec = _SPECS[name]
     if len(args) != len(spec):
         raise TypeError(f"{name} takes {len(spec)} arguments, got {len(args)}")
-    return [_argument(a, dtype, ndim, written, name, i) for i, (a, (dtype, ndim, written)) in enumerate(zip(args, spec))]
+    return [_argument(a, dtype, ndim, written, name, i)
+            for i, (a, (dtype, ndim, written)) in enumerate(zip(args, spec))]
 
 
 def call(name: str, *args, impl: object | None = None):
