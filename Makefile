@@ -13,7 +13,7 @@ $(STAMP): pyproject.toml constraints.txt
 	touch $(STAMP)
 
 # The search's kernels compiled ahead of time (docs/design.md §2, "Compiled kernels"; ~15 s, instant when current):
-# an agent then runs without numba's JIT (~125 MB less resident). Without them, or after a kernel's source changed
+# an agent then runs without numba's JIT (~110 MB less resident). Without them, or after a kernel's source changed
 # and before this runs again, the same kernels run through the JIT.
 kernels: $(STAMP)
 	$(PY) -m evopose.kernel_build

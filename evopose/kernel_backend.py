@@ -1,6 +1,6 @@
 """Which compiled kernels run, once per process: the module compiled ahead of time, or numba's JIT.
 
-docs/design.md §2, "Compiled kernels": numba's JIT costs an agent about 125 MB resident (numba itself, LLVM's code
+docs/design.md §2, "Compiled kernels": numba's JIT costs an agent about 110 MB resident (numba itself, LLVM's code
 generator and its registries) for kernels that never change while it runs. ``make install`` compiles them ahead of
 time (:mod:`evopose.kernel_build`, numba's ``pycc``) into :data:`evopose.kernel_abi.AOT_MODULE`, an extension
 module that needs neither numba nor llvmlite. It is used when it is there and *current*: its :func:`build_key`
@@ -12,7 +12,7 @@ Every kernel of :data:`evopose.kernel_abi.EXPORTS` is a function here, and calle
 modules: a compiled module has no dispatcher to adapt to what it is given and would read an array of another type
 as garbage, so each call first brings its arrays to the one type the kernel is compiled for (a C-contiguous copy of
 the declared dtype when they differ; an array the kernel writes must already have its type, or ``TypeError``).
-Both backends get the same arrays, so they compile the same specialisation and give the same bits.
+Both backends get the same arrays, so both run the same specialisation (how closely they agree: docs/design.md §2).
 """
 
 from __future__ import annotations

@@ -9,10 +9,10 @@ numba's ``pycc`` (docs/design.md §2, "Compiled kernels") compiles each kernel o
 :data:`evopose.kernel_abi.EXPORTS` for its one set of argument types into an extension module that needs neither
 numba nor llvmlite at run time, with numba's own runtime for the arrays a kernel allocates. Each exported function is
 a thin wrapper that calls the kernel, so the kernel is compiled by its own dispatcher with its own options
-(``fastmath``, ``inline``), from an empty numba cache: the same LLVM code numba's JIT makes. Three settings of
+(``fastmath``, ``inline``), from an empty numba cache, as numba's JIT compiles it. Three settings of
 ``pycc`` are changed to match the JIT: the wrappers release the GIL (the kernels' ``nogil``: the bus threads run
 while a search computes), and the code is generated for this machine's processor and its instruction-set features
-(pycc's default is a generic processor: slower, and not the JIT's bits). The module also exports ``build_key()``,
+(pycc's default is a generic processor: slower, and not the JIT's code). The module also exports ``build_key()``,
 :func:`evopose.kernel_backend.build_key` at build time, so that a checkout whose kernels changed since, or another
 machine, does not use it. ``pycc`` is pending deprecation in numba (since 0.57) without a replacement yet;
 ``constraints.txt`` pins numba.

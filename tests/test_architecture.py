@@ -233,7 +233,7 @@ def test_a_camera_vehicle_warmed_up_has_imported_nothing_it_does_not_use():
 
 def test_a_camera_vehicle_with_the_compiled_kernels_never_imports_numba():
     """With the kernels compiled ahead of time (make install), an agent's imports and warm-up load neither numba nor
-    llvmlite: about 125 MB resident (docs/design.md §2, "Compiled kernels"). Skipped when they are not built, unless
+    llvmlite: about 110 MB resident (docs/design.md §2, "Compiled kernels"). Skipped when they are not built, unless
     EVOPOSE_REQUIRE_AOT is set (make test)."""
     from evopose.kernel_backend import load_aot
 
