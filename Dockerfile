@@ -29,6 +29,8 @@ COPY geometry ./geometry
 RUN pip install -c constraints.txt .
 
 # The agents read their world from scenarios/*.yaml relative to /app (the compose commands name it so).
-# Numba caches its compiled kernels in the user's cache directory, which this user can write.
+# Numba caches its compiled kernels in the user's cache directory, which this user can write. The image runs the
+# kernels through numba's JIT: the module compiled ahead of time (docs/design.md §2, "Compiled kernels") needs a C
+# compiler to build and is built for one processor, and an image runs on any.
 RUN useradd --create-home --uid 1000 evopose
 USER evopose

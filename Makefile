@@ -4,7 +4,7 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test fuzz bench bench-solver bench-looks bench-footprint examples install clean lock compose photoreal
+.PHONY: demo test fuzz bench bench-solver bench-looks bench-footprint examples install kernels clean lock compose photoreal
 
 $(STAMP): pyproject.toml constraints.txt
 	$(PYTHON) -m venv $(VENV)
@@ -12,7 +12,13 @@ $(STAMP): pyproject.toml constraints.txt
 	$(PY) -m pip install --quiet -c constraints.txt -e ".[dev]"
 	touch $(STAMP)
 
-install: $(STAMP)
+# The search's kernels compiled ahead of time (docs/design.md §2, "Compiled kernels"; ~15 s, instant when current):
+# an agent then runs without numba's JIT (~110 MB less resident). Without them, or after a kernel's source changed
+# and before this runs again, the same kernels run through the JIT.
+kernels: $(STAMP)
+	$(PY) -m evopose.kernel_build
+
+install: $(STAMP) kernels
 
 # Blender's bpy (Cycles, the photoreal renderer: docs/datasets.md) in its own interpreter: bpy 4.5 needs Python 3.11
 # and numpy < 2, the project pins numpy 2. EVOPOSE_BPY_PYTHON may name another Python that has bpy 4.5.
@@ -26,15 +32,15 @@ $(PHOTOREAL)/.installed: constraints-photoreal.txt
 
 # The demo's fleet listens on tcp/127.0.0.1:$(PORT): `make demo PORT=7448` when another fleet has 7447.
 PORT ?= 7447
-demo: $(STAMP)
+demo: $(STAMP) kernels
 	@if $(PY) -c "import sys; from agents.transport.ports import listening; sys.exit(listening('tcp/127.0.0.1:$(PORT)'))"; \
 	then :; else echo "port $(PORT) is in use (another fleet or router?): run make demo PORT=$$(($(PORT) + 1))" >&2; exit 2; fi
 	$(VENV)/bin/evopose scenario run exp2a-features --listen tcp/127.0.0.1:$(PORT)
 
 # Two passes (tests/conftest.py): everything but the real-time tests on two workers, then those one at a time.
-test: $(STAMP)
-	$(PY) -m pytest -q -n 2 -m "not realtime"
-	$(PY) -m pytest -q -m realtime
+test: $(STAMP) kernels
+	EVOPOSE_REQUIRE_AOT=1 $(PY) -m pytest -q -n 2 -m "not realtime"
+	EVOPOSE_REQUIRE_AOT=1 $(PY) -m pytest -q -m realtime
 
 # The fuzz tests with many more (and random) examples than `make test` runs (a few minutes).
 fuzz: $(STAMP)
@@ -45,7 +51,7 @@ examples: $(STAMP)
 	$(PY) -m examples.make_examples
 
 # Long (tens of minutes): each benchmark writes benchmarks/results/<name>.md, then BENCHMARKS.md is assembled.
-bench: $(STAMP)
+bench: $(STAMP) kernels
 	NUMBA_NUM_THREADS=1 $(PY) -m benchmarks.run_solvers
 	NUMBA_NUM_THREADS=1 $(PY) -m benchmarks.bench_kernels
 	$(PY) -m benchmarks.bench_features
@@ -64,7 +70,7 @@ bench: $(STAMP)
 # The solver on a fixed problem set against the committed figures (benchmarks/results/solver_regression.json):
 # fails on a drop in success or accuracy, more evaluations, or a slower median beyond the measured noise (~1 min).
 # After a change meant to move them: $(PY) -m benchmarks.solver_regression --update
-bench-solver: $(STAMP)
+bench-solver: $(STAMP) kernels
 	NUMBA_NUM_THREADS=1 $(PY) -m benchmarks.solver_regression
 
 # The mark front-ends through eight camera looks (~1 h here: renders the Cycles worlds of the Pioneer and the second
@@ -78,7 +84,7 @@ bench-looks: $(STAMP) photoreal
 	$(PY) -m benchmarks.report
 
 # Three agent pairs for 10 minutes each (30 min): memory and CPU over time.
-bench-footprint: $(STAMP)
+bench-footprint: $(STAMP) kernels
 	$(PY) -m benchmarks.bench_footprint --minutes 10
 	$(PY) -m benchmarks.report
 

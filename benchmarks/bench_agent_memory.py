@@ -7,14 +7,17 @@ Run from the repository root (a few seconds per condition)::
 Each condition is a fresh interpreter that does what ``evopose agent --scenario exp2 --vehicle H1`` does before
 its first frame, one step at a time, and reads its own ``VmRSS`` (``/proc/self/status``) after each step: the
 imports in the order an agent needs them (each row's libraries on top of the rows above: the figure is what that
-import adds to a process that has the others), then numba's own start at the first compiled kernel, split in two
-(numba imports ``scipy.linalg`` for its BLAS and LAPACK; then it loads its implementation registries and starts
-LLVM's code generator), then the camera vehicle's warm-up as ``CameraVehicle.warm_up`` runs it (open the camera,
-render and extract the first image, one search, tracking frames, a generation between frames). MB = 10^6 bytes.
-*numba cache* says whether the kernels came from numba's on-disk cache (``cache=True``, as agents run; warmed
-first) or were compiled in the process (an empty ``NUMBA_CACHE_DIR``); *peak* is the kernel's high-water mark
+import adds to a process that has the others), the world, then numba's own start at the first kernel through its
+JIT, in three rows (``import numba``; numba imports ``scipy.linalg`` for its BLAS and LAPACK; then it loads its
+implementation registries and starts LLVM's code generator), which add nothing with the kernels compiled ahead of
+time, then the camera vehicle's warm-up as ``CameraVehicle.warm_up`` runs it (open the camera, render and extract
+the first image, one search, tracking frames, a generation between frames). MB = 10^6 bytes.
+*compiled ahead of time* runs the kernels of ``evopose.kernels_aot`` (``make install`` builds it; docs/design.md §2,
+"Compiled kernels"), as agents run when it is built; the *JIT* conditions run the same kernels through numba's JIT
+(``EVOPOSE_KERNELS=jit``), their code from numba's on-disk cache (``cache=True``; warmed first) or compiled in the
+process (an empty ``NUMBA_CACHE_DIR``); *peak* is the kernel's high-water mark
 (``VmHWM``) so far: the renderer's one-off ground texture (made through FFTs, then freed) lifts it for a moment,
-here on top of numba's start; in an agent the texture comes before numba starts, and its peak is lower (the
+here on top of numba's start (JIT); in an agent the texture comes before numba starts, and its peak is lower (the
 footprint section's *peak RSS*). The last table splits the final RSS by mapping (``/proc/self/smaps``): the
 libraries' code and data that were touched, and the anonymous memory (Python objects, numpy arrays, LLVM's and
 OpenCV's heaps).
@@ -54,7 +57,7 @@ def step(name):
 
 step("the interpreter")
 for names in (["numpy"], ["typer", "rich.console"], ["pydantic", "msgpack", "yaml"], ["zenoh"], ["cv2"],
-              ["numba"], ["agents.vehicle.agent"]):
+              ["agents.vehicle.agent"]):
     for name in names:
         importlib.import_module(name)
     step("import " + ", ".join(names))
@@ -69,11 +72,17 @@ config = AgentConfig(fleet="memory", vehicle="H1", scenario="exp2", share="featu
 scenario = load_world(config)
 scenario.bounds()
 step("the world loaded (exp2)")
-importlib.import_module("scipy.linalg")
-step("numba's first kernel: scipy.linalg (numba's BLAS, LAPACK)")
-from numba.core.registry import cpu_target
-cpu_target.target_context.refresh()
-step("numba's first kernel: its registries, LLVM's code generator")
+from evopose import kernel_backend
+if kernel_backend.BACKEND == "jit":
+    importlib.import_module("numba")
+step("JIT only: import numba")
+if kernel_backend.BACKEND == "jit":
+    importlib.import_module("scipy.linalg")
+step("JIT only: numba's first kernel: scipy.linalg (numba's BLAS, LAPACK)")
+if kernel_backend.BACKEND == "jit":
+    from numba.core.registry import cpu_target
+    cpu_target.target_context.refresh()
+step("JIT only: numba's first kernel: its registries, LLVM's code generator")
 camera = roles.open_camera(config, scenario)
 step("the camera opened")
 frame = camera.acquire(0, 0)
@@ -105,9 +114,10 @@ print(json.dumps({"mappings": by}), flush=True)
 '''
 
 
-def run_child(cold_cache: bool) -> tuple[list[dict], dict]:
-    """The child's steps and its final RSS by mapping; ``cold_cache``: numba compiles every kernel itself."""
-    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+def run_child(cold_cache: bool, backend: str = "jit") -> tuple[list[dict], dict]:
+    """The child's steps and its final RSS by mapping; ``backend`` "aot" (the compiled kernels, which must be built
+    and current) or "jit"; ``cold_cache``: numba compiles every kernel itself."""
+    env = {**os.environ, "PYTHONPATH": str(ROOT), "EVOPOSE_KERNELS": backend}
     with tempfile.TemporaryDirectory(prefix="numba-cache-") as empty:
         if cold_cache:
             env["NUMBA_CACHE_DIR"] = empty
@@ -127,31 +137,37 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--out", type=Path, default=DEFAULT_OUT)
     args = parser.parse_args(argv)
+    from evopose.kernel_backend import load_aot
+
+    if load_aot() is None:
+        parser.error("the compiled kernels are not built or not current: python -m evopose.kernel_build")
     run_child(cold_cache=False)  # warm numba's on-disk cache, as an agent finds it
+    aot, aot_mappings = run_child(cold_cache=False, backend="aot")
     cached, mappings = run_child(cold_cache=False)
     cold, _ = run_child(cold_cache=True)
     rows, before = [], 0.0
-    for a, b in zip(cached, cold):
-        rows.append([a["step"], f"{a['VmRSS'] / MB:.1f}", f"{(a['VmRSS'] - before) / MB:+.1f}",
-                     f"{a['VmHWM'] / MB:.1f}", f"{b['VmRSS'] / MB:.1f}", a["Threads"]])
-        before = a["VmRSS"]
-        print(f"{a['step']:70s} {a['VmRSS'] / MB:7.1f} {a['VmHWM'] / MB:7.1f} {b['VmRSS'] / MB:7.1f}", flush=True)
-    rows.append(["peak (VmHWM) at the end", "", "", f"{cached[-1]['VmHWM'] / MB:.1f}",
-                 f"{cold[-1]['VmHWM'] / MB:.1f}", ""])
-    total = sum(mappings.values())
+    for c, a, b in zip(aot, cached, cold):
+        rows.append([c["step"], f"{c['VmRSS'] / MB:.1f}", f"{(c['VmRSS'] - before) / MB:+.1f}",
+                     f"{c['VmHWM'] / MB:.1f}", f"{a['VmRSS'] / MB:.1f}", f"{a['VmHWM'] / MB:.1f}",
+                     f"{b['VmRSS'] / MB:.1f}", c["Threads"]])
+        before = c["VmRSS"]
+        print(f"{c['step']:70s} {c['VmRSS'] / MB:7.1f} {a['VmRSS'] / MB:7.1f} {b['VmRSS'] / MB:7.1f}", flush=True)
+    rows.append(["peak (VmHWM) at the end", "", "", f"{aot[-1]['VmHWM'] / MB:.1f}", "",
+                 f"{cached[-1]['VmHWM'] / MB:.1f}", f"{cold[-1]['VmHWM'] / MB:.1f}", ""])
     known = {name for name, _ in MAPPINGS}
-    split = [[label, f"{mappings.get(name, 0) / MB:.1f}"] for name, label in MAPPINGS]
-    libraries = sum(v for k, v in mappings.items() if k not in known)
+    split = [[label, f"{aot_mappings.get(name, 0) / MB:.1f}", f"{mappings.get(name, 0) / MB:.1f}"]
+             for name, label in MAPPINGS]
     split.append(["other libraries (Python, numpy, OpenBLAS x 3, pydantic-core, libcrypto, ...)",
-                  f"{libraries / MB:.1f}"])
-    split.append(["total", f"{total / MB:.1f}"])
+                  *(f"{sum(v for k, v in m.items() if k not in known) / MB:.1f}" for m in (aot_mappings, mappings))])
+    split.append(["total", *(f"{sum(m.values()) / MB:.1f}" for m in (aot_mappings, mappings))])
     body = "\n".join([
         f"Produced by `.venv/bin/python -m benchmarks.bench_agent_memory`; {provenance()}.", "",
         next(part for part in __doc__.split("\n\n") if part.startswith("Each condition")).replace("\n", " "), "",
-        *md_table(["step", "RSS (MB), numba cache", "added (MB)", "peak so far (MB)",
-                   "RSS (MB), compiled in the process", "threads"], rows), "",
-        "The final RSS (numba cache) by mapping:", "",
-        *md_table(["mapping", "RSS (MB)"], split),
+        *md_table(["step", "RSS (MB), compiled ahead of time", "added (MB)", "peak so far (MB)",
+                   "RSS (MB), JIT, numba cache", "peak (MB), JIT, numba cache", "RSS (MB), JIT compiled in the process",
+                   "threads"], rows), "",
+        "The final RSS by mapping:", "",
+        *md_table(["mapping", "RSS (MB), compiled ahead of time", "RSS (MB), JIT, numba cache"], split),
     ])
     write_section(args.out, "Where a camera vehicle's memory goes", body)
     print(f"wrote {args.out}")

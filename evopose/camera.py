@@ -15,7 +15,8 @@ import numpy as np
 
 from geometry import invert_transform, matrix_from_pose
 
-from .projection import FAR_AWAY_PX, MIN_DEPTH, project_points, project_poses
+from .kernel_abi import FAR_AWAY_PX, MIN_DEPTH
+from .kernel_backend import project_points, project_poses
 
 __all__ = ["Camera", "FAR_AWAY_PX", "MIN_DEPTH"]
 

@@ -37,10 +37,10 @@ from typing import Literal
 
 import numpy as np
 
-from .kernels import MUTUAL, PAPER, ROBUST, chamfer_matches, view_terms
+from .kernel_abi import MUTUAL, PAPER, ROBUST
+from .kernel_backend import chamfer_matches, project_poses, view_terms
 from .neighbours import nearest_distance
 from .problem import Model, PoseProblem, View, label_coordinates
-from .projection import project_poses
 
 FitnessKind = Literal["mutual", "robust", "paper"]
 #: Kernel mode of each fitness kind (:func:`evopose.kernels.view_term_row`).

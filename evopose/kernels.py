@@ -7,7 +7,10 @@ and for every model point its nearest image point. :func:`view_term_row` turns t
 view's term ``d^(k)`` (the paper's eq. 1, or its bounded two-sided variant). The fitness of whole
 populations (:func:`view_terms`) and the refinement's own fitness (:mod:`evopose.refine_kernel`)
 both call them, so the two cannot drift apart. :func:`nearest_row` is the one nearest-neighbour
-matching with indices (the refinement's hard steps, the unmatched-marks count).
+matching with indices (the refinement's hard steps, the unmatched-marks count); :func:`nearest_sorted` the
+nearest neighbours of small point sets (:mod:`evopose.neighbours`). Python calls these kernels through
+:mod:`evopose.kernel_backend`, which runs them compiled ahead of time or through numba's JIT (docs/design.md §2,
+"Compiled kernels").
 
 Squared distances are used inside the loops; a large finite sentinel stands for "no candidate" so
 that ``fastmath`` stays valid. Every distance is taken in (u, v, label) space: ``pz`` (P,) and ``mz`` (M,) are
@@ -20,12 +23,11 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
-from .projection import FASTMATH as _FASTMATH
+from .kernel_abi import FASTMATH as _FASTMATH
+from .kernel_abi import MUTUAL, NO_MATCH_D2, PAPER, ROBUST
 
-#: Squared distance reported when no candidate exists (no usable model point, or unusable model point).
-NO_MATCH_D2 = 1e30
-#: View-term modes (:func:`view_term_row`): the paper's eq. (1), the robust two-sided mean, the mutual RMS.
-PAPER, ROBUST, MUTUAL = 0, 1, 2
+__all__ = ["MUTUAL", "NO_MATCH_D2", "PAPER", "ROBUST", "chamfer_matches", "chamfer_row", "chamfer_sums", "is_typed",
+           "mutual_row", "nearest_row", "nearest_sorted", "view_term_row", "view_terms"]
 
 
 @nb.njit(cache=True, fastmath=_FASTMATH, nogil=True, inline="always")
@@ -277,3 +279,42 @@ def chamfer_matches(u, v, mz, usable, px, py, pz):  # pragma: no cover - compile
     for n in range(N):
         nearest_row(u[n], v[n], mz, usable[n], px, py, pz, typed, img_nn[n], img_d2[n], mod_nn[n], mod_d2[n])
     return img_nn, img_d2, mod_nn, mod_d2
+
+
+@nb.njit(cache=True, nogil=True)
+def nearest_sorted(queries, points, order, exclude_self):  # pragma: no cover - compiled
+    """Nearest neighbours of small point sets (:mod:`evopose.neighbours`), per query: the squared distance to its nearest point, that point's index, and whether another point is
+    exactly as near. ``order`` sorts ``points`` by their first coordinate. ``exclude_self``: the queries are the
+    points themselves, and a query is not its own neighbour."""
+    n_q, dim = queries.shape
+    n_p = points.shape[0]
+    xs = np.empty(n_p)
+    for j in range(n_p):
+        xs[j] = points[order[j], 0]
+    best_d2 = np.full(n_q, np.inf)
+    best_i = np.full(n_q, -1, np.int64)
+    tied = np.zeros(n_q, np.bool_)
+    for q in range(n_q):
+        x = queries[q, 0]
+        start = np.searchsorted(xs, x)
+        for direction in (-1, 1):
+            j = start - 1 if direction < 0 else start
+            while 0 <= j < n_p:
+                dx = xs[j] - x
+                if dx * dx > best_d2[q]:
+                    break
+                i = order[j]
+                if not (exclude_self and i == q):
+                    d2 = 0.0
+                    for k in range(dim):
+                        diff = points[i, k] - queries[q, k]
+                        d2 += diff * diff
+                    if d2 < best_d2[q]:
+                        best_d2[q] = d2
+                        best_i[q] = i
+                        tied[q] = False
+                    elif d2 == best_d2[q]:
+                        tied[q] = True
+                        best_i[q] = min(best_i[q], i)
+                j += direction
+    return best_d2, best_i, tied

@@ -10,57 +10,20 @@ Distances are the k-d tree's, to the bit: ``sqrt`` of the sum of squared coordin
 coordinate order. Where the answer is an index, equally near points leave a choice that the tree made by its
 traversal order; to keep those answers as they were, a query with such a tie is answered by the tree itself
 (imported then, and only then: a chessboard's exact grid has ties, the shipped target models and noisy image
-points have none). :func:`nearest` sorts the points along their first coordinate and scans outwards from each
-query until that coordinate alone is farther than the best so far: exact, and about ``O(P log P)`` for points
-spread over an image (``O(P^2)`` only when they all share one first coordinate).
+points have none). :func:`nearest_distance` sorts the points along their first coordinate and scans outwards from
+each query until that coordinate alone is farther than the best so far (:func:`evopose.kernels.nearest_sorted`,
+compiled): exact, and about ``O(P log P)`` for points spread over an image (``O(P^2)`` only when they all share one
+first coordinate).
 """
 
 from __future__ import annotations
 
-import numba as nb
 import numpy as np
+
+from .kernel_backend import nearest_sorted
 
 #: Most query-by-point squared distances :func:`k_nearest` holds at once (floats: 32 MB).
 CHUNK_ENTRIES = 1 << 22
-
-
-@nb.njit(cache=True, nogil=True)
-def _nearest_sorted(queries, points, order, exclude_self):  # pragma: no cover - compiled
-    """Per query: the squared distance to its nearest point, that point's index, and whether another point is
-    exactly as near. ``order`` sorts ``points`` by their first coordinate. ``exclude_self``: the queries are the
-    points themselves, and a query is not its own neighbour."""
-    n_q, dim = queries.shape
-    n_p = points.shape[0]
-    xs = np.empty(n_p)
-    for j in range(n_p):
-        xs[j] = points[order[j], 0]
-    best_d2 = np.full(n_q, np.inf)
-    best_i = np.full(n_q, -1, np.int64)
-    tied = np.zeros(n_q, np.bool_)
-    for q in range(n_q):
-        x = queries[q, 0]
-        start = np.searchsorted(xs, x)
-        for direction in (-1, 1):
-            j = start - 1 if direction < 0 else start
-            while 0 <= j < n_p:
-                dx = xs[j] - x
-                if dx * dx > best_d2[q]:
-                    break
-                i = order[j]
-                if not (exclude_self and i == q):
-                    d2 = 0.0
-                    for k in range(dim):
-                        diff = points[i, k] - queries[q, k]
-                        d2 += diff * diff
-                    if d2 < best_d2[q]:
-                        best_d2[q] = d2
-                        best_i[q] = i
-                        tied[q] = False
-                    elif d2 == best_d2[q]:
-                        tied[q] = True
-                        best_i[q] = min(best_i[q], i)
-                j += direction
-    return best_d2, best_i, tied
 
 
 def _as_sets(queries: np.ndarray, points: np.ndarray, exclude_self: bool) -> tuple[np.ndarray, np.ndarray]:
@@ -77,7 +40,7 @@ def _nearest(queries: np.ndarray, points: np.ndarray, exclude_self: bool):
     if len(points) == 0:
         return np.full(len(queries), np.inf), np.full(len(queries), -1, np.int64), np.zeros(len(queries), bool)
     order = np.argsort(points[:, 0], kind="stable")
-    return _nearest_sorted(queries, points, order, exclude_self)
+    return nearest_sorted(queries, points, order, exclude_self)
 
 
 def _tree_neighbours(queries: np.ndarray, points: np.ndarray, k: int) -> np.ndarray:

@@ -15,12 +15,7 @@ import numpy as np
 
 from geometry import rotation_entries
 
-#: Points closer than this to the camera plane (metres, along the optical axis) are not projected.
-MIN_DEPTH = 1e-3
-#: Image coordinate given to points that cannot be projected (behind the camera); far from any pixel.
-FAR_AWAY_PX = 1e6
-#: Relaxed floating point (no NaN/inf assumptions, which the sentinels above would break).
-FASTMATH = {"nsz", "arcp", "contract", "afn", "reassoc"}
+from .kernel_abi import FAR_AWAY_PX, FASTMATH, MIN_DEPTH
 
 
 #: ``R = Rz(yaw) Ry(pitch) Rx(roll)`` as nine scalars: the one convention (:func:`geometry.rotation_entries`), compiled.

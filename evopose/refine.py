@@ -23,9 +23,7 @@ from typing import Sequence
 import numpy as np
 
 from .fitness import PoseObjective
-from .kernels import is_typed, nearest_row
-from .projection import project_pose
-from .refine_kernel import refine_population
+from .kernel_backend import is_typed, nearest_row, project_pose, refine_population
 
 #: Outlier slack of the soft matching: a pair at 2.5 sigma weighs as much as "no match".
 SOFT_OUTLIER = float(np.exp(-0.5 * 2.5**2))

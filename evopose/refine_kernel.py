@@ -18,8 +18,9 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
-from .kernels import MUTUAL, is_typed, nearest_row, view_term_row
-from .projection import FASTMATH as _FASTMATH
+from .kernel_abi import FASTMATH as _FASTMATH
+from .kernel_abi import MUTUAL
+from .kernels import is_typed, nearest_row, view_term_row
 from .projection import project_pose
 
 _TWO_PI = 2.0 * np.pi

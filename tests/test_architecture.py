@@ -10,6 +10,7 @@ interpreter.
 from __future__ import annotations
 
 import ast
+import os
 import re
 import subprocess
 import sys
@@ -198,9 +199,9 @@ def test_no_module_imports_another_modules_private_name(path):
     assert not private, f"{module} imports private names: {private}"
 
 
-def _loaded_after(statement: str) -> set[str]:
+def _loaded_after(statement: str, env: dict[str, str] | None = None) -> set[str]:
     code = f"import sys; {statement}; print(' '.join(sorted(sys.modules)))"
-    out = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=120)
+    out = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=120, env=env)
     assert out.returncode == 0, out.stderr
     return set(out.stdout.split())
 
@@ -211,7 +212,7 @@ def test_the_cli_imports_nothing_heavy_to_print_help():
 
 
 #: Packages a camera vehicle does not use, each some megabytes resident once imported (docs/design.md §2,
-#: "Lazy imports"). scipy.linalg is not among them: numba loads it for its BLAS and LAPACK at its first compiled kernel.
+#: "Lazy imports"). scipy.linalg is not among them: the refinement's compiled solve takes LAPACK from it.
 NOT_FOR_A_CAMERA_VEHICLE = {"scipy.spatial", "scipy.sparse", "scipy.special", "scipy.optimize", "scipy.stats",
                             "scipy.ndimage", "matplotlib", "PIL", "rosbags", "mcap", "foxglove", "websockets",
                             "cryptography", "agents.bridges", "agents.tools", "agents.experiments"}
@@ -230,15 +231,40 @@ def test_a_camera_vehicle_warmed_up_has_imported_nothing_it_does_not_use():
                 or ".".join(m.split(".")[:2]) in NOT_FOR_A_CAMERA_VEHICLE}
 
 
+def test_a_camera_vehicle_with_the_compiled_kernels_never_imports_numba():
+    """With the kernels compiled ahead of time (make install), an agent's imports and warm-up load neither numba nor
+    llvmlite: about 110 MB resident (docs/design.md §2, "Compiled kernels"). Skipped when they are not built, unless
+    EVOPOSE_REQUIRE_AOT is set (make test)."""
+    from evopose.kernel_backend import load_aot
+
+    if load_aot() is None:
+        assert not os.environ.get("EVOPOSE_REQUIRE_AOT"), "the compiled kernels are not built (make install)"
+        pytest.skip("the compiled kernels are not built (python -m evopose.kernel_build)")
+    env = {k: v for k, v in os.environ.items() if k != "EVOPOSE_KERNELS"}
+    loaded = _loaded_after("from agents.vehicle.agent import load_world; "
+                           "from agents.vehicle.config import AgentConfig; "
+                           "from agents.vehicle.roles import CameraVehicle; "
+                           "config = AgentConfig(fleet='aot', vehicle='H1', scenario='exp2', share='features'); "
+                           "CameraVehicle.warm_up(config, load_world(config))", env=env)
+    assert "evopose.solver" in loaded and "evopose.kernels_aot" in loaded  # it did run, compiled ahead of time
+    assert not {m for m in loaded if m.split(".")[0] in ("numba", "llvmlite")}
+
+
 def test_the_problem_file_contract_does_not_pull_in_the_renderer():
     loaded = _loaded_after("import agents.problem.problem_file, agents.problem.solve")
     assert "scenarios.render" not in loaded and "zenoh" not in loaded
+
+
+#: evopose/'s modules that touch files, none of them the search's data: whether the compiled kernels are current
+#: (their sources, the processor) and building them (docs/design.md §2, "Compiled kernels").
+KERNEL_BUILD = {"evopose/kernel_backend.py", "evopose/kernel_build.py"}
 
 
 def test_the_pose_search_reads_and_writes_no_files():
     """evopose/ is the search (eq. 1-4): images and files are vision's and the agents' (docs/architecture.md)."""
     io = re.compile(r"\bopen\(|\bPath\(|read_text|write_text|read_bytes|np\.load|np\.save|json\.load")
     found = [f"{p.relative_to(ROOT)}:{n}" for p in sorted((ROOT / "evopose").rglob("*.py"))
+             if str(p.relative_to(ROOT)) not in KERNEL_BUILD
              for n, line in enumerate(p.read_text(encoding="utf-8").splitlines(), 1) if io.search(line)]
     assert not found
 
