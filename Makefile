@@ -16,7 +16,7 @@ $(STAMP): pyproject.toml constraints.txt
 # an agent then runs without numba's JIT (~110 MB less resident). Without them, or after a kernel's source changed
 # and before this runs again, the same kernels run through the JIT.
 kernels: $(STAMP)
-	$(PY) -m evopose.kernel_build
+	@$(PY) -m evopose.kernel_build
 
 install: $(STAMP) kernels
 
