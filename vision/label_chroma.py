@@ -13,10 +13,10 @@ patch only). A camera's labels are sent while the median over its recent frames'
 :data:`MIN_LABEL_CHROMA`; else its points go out untyped (eq. 1 as the paper writes it).
 
 Chosen on the paper-scale training worlds t1-t4 through 16 random looks (seeds 0-15, :func:`scenarios.looks.random_look`,
-2 frames per camera; a development script, not a benchmark). The five looks whose median spot chroma was 4.0-4.7
-labelled 0.41-0.57 of their matched marks right; the eleven at 5.5 and over 0.54-0.87 (all but one 0.62 or more).
-Per frame, the bar of 5 keeps 528 frames labelled 0.73 right and drops 207 labelled 0.54 right. A first bar of 7
-(keeping 0.76, dropping 0.56) was moved to the gap at 5 when the committed reference-look frames
+2 frames per camera; ``benchmarks/bench_label_chroma.py``, BENCHMARKS.md). The five looks whose median spot chroma
+is 3.7-4.6 label 0.41-0.57 of their matched marks right; the eleven at 5.8 and over 0.56-0.87 (all but two 0.68 or
+more). Per frame, the bar of 5 keeps 539 frames labelled 0.73 right and sends 192 labelled 0.54 right untyped. A first
+bar of 7 (keeping 0.76, dropping 0.56) was moved to the gap at 5 when the committed reference-look frames
 (``tests/data/photoreal/paper-sequence``, H1: 3.4-9.5 per frame) showed a camera whose labels are mostly right
 sitting at 7, so the bar is not held out from those frames; the benchmark's named looks were not used.
 """
