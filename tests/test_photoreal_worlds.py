@@ -1,27 +1,70 @@
-"""The photoreal world sets (benchmarks/photoreal_worlds.py): the committed files are what the generator writes, and
-the recoloured training robots are the Pioneer with other paints."""
+"""The photoreal world sets (benchmarks/photoreal_worlds.py): the committed files are what the generator writes, the
+recoloured training robots are the Pioneer with other paints, and the random training robots
+(benchmarks/random_bodies.py) are marked on their faces where no dark part covers them."""
 
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from benchmarks import photoreal_worlds as worlds
+from benchmarks.random_bodies import random_body_model
+from scenarios.target import ModelFileSpec, model_from_spec
 from scenarios.world import load_scenario
 
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def test_the_committed_palette_worlds_and_models_are_the_generators(tmp_path, monkeypatch):
-    folder = tmp_path / "photoreal-palettes"
-    monkeypatch.setitem(worlds.SETS, "palettes", (folder, *worlds.SETS["palettes"][1:]))
-    written = worlds.write_worlds("palettes")
+@pytest.mark.parametrize("world_set", ["palettes", "bodies"])
+def test_the_committed_training_robots_worlds_and_models_are_the_generators(tmp_path, monkeypatch, world_set):
+    committed_folder = worlds.SETS[world_set][0]
+    folder = tmp_path / world_set
+    monkeypatch.setitem(worlds.SETS, world_set, (folder, *worlds.SETS[world_set][1:]))
+    written = worlds.write_worlds(world_set)
     assert len(written) == 12
     for path in written:
-        committed = worlds.PALETTE_WORLDS / path.relative_to(folder)
+        committed = committed_folder / path.relative_to(folder)
         assert committed.read_text(encoding="utf-8") == path.read_text(encoding="utf-8"), committed
         model = Path("models") / path.name
-        assert (worlds.PALETTE_WORLDS / model).read_text(encoding="utf-8") == (folder / model).read_text(
+        assert (committed_folder / model).read_text(encoding="utf-8") == (folder / model).read_text(
             encoding="utf-8"), model
+
+
+def _on_box_face(point: np.ndarray, centre: np.ndarray, size: np.ndarray, normal: np.ndarray) -> bool:
+    axis = int(np.argmax(np.abs(normal)))
+    half = size / 2
+    on_plane = np.isclose(point[axis], centre[axis] + np.sign(normal[axis]) * half[axis], atol=1e-3)
+    inside = all(abs(point[k] - centre[k]) < half[k] for k in range(3) if k != axis)
+    return bool(on_plane and inside)
+
+
+@pytest.mark.parametrize("seed", range(40))
+def test_a_random_robot_is_marked_on_its_painted_faces_clear_of_its_dark_parts(seed):
+    doc = random_body_model(seed)
+    model = model_from_spec(ModelFileSpec.model_validate(doc))
+    body = doc["parts"][0]
+    centre, size = np.array(body["box"]["centre"]), np.array(body["box"]["size"])
+    assert model.body_colour == tuple(body["colour"])          # the paint a camera sees around the marks
+    assert len(model.mark_points) >= 6 and set(m["colour"] for m in doc["marks"]) == set(doc["colours"])
+    radius = doc["mark_radius"]
+    for mark in doc["marks"]:
+        p, n = np.array(mark["position"]), np.array(mark["normal"])
+        assert _on_box_face(p, centre, size, n), mark
+        for part in doc["parts"][1:]:   # no dark part covers a mark: its disc is clear of the part's box
+            shape = part.get("box") or part["ellipsoid"]
+            c = np.array(shape["centre"])
+            half = np.array(shape["size"]) / 2 if "box" in part else np.array(shape["semi_axes"])
+            near = np.all(np.abs(p - c) < half + radius, axis=0)
+            assert not near, (mark, part)
+
+
+def test_random_robots_differ_in_shape_and_parts():
+    docs = [random_body_model(seed) for seed in range(12)]
+    sizes = {tuple(d["parts"][0]["box"]["size"]) for d in docs}
+    assert len(sizes) == 12
+    # dark parts: a plate is one box, bumpers two, wheels four ellipsoids
+    kinds = {(sum("box" in p for p in d["parts"][1:]), sum("ellipsoid" in p for p in d["parts"][1:])) for d in docs}
+    assert len(kinds) >= 4, kinds
 
 
 def test_a_recoloured_robot_is_the_pioneer_with_its_own_body_and_mark_paints():
