@@ -1,4 +1,4 @@
-"""Random marked robots for training: other bodies than the Pioneer's (docs/datasets.md, "Rendering: commands, engines, timings").
+"""Random marked robots for training: other bodies than the Pioneer's (docs/datasets.md, "Rendering").
 
 The mark scorer (vision/mark_scorer.py) learns which contrast spots on a robot's paint are its marks. Trained on the
 Pioneer's body alone (recoloured or not, :func:`benchmarks.photoreal_worlds.recoloured_model`), it never meets what
@@ -52,7 +52,7 @@ def random_body_model(seed: int) -> dict:
     """A model file (a mapping, :mod:`scenarios.target`'s schema) of a random marked robot, ``seed``'s."""
     rng = np.random.default_rng([35, seed])
     body_paint, mark_paints = random_paints(1000 + seed)
-    length, width = float(rng.uniform(0.4, 1.0)), 0.0
+    length = float(rng.uniform(0.4, 1.0))
     width = float(rng.uniform(0.55, 0.8)) * length
     height = float(rng.uniform(0.18, 0.4))
     wheels = rng.uniform() < 0.7
