@@ -14,9 +14,9 @@ patch only). A camera's labels are sent while the median over its recent frames'
 
 Chosen on the paper-scale training worlds t1-t4 through 16 random looks (seeds 0-15, :func:`scenarios.looks.random_look`,
 2 frames per camera; ``benchmarks/bench_label_chroma.py``, BENCHMARKS.md). The five looks whose median spot chroma
-is 3.7-4.6 label 0.41-0.57 of their matched marks right; the eleven at 5.8 and over 0.56-0.87 (all but two 0.68 or
-more). Per frame, the bar of 5 keeps 539 frames labelled 0.73 right and sends 192 labelled 0.54 right untyped. A first
-bar of 7 (keeping 0.76, dropping 0.56) was moved to the gap at 5 when the committed reference-look frames
+is 3.6-4.5 label 0.43-0.58 of their matched marks right; the eleven at 5.8 and over 0.57-0.88 (all but two 0.67 or
+more). Per frame, the bar of 5 keeps 538 frames labelled 0.74 right and sends 188 labelled 0.54 right untyped. A first
+bar of 7 (keeping 0.77, dropping 0.57) was moved to the gap at 5 when the committed reference-look frames
 (``tests/data/photoreal/paper-sequence``, H1: 3.4-9.5 per frame) showed a camera whose labels are mostly right
 sitting at 7, so the bar is not held out from those frames; the benchmark's named looks were not used.
 """
