@@ -90,3 +90,22 @@ def test_on_the_committed_paper_scale_frames_most_matched_marks_have_their_colou
 
     rows = [r for r in evaluate(Path(__file__).parent / "data" / "photoreal" / "paper") if r["front_end"] == "contrast"]
     assert all(r["labels"] >= 0.7 for r in rows), rows
+
+
+def test_a_saturated_mark_as_lit_as_its_ring_is_its_paint_however_dark_beside_the_scene():
+    # the second robot's red mark on its shaded side under a low sun (telephoto g1-low, H1: linear BGR as measured)
+    # is darker than a fifth of the sunlit scene, yet lit like the yellow paint around it
+    husky = {"red": (35, 35, 200), "blue": (200, 90, 20), "violet": (190, 40, 130), "black": (30, 30, 30)}
+    pal = _srgb_to_linear(np.array(list(husky.values()), np.float32) / 255).astype(float)
+    body = _srgb_to_linear(np.array((20, 195, 240), np.float32) / 255).astype(float)
+    spot, ring = np.array([[0.009, 0.009, 0.103]]), np.array([[0.008, 0.107, 0.162]])
+    scene_bar = 0.12   # MIN_RELATIVE_BRIGHTNESS x the scene: more than the red paint's fit gives
+    light = ring @ body / (body @ body)
+    labels, misfit, _ = label_colours(spot, ring, pal, scene_bar, bleached=True, ring_light=light)
+    assert list(husky)[labels[0]] == "red" and misfit[0] < 0.35
+    labels, misfit, _ = label_colours(spot, ring, pal, scene_bar, bleached=True)   # the scene's bar alone
+    assert list(husky)[labels[0]] != "red" or misfit[0] >= 0.35
+    # a hole in the same paint, far darker than its ring, is still no lit paint
+    _, misfit, _ = label_colours(np.array([[0.004, 0.004, 0.012]]), ring, pal[:3], scene_bar, bleached=True,
+                                 ring_light=light)
+    assert not np.isfinite(misfit[0])
