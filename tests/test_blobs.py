@@ -362,3 +362,25 @@ def test_a_bright_mark_bleached_toward_white_fits_its_paint_and_a_glint_on_the_b
     assert np.argmin(misfit[0]) == 2 and misfit[0, 2] < 0.01
     assert misfit[1, [1, 2, 3]].min() > 0.35    # only the body's own hue (yellow, a palette colour here) could fit
     assert np.isinf(misfit[2]).all()            # darker than its ring: not bleached
+
+
+def test_an_oblique_mark_peaking_at_both_ends_is_one_detection_at_its_centre_and_two_marks_stay_two():
+    # a disc seen at a grazing angle (an 11 x 3 px ellipse) peaks towards both ends at the finest scale, with no
+    # larger scale peaking at its centre; two round marks of one colour 14 px apart have paint between them
+    s, body = 8, (40, 40, 150)
+    big = cv2.resize(np.full((160, 240, 3), (120, 125, 130), np.float32), None, fx=s, fy=s,
+                     interpolation=cv2.INTER_NEAREST)
+    cv2.rectangle(big, (30 * s, 30 * s), (210 * s, 130 * s), body, -1)
+    marks = [((80.3, 80.6), (11, 3), "cyan"), ((150.4, 110.2), (5, 5), "yellow"),
+             ((100.3, 110.2), (5, 5), "cyan"), ((114.3, 110.2), (5, 5), "cyan")]
+    for (u, v), axes, colour in marks:
+        cv2.ellipse(big, (int(u * s), int(v * s)), (axes[0] * s, axes[1] * s), 0, 0, 360, PALETTE[colour], -1,
+                    cv2.LINE_AA)
+    image = cv2.resize(big, (240, 160), interpolation=cv2.INTER_AREA)
+    image = np.clip(image + np.random.default_rng(0).normal(0, 2, image.shape), 0, 255).astype(np.uint8)
+    det = detect_contrast_marks(image, PALETTE, MarkPrior((2.5, 12.0), 200.0), body=body)
+    # each mark's centre in the image's pixel coordinates (area sampling of the 8x drawing)
+    centres = np.array([((int(u * s) + 0.5) / s - 0.5, (int(v * s) + 0.5) / s - 0.5) for (u, v), _, _ in marks])
+    found, _ = match_to_truth(det.points, centres, 0.6)
+    assert len(det) == 4 and len(found) == 4, det.points
+    assert sorted(det.colours()) == ["cyan", "cyan", "cyan", "yellow"]

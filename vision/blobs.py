@@ -52,7 +52,7 @@ from .camera_look import Look, estimate_look, to_reference_look
 from .features import MarkDetections, to_bgr
 from .mark_prior import MarkPrior, mark_prior
 from .mark_scorer import MarkScorer, candidate_features, feature_names, shipped
-from .mark_selection import densest_cluster, one_per_disc, one_scale, same_spots, surrounded
+from .mark_selection import densest_cluster, one_mark_between, one_per_disc, one_scale, same_spots, surrounded
 from .spot_colour import label_small_spots, labels_of, ring_colours, spot_misfits
 from .spot_position import SMALL_SPOT_PX, coverage_centroids, round_peaks
 from .spot_label import label_colours
@@ -363,15 +363,29 @@ def _detect(bgr: np.ndarray, lin: np.ndarray, names: tuple[str, ...], palette: M
         conf[good]
     contrast = mag[lvl, ys, xs] / thresh[lvl]
     pts = coverage_centroids(lin, pts, radius, spot[good], ring[good])
-    # one detection per place: a stronger peak within its radius (another scale of the same spot) wins
+    # one detection per place: a stronger peak within its radius (another scale of the same spot) wins; an oblique
+    # mark's two ends (where marks are 3 px and more) are one detection at their middle
     order = np.argsort(-contrast)
     same = same_spots(pts, radius)
+    ends = (one_mark_between(lin, pts, radius, labels, spot[good], ring[good]) & ~same
+            if prior.radius_px[1] >= SMALL_SPOT_PX else np.zeros(same.shape, bool))
+    same |= ends
     taken: list[int] = []
+    one_mark: dict[int, list[int]] = {}   # the peaks of an oblique mark, under the first taken
     for i in order.tolist():
         if not same[i, taken].any():
             taken.append(i)
+        elif ends[i, taken].any():
+            one_mark.setdefault(taken[int(np.flatnonzero(ends[i, taken])[0])], []).append(i)
         if len(taken) >= max_marks:
             break
+    for first, more in one_mark.items():   # the mark: its radius half its farthest two peaks' span, its centre the
+        peaks = pts[[first, *more]]        # centroid of its colour's coverage from their middle (as one round spot's)
+        apart = np.hypot(*(peaks[:, None, :] - peaks[None, :, :]).transpose(2, 0, 1))
+        a, b = np.unravel_index(int(np.argmax(apart)), apart.shape)
+        radius[first] = float(radius[[first, *more]].max()) + 0.5 * float(apart[a, b])
+        pts[first] = coverage_centroids(lin, 0.5 * (peaks[a] + peaks[b])[None], radius[first:first + 1],
+                                        spot[good][first:first + 1], ring[good][first:first + 1])[0]
     sel = np.array(sorted(taken), int)
     if silhouette is not None and len(sel) and prior.radius_px[1] >= SMALL_SPOT_PX:   # a mark's centre is on the body
         depth = cv2.distanceTransform(silhouette.astype(np.uint8), cv2.DIST_L2, 3)

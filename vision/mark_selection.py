@@ -16,6 +16,11 @@ SCALE_CONSENSUS = 0.55
 #: alike, what a look or the ground's texture adds is weak (telephoto-g1-high through flat-cool and hable-faded, and
 #: the Husky's frames, a one-off analysis: marks 1.6-9, specks 1.0-2.7).
 RELATIVE_CONTRAST = 0.35
+#: Two peaks of one label this many of their larger radius apart, or nearer, may be one oblique mark's two ends
+#: (:func:`one_mark_between`): a disc at 75 deg from its normal is ~4 times as long as wide.
+ONE_MARK_REACH = 4.0
+#: ... when the colour between them is mostly the mark's (its share on the line paint -> mark) and near that line.
+MIN_COVER_BETWEEN, MAX_ACROSS_BETWEEN = 0.6, 0.3
 
 
 def one_per_disc(pts: np.ndarray, score: np.ndarray, disc_radius_px: float) -> np.ndarray:
@@ -92,6 +97,41 @@ def same_spots(pts: np.ndarray, radius: np.ndarray) -> np.ndarray:
     return (d <= np.maximum(big, 1.0)) | ((big >= 1.8 * small) & (d < 1.3 * (big + small)))
 
 
+def one_mark_between(lin: np.ndarray, pts: np.ndarray, radius: np.ndarray, labels: np.ndarray, spot: np.ndarray,
+                     ring: np.ndarray) -> np.ndarray:
+    """Whether each two peaks ``pts`` (K, 2) of one label ``labels`` (K,) are the two ends of one oblique mark, bool
+    (K, K): within :data:`ONE_MARK_REACH` of their larger ``radius`` (K,) px, and every sample of the segment between
+    them nearer their mark's colour (the mean of their ``spot`` colours, (K, 3)) than the paint around them (their
+    ``ring`` colours' mean) in ``lin`` (H, W, 3), linear light. A disc seen at a grazing angle is an ellipse whose
+    finest scale fits its minor axis: it peaks twice, towards its ends, with no larger scale peaking at its centre
+    (the second robot's top-face marks at telephoto); two marks of one colour have paint between them."""
+    pts = np.asarray(pts, float).reshape(-1, 2)
+    k = len(pts)
+    joined = np.zeros((k, k), bool)
+    if k < 2:
+        return joined
+    i, j = np.triu_indices(k, 1)
+    d = np.hypot(*(pts[i] - pts[j]).T)
+    big, small = np.maximum(radius[i], radius[j]), np.minimum(radius[i], radius[j])
+    # two ends fit the minor axis alike (a rim peak beside a whole disc's is :func:`same_spots`')
+    near = (labels[i] == labels[j]) & (d <= ONE_MARK_REACH * big) & (d > 0) & (big <= 1.5 * small)
+    i, j = i[near], j[near]
+    if not len(i):
+        return joined
+    mark, paint = 0.5 * (spot[i] + spot[j]), 0.5 * (ring[i] + ring[j])                # (N, 3)
+    contrast = mark - paint
+    span = np.maximum(np.einsum("nc,nc->n", contrast, contrast), 1e-12)
+    inside = np.ones(len(i), bool)
+    for t in (0.25, 0.5, 0.75):
+        p = pts[i] + t * (pts[j] - pts[i])
+        off = _bilinear(lin, p[:, 0:1], p[:, 1:2])[:, 0] - paint                     # (N, 3)
+        cover = np.einsum("nc,nc->n", off, contrast) / span   # the share of the mark's colour on paint -> mark
+        across = np.linalg.norm(off - cover[:, None] * contrast, axis=1) / np.sqrt(span)
+        inside &= (cover >= MIN_COVER_BETWEEN) & (across <= MAX_ACROSS_BETWEEN)
+    joined[i[inside], j[inside]] = joined[j[inside], i[inside]] = True
+    return joined
+
+
 def densest_cluster(pts: np.ndarray, weight: np.ndarray, radius: float) -> np.ndarray:
     """Indices of the points within ``radius`` of the point whose ``radius`` neighbourhood holds the most weight
     (the target's marks; specks and clutter far from it are dropped)."""
@@ -104,4 +144,4 @@ def densest_cluster(pts: np.ndarray, weight: np.ndarray, radius: float) -> np.nd
     return np.nonzero(np.linalg.norm(pts - mean, axis=1) <= radius)[0]
 
 
-__all__ = ["densest_cluster", "one_per_disc", "one_scale", "same_spots", "surrounded"]
+__all__ = ["densest_cluster", "one_mark_between", "one_per_disc", "one_scale", "same_spots", "surrounded"]
