@@ -9,9 +9,10 @@ basins, the stop rules), *polish* (the best pose's last refinement), *rivals* (t
 verdict), *verdict* (:func:`evopose.uncertainty.assess`), *robust fit + covariance* (the published pose,
 :func:`evopose.solver.published`); *other* is the rest of the solve.
 
-``--other PATH`` runs the same measurement on the code at PATH (a git worktree, with this module copied in when it
-predates it) in a child process started there, the two alternating repeat by repeat on the same problems, so the
-ratios compare code under the same load.
+``--other PATH`` runs the same measurement on the code at PATH (a git worktree, or a ``git archive`` of a commit
+with its compiled kernels, with this module copied in when it predates it) in a child process started there, the
+two alternating repeat by repeat on the same problems, so the ratios compare code under the same load. Per group of
+the suite it also gives success, confident answers and the median and mean time (when both modules record them).
 """
 
 from __future__ import annotations
@@ -62,7 +63,9 @@ def measure(repeats: int) -> dict:
     _wrap(solver, "_rivals", "rivals", spent)
     _wrap(solver, "assess", "verdict", spent)
     _wrap(solver, "published", "robust fit + covariance", spent)
-    problems = [sp for group in suite().values() for sp in group]
+    groups = suite()
+    problems = [sp for group in groups.values() for sp in group]
+    names = [g for g, group in groups.items() for _ in group]
     solve(problems[0].problem, seed=0)
     solve(problems[-1].problem, seed=0)
     rows = []
@@ -80,7 +83,7 @@ def measure(repeats: int) -> dict:
             rot, pos = pose_errors(sol.pose, sp.true_pose, sp.symmetries, sp.problem.model.points.mean(axis=0))
             rows.append({"total": total, "phases": phases, "evaluations": int(sol.evaluations),
                          "ok": bool(is_success(rot, pos, sp.distance)), "generations": int(sol.generations),
-                         "stop": sol.stop_reason})
+                         "stop": sol.stop_reason, "group": names[i], "confident": bool(sol.confident)})
     return {"rows": rows, "problems": len(problems)}
 
 
@@ -97,6 +100,46 @@ def summary(result: dict) -> dict:
             "generations": float(np.median([r["generations"] for r in first])),
             "success": sum(r["ok"] for r in first), "problems": n,
             "stops": {s: sum(r["stop"] == s for r in first) for s in sorted({r["stop"] for r in first})}}
+
+
+def by_group(result: dict) -> dict[str, dict]:
+    """Per group of the suite: success, confident (and of those, successes), median and mean of each problem's
+    least CPU time over the repeats, median evaluations."""
+    rows, n = result["rows"], result["problems"]
+    repeats = len(rows) // n
+    total = np.array([r["total"] for r in rows]).reshape(repeats, n).min(axis=0)
+    out: dict[str, dict] = {}
+    for g in dict.fromkeys(r["group"] for r in rows[:n]):
+        idx = [i for i, r in enumerate(rows[:n]) if r["group"] == g]
+        first = [rows[i] for i in idx]
+        out[g] = {"problems": len(idx), "success": sum(r["ok"] for r in first),
+                  "confident": sum(r["confident"] for r in first),
+                  "confident_right": sum(r["ok"] and r["confident"] for r in first),
+                  "median_ms": 1000 * float(np.median(total[idx])), "mean_ms": 1000 * float(np.mean(total[idx])),
+                  "evaluations": float(np.median([r["evaluations"] for r in first]))}
+    return out
+
+
+def group_lines(results: dict[str, dict]) -> list[str]:
+    """The per-group table (and this / other ratios when there is another checkout); checkouts whose module
+    predates the groups are left out."""
+    known = {name: by_group(r) for name, r in results.items() if r["rows"] and "group" in r["rows"][0]}
+    if not known:
+        return []
+    lines = ["", "| code | group | success | confident (successes) | median time (ms) | mean time (ms) | "
+                 "median evaluations |", "|---|---|---|---|---|---|---|"]
+    for name, groups in known.items():
+        for g, s in groups.items():
+            lines.append(f"| {name} | {g} | {s['success']}/{s['problems']} | {s['confident']} ({s['confident_right']}) "
+                         f"| {s['median_ms']:.1f} | {s['mean_ms']:.1f} | {s['evaluations']:.0f} |")
+    if "this" in known and "other" in known:
+        lines.append("")
+        for g, s in known["this"].items():
+            o = known["other"][g]
+            lines.append(f"{g}, this / other: median time {s['median_ms'] / o['median_ms']:.2f}, mean time "
+                         f"{s['mean_ms'] / o['mean_ms']:.2f}, median evaluations "
+                         f"{s['evaluations'] / o['evaluations']:.2f}")
+    return lines
 
 
 def _commit(tree: Path) -> str:
@@ -148,6 +191,7 @@ def main(argv: list[str] | None = None) -> int:
         lines += ["", f"this / other: median time {sums['this']['median_ms'] / sums['other']['median_ms']:.2f}, "
                       f"mean time {sums['this']['mean_ms'] / sums['other']['mean_ms']:.2f}, median evaluations "
                       f"{sums['this']['evaluations'] / sums['other']['evaluations']:.2f}"]
+    lines += group_lines(results)
     text = "\n".join(lines) + "\n"
     print(text)
     if args.out:

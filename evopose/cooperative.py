@@ -150,7 +150,7 @@ class Cooperation:
                 st = replace(st, last=None)
                 problem = problem.with_hints(np.concatenate([problem.hints, solution.pose[None]]))
         if st.search is None:
-            optimiser = EvoPose(problem, self.options)
+            optimiser = self._optimiser(problem, generations)
             run = Run(optimiser.start(), Told(0, np.inf, False, None), Evaluator.for_search(problem, self.options),
                       0.0)
             st = replace(st, search=SearchInProgress(optimiser, run, problem, frame, clock(),
@@ -169,7 +169,7 @@ class Cooperation:
             return replace(st, confirm=None), solution
         search = st.confirm
         if search is None:
-            optimiser = EvoPose(problem, self.options)
+            optimiser = self._optimiser(problem, generations)
             evaluator = Evaluator.for_search(problem, self.options)
             search = SearchInProgress(optimiser, Run(optimiser.start(), Told(0, np.inf, False, None), evaluator, 0.0),
                                       problem, frame, clock(), anchor=np.array(solution.pose),
@@ -193,6 +193,16 @@ class Cooperation:
                           seed=np.random.default_rng([self.seed, frame, 3]), lost_mismatch=self.lost_mismatch,
                           search_when_lost=False)
         return st, (relocated if relocated.converged else solution)
+
+    def _optimiser(self, problem: PoseProblem, generations: int | None) -> EvoPose:
+        """The global search of ``problem``. In slices of a fixed number of ``generations`` (team-mates with the same
+        views: :meth:`estimate`) it stops at the starts ``min_starts`` asks for, not earlier when settled
+        (:meth:`evopose.search.EvoPose.settled`): their searches, seeded apart, must end in the same slice to
+        begin their tracks from the same weighed pose. At 4 generations a frame none ends in its first (249 starts,
+        fewer than 256); a settled stop ends one team-mate's there and not the other's, and each then publishes its
+        own track (tests/test_paper_scale.py: 0 of 20 frames the same). The slices are generations, not time, so an
+        earlier stop would save no frame time there."""
+        return EvoPose(problem, self.options if generations is None else replace(self.options, settled_supporters=0))
 
     @staticmethod
     def _predicted(st: EstimatorState, frame: int, start: np.ndarray) -> np.ndarray | None:

@@ -57,6 +57,11 @@ class SearchOptions:
     close_unmatched : float
     min_starts_loose : int
         starts are needed (a poor best match may be a wrong basin: search longer).
+    settled_starts, settled_supporters, settled_ratio : int, int, float
+        The search stops ("consensus") before ``min_starts`` once its answer is settled
+        (:meth:`evopose.search.EvoPose.settled`): at least ``settled_starts`` starts (times the same factor), the
+        best basin's match close and reached from ``settled_supporters`` independent starts, and the best unimproved
+        since ``1 / settled_ratio`` of the starts. 0 supporters: never.
     patience : int
         Stop ("stalled") when the best has not improved for this many generations after ``min_starts``.
     min_generations : int
@@ -97,6 +102,9 @@ class SearchOptions:
     close_mismatch: float = 0.3
     close_unmatched: float = 0.1
     min_starts_loose: int = 1024
+    settled_starts: int = 128
+    settled_supporters: int = 5
+    settled_ratio: float = 2.0
     patience: int = 6
     min_generations: int = 1
     view_reject: float | None = 0.8

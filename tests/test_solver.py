@@ -9,9 +9,10 @@ import pytest
 
 from benchmarks.problems import in_true_basin, is_success, make_paper_scale_problem, make_problem, pose_errors
 from evopose import Bounds, Evaluator, EvoPose, PoseObjective, PoseProblem, SearchOptions, View, refine, solve, track
-from evopose.fitness import TAU_MIN_PX
+from evopose.fitness import TAU_MIN_PX, Match
 from geometry import PARAM_NAMES
 from evopose.robust_fit import robust_pose
+from evopose.search import EvoPoseState
 from evopose.solver import POLISH_SCHEDULE
 
 
@@ -124,6 +125,32 @@ def test_good_hint_enters_and_wins_bad_hint_dies():
     asked, state, told = generation(evo.inject(state, sp.true_pose[None]))
     assert state.best_from_hint and told.improved
     assert state.best_match.mismatch == pytest.approx(objective.mismatch(state.best_fitness))
+
+
+def test_a_settled_search_stops_before_min_starts_and_only_when_settled():
+    """The settled stop (EvoPose.settled): before ``min_starts`` only once the best basin's match is close, five
+    independent starts reached it and the best has stood for as many starts again as it took to find it."""
+    sp = make_problem("box", np.random.default_rng(31), noise=1.0, clutter=0.2, missing=0.1)
+    evo = EvoPose(sp.problem, SearchOptions())
+    o = evo.options
+    starts = int(np.ceil(o.settled_starts * evo.start_factor))
+    assert starts < o.min_starts * evo.start_factor
+    settled = EvoPoseState(population=np.zeros((1, 6)), fitness=np.zeros(1), origin=np.zeros(1, int), generation=5,
+                           starts=starts, improved_starts=starts // 2,
+                           best_supporters=frozenset(range(o.settled_supporters)), best_match=Match(0.1, 0.0))
+    assert evo.settled(settled) and evo.stop_reason(settled, 0, 0.0) == "consensus"
+    for unsettled in (replace(settled, best_supporters=frozenset(range(o.settled_supporters - 1))),  # a rare basin
+                      replace(settled, improved_starts=starts // 2 + 1),  # the best moved in the last half
+                      replace(settled, starts=starts - 1),
+                      replace(settled, best_match=Match(0.45, 0.3))):  # acceptable, not close
+        assert not evo.settled(unsettled) and evo.stop_reason(unsettled, 0, 0.0) is None
+    for never in (SearchOptions(settled_supporters=0), SearchOptions(consensus=0)):
+        assert not EvoPose(sp.problem, never).settled(settled)
+    # end to end: fewer generations, the same answer
+    fast, full = solve(sp.problem, seed=0), solve(sp.problem, SearchOptions(settled_supporters=0), seed=0)
+    assert fast.generations < full.generations and fast.stop_reason == full.stop_reason == "consensus"
+    np.testing.assert_allclose(fast.pose, full.pose, atol=1e-6)
+    assert fast.confident == full.confident
 
 
 def test_ask_tell_state_is_immutable():

@@ -32,8 +32,9 @@ from agents.vehicle.team_views import MateView, build_views, encode_image
 
 #: When team-mates share the same views, a search from scratch runs a fixed number of generations per frame (so
 #: their bests agree): as many as POINTS_PER_FRAME image points in all allow, 1 to MAX_GENERATIONS_PER_FRAME. A
-#: search from scratch makes 256-1024 fresh starts (SearchOptions.min_starts, _loose; up to 4x on a small problem),
-#: ~51 a generation: 20-80 generations, which at one a frame outlast a 2 s sequence. Four on two paper-scale views
+#: search from scratch makes 256-1024 fresh starts (SearchOptions.min_starts, _loose; up to 4x on a small problem;
+#: in these slices never fewer, evopose/cooperative.py's Cooperation._optimiser), ~51 a generation: 20-80
+#: generations, which at one a frame outlast a 2 s sequence. Four on two paper-scale views
 #: take 24-36 ms of a 100 ms frame (benchmarks/bench_photoreal_fleet.py, "frame ms").
 POINTS_PER_FRAME, MAX_GENERATIONS_PER_FRAME = 160, 4
 #: Hint mode: a team-mate's pose whose mismatch on the own views is at most this much higher than the own
