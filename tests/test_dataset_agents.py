@@ -96,6 +96,12 @@ def test_an_agent_on_an_opencv_engine_dataset_publishes_the_renderers_poses_with
     errors = {k: v for k, v in summary.items() if k.startswith("error_")}
     assert errors and errors == {k: v for k, v in rendered_summary.items() if k.startswith("error_")}
     assert summary["dataset_camera"] == "H1" and summary["target_visible"] and "false_positives" not in summary
+    # each frame says where its time went (the frame loop's timing_s), and the summary the frames' totals
+    for frame in source.values():
+        timing = frame["timing_s"]
+        assert set(timing) == {"late", "image", "extract", "share", "pair", "step", "total", "cpu"}
+        assert timing["total"] >= timing["extract"] + timing["step"] > 0 and timing["image"] > 0
+    assert summary["frame_total_s_max"] >= summary["frame_total_s_median"] > summary["extract_s_median"] > 0
 
 
 def test_a_camera_folder_plays_that_camera_with_its_truth(runs):

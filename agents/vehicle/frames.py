@@ -98,6 +98,8 @@ class Frame:
     render_cpu_s : float
         CPU seconds of the rendering thread for it (0 for a real source): what the simulator, not the vehicle,
         cost; unlike ``render_s`` it does not grow while the thread waits for a core.
+    extract_s : float
+        Seconds the front-end took to find the marks in it (the vehicle's own work, unlike ``render_s``).
     """
 
     index: int
@@ -111,6 +113,7 @@ class Frame:
     labels: np.ndarray | None = None
     skipped: str | None = None
     render_cpu_s: float = 0.0
+    extract_s: float = 0.0
 
 
 def default_extractor(scenario: Scenario) -> Callable[..., tuple[np.ndarray, np.ndarray | None]]:
@@ -139,9 +142,11 @@ class SimulatedCamera:
         t0, cpu0 = time.perf_counter(), time.thread_time()
         rendered = render_frame(self.scenario, scene, self.vehicle)
         render_s, render_cpu_s = time.perf_counter() - t0, time.thread_time() - cpu0
+        t1 = time.perf_counter()
         points, labels = self.extract(rendered.image, rendered.camera)
         return Frame(index, scene, stamp_ns, rendered.image, rendered.camera, points,
-                     self.scenario.target_pose(scene), render_s, labels, render_cpu_s=render_cpu_s)
+                     self.scenario.target_pose(scene), render_s, labels, render_cpu_s=render_cpu_s,
+                     extract_s=time.perf_counter() - t1)
 
     def close(self) -> None:
         """Nothing to release (a real source closes its device or file)."""

@@ -72,6 +72,10 @@ class RunRecord:
     last_error: dict | None = None
     errors: ErrorTotals = field(default_factory=ErrorTotals)
     frame_seconds: deque = field(default_factory=lambda: deque(maxlen=RECENT))
+    #: each frame's time from acquiring the image to publishing, and the front-end's share of it (the frame loop's
+    #: ``timing_s``): what decides whether the clock's next tick is kept
+    frame_total_s: deque = field(default_factory=lambda: deque(maxlen=RECENT))
+    extract_s: deque = field(default_factory=lambda: deque(maxlen=RECENT))
     mate_latency_s: deque = field(default_factory=lambda: deque(maxlen=RECENT))  # team-mates' data: arrival - stamp
     #: the last :data:`RECENT` published poses (team agreement, errors over time)
     poses: deque[PoseRow] = field(default_factory=lambda: deque(maxlen=RECENT))
@@ -105,12 +109,16 @@ class RunRecord:
 
     def summary(self) -> dict:
         out = {k: v for k, v in asdict(self).items()
-               if k not in ("errors", "frame_seconds", "mate_latency_s", "poses")}
+               if k not in ("errors", "frame_seconds", "mate_latency_s", "poses", "frame_total_s", "extract_s")}
         out["pose_columns"] = list(POSE_COLUMNS)
         out["poses"] = [p.to_json() for p in self.poses]
         out.update(self.errors.summary())
         if self.frame_seconds:
             out["frame_seconds_median"] = statistics.median(self.frame_seconds)
+        if self.frame_total_s:
+            out["frame_total_s_median"] = statistics.median(self.frame_total_s)
+            out["frame_total_s_max"] = max(self.frame_total_s)
+            out["extract_s_median"] = statistics.median(self.extract_s)
         if self.mate_latency_s:
             latency = np.array(self.mate_latency_s)
             out["mate_latency_median_s"] = float(np.median(latency))

@@ -294,7 +294,10 @@ class CameraVehicle(Vehicle):
     # -- the frame ------------------------------------------------------------------------------
 
     def frame(self, n: int) -> None:
-        t_acquire = time.perf_counter()
+        # how late the frame starts after its tick and where its time goes, in the frame's JSON line (``timing_s``):
+        # a tick is skipped when a frame ends after the tick after next (Vehicle.run)
+        late_s = (time.time_ns() - self.clock.stamp_ns(n)) / NS
+        t_acquire, cpu0 = time.perf_counter(), time.thread_time()
         frame = self.camera.acquire(n, self.clock.stamp_ns(n))
         stamp = frame.stamp_ns  # when the image was taken: tick n's, or a recording's own instant (dataset_source)
         # the instant this vehicle is at: a recording played behind the wall clock judges team-mates' data there
@@ -307,7 +310,10 @@ class CameraVehicle(Vehicle):
         if shared is not None:
             self.bus.send(shared)
         takes = self.policy.takes_hints
-        inputs = FrameInputs(n, mine, self.paired_views(stamp), self.knowledge(), self.take_hints() if takes else None,
+        t_pair = time.perf_counter()
+        paired = self.paired_views(stamp)
+        t_step = time.perf_counter()
+        inputs = FrameInputs(n, mine, paired, self.knowledge(), self.take_hints() if takes else None,
                              frame.truth, self.hints.take_latest() if takes else None,
                              self.policy.search_share_of_frame * self.period_s)
         self.state, messages, event = step(self.state, inputs)
@@ -315,7 +321,13 @@ class CameraVehicle(Vehicle):
             self.send(message)
         event = event.from_source(frame.scene_frame, frame.skipped)
         self.record.add_frame(event, self._image_ready)
-        self.emit(event.to_json())
+        t_end = time.perf_counter()
+        self.record.frame_total_s.append(t_end - t_acquire)
+        self.record.extract_s.append(frame.extract_s)
+        self.emit({**event.to_json(), "timing_s": {
+            "late": late_s, "image": frame.render_s, "extract": frame.extract_s,
+            "share": t_pair - t_acquire - frame.render_s - frame.extract_s, "pair": t_step - t_pair,
+            "step": t_end - t_step, "total": t_end - t_acquire, "cpu": time.thread_time() - cpu0}})
 
     def send(self, message: Message | Hint) -> None:
         """Publish a message of :func:`step` or :func:`idle`; hints no faster than ``hint_rate_hz``."""

@@ -275,8 +275,10 @@ class SourceCamera:
             raise SourceError(f"--source {self.reader.name}: frame {k} is {image.shape[1]}x{image.shape[0]}, "
                               f"the camera ({self.intrinsics_from}) is {camera.width}x{camera.height}")
         self._last_camera = camera
+        t1 = time.perf_counter()
         points, labels = self.extract(image, camera)
-        return Frame(index, k, stamp_ns, image, camera, points, None, read_s, labels)
+        return Frame(index, k, stamp_ns, image, camera, points, None, read_s, labels,
+                     extract_s=time.perf_counter() - t1)
 
     def _skipped(self, index: int, stamp_ns: int, read_s: float, why: str) -> Frame:
         """A tick without a usable frame: no points, a black image, the last camera (before any: the intrinsics
