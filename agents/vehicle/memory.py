@@ -5,6 +5,13 @@ work (a 1024 x 1024 procedural ground texture made through FFTs) later large num
 heap, and freed heap memory stays resident: about 75 MB for an agent measured here. Pinning the
 threshold keeps large arrays in their own mappings, which are returned to the system when freed, and
 ``malloc_trim`` gives back what the warm-up left behind.
+
+Once warm, a camera vehicle's frames allocate and free the same arrays every frame: the contrast front-end
+dozens of 0.3-4 MB ones. Each in its own mapping was mapped, faulted in page by page (zeroed by the kernel) and
+unmapped again every frame: 17 000-27 000 page faults and 27-48 ms of system time per telephoto frame, as much
+as the front-end's own work (:func:`reuse_frame_memory`; BENCHMARKS.md, "The frame loop's memory"). The frame loop
+therefore takes blocks under 4 MB from the heap, where a frame reuses what the last one freed, and keeps 16 MB of
+freed memory at its top: the frames' working set stays resident, bounded, instead.
 """
 
 from __future__ import annotations
@@ -16,6 +23,11 @@ import ctypes.util
 M_MMAP_THRESHOLD = -3
 #: Blocks of this many bytes or more get their own mapping.
 MMAP_THRESHOLD = 256 * 1024
+#: mallopt parameter number of the trim threshold (malloc.h): freed memory at the heap's top beyond this is returned.
+M_TRIM_THRESHOLD = -1
+#: In the frame loop: blocks under 4 MB come from the heap (numpy asks for huge pages from 4 MB, so larger ones are
+#: few faults each), and up to 16 MB of freed memory stays at the heap's top for the next frame.
+FRAME_MMAP_THRESHOLD, FRAME_TRIM_THRESHOLD = 4 * 1024 * 1024, 16 * 1024 * 1024
 
 
 def _libc():
@@ -37,3 +49,11 @@ def release_free_memory() -> bool:
     """Return freed heap memory to the system; True if glibc did."""
     libc = _libc()
     return bool(libc and libc.malloc_trim(0))
+
+
+def reuse_frame_memory() -> bool:
+    """After the warm-up: a frame's arrays under :data:`FRAME_MMAP_THRESHOLD` reuse the heap's memory, and
+    :data:`FRAME_TRIM_THRESHOLD` of it stays at the top (see the module's docstring); True if glibc took both."""
+    libc = _libc()
+    return bool(libc and libc.mallopt(M_MMAP_THRESHOLD, FRAME_MMAP_THRESHOLD)
+                and libc.mallopt(M_TRIM_THRESHOLD, FRAME_TRIM_THRESHOLD))

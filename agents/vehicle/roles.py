@@ -32,7 +32,7 @@ from agents.transport.bus import FleetBus, Received
 from agents.vehicle.config import AgentConfig
 from agents.vehicle.frames import NS, fleet_clock
 from agents.vehicle.hints import HintInbox
-from agents.vehicle.memory import release_free_memory
+from agents.vehicle.memory import release_free_memory, reuse_frame_memory
 from agents.vehicle.plausibility import Plausibility
 from agents.vehicle.records import RunRecord
 from agents.vehicle.cameras import open_camera
@@ -199,6 +199,7 @@ class CameraVehicle(Vehicle):
                 state, _ = rules.estimate(state, views, frame=k, candidates=None if best is None else best[None])
             rules.generation(state, budget_s=0.0)
         release_free_memory()  # what the one-off work (ground texture, compilation) freed
+        reuse_frame_memory()  # then the frames' arrays from the heap, not one mapping each (agents/vehicle/memory.py)
 
     def run(self, stop: threading.Event) -> dict:
         try:
