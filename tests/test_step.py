@@ -11,7 +11,7 @@ import pytest
 
 from agents.vehicle.frames import SimulatedCamera
 from agents.vehicle.hints import HintInbox
-from agents.vehicle.step import POLICIES, FrameInputs, VehicleState, idle, share, share_policy, step
+from agents.vehicle.step import FOLLOW_FRAMES, POLICIES, FrameInputs, VehicleState, idle, share, share_policy, step
 from agents.vehicle.team_views import Staleness, TeamViews, build_views, mate_view, own_view
 from evopose import SearchOptions
 from evopose.cooperative import Cooperation, CooperativeEstimator, EstimatorState
@@ -223,6 +223,30 @@ def test_searches_in_generation_slices_stop_at_the_fixed_starts():
         assert sliced.searching
         whole[seed] = rules.estimate(EstimatorState(), views, frame=0)[1]
     assert whole[0].converged and whole[0].solution.generations <= 4 < whole[1].solution.generations
+
+
+def test_the_front_end_is_pointed_at_the_last_good_pose_for_a_few_frames(paper_scale):
+    """VehicleState.near: where the front-end looks for the target (vision.window): nowhere in particular before a
+    good pose, then the last good published pose, kept through frames that are not good, for FOLLOW_FRAMES."""
+    scenario, frames = paper_scale
+    states = {"H1": _state(scenario, "H1", "features", seed=1), "H2": _state(scenario, "H2", "features", seed=2)}
+    assert states["H1"].near(0) is None
+    last_good = None
+    for n in range(4):
+        own = {"H1": _own(frames, "H1", n), "H2": _own(frames, "H2", n)}
+        sent = {v: decode("features", encode(share(states[v], frames[v][n], own[v]))) for v in own}
+        expected = states["H1"].near(n)
+        events = {}
+        for v, mate in (("H1", "H2"), ("H2", "H1")):
+            states[v], _, events[v] = step(states[v], FrameInputs(n, own[v], (mate_view(mate, sent[mate], None),)))
+        assert (expected is None) == (last_good is None) and (expected is None or np.array_equal(expected, last_good))
+        if events["H1"].good:
+            last_good = np.array(events["H1"].pose)
+    assert last_good is not None and np.array_equal(states["H1"].near(4), last_good)
+    # a frame without a good pose keeps it; FOLLOW_FRAMES after the last good one, the whole image again
+    unsure = replace(states["H1"], follow=(last_good, 3))
+    assert np.array_equal(unsure.near(3 + FOLLOW_FRAMES), last_good) and unsure.near(4 + FOLLOW_FRAMES) is None
+    assert unsure.near(3) is None  # never a frame's own pose for itself
 
 
 def _pair_published(scenario, frames, frame_period_s):

@@ -47,7 +47,8 @@ from dataclasses import dataclass, replace
 import cv2
 import numpy as np
 
-from .body_paint import body_paint, body_region, body_silhouette, paint_around, pixel_box
+from .body_paint import (LINEAR_OF_BYTE, body_paint, body_region, body_silhouette, paint_around, pixel_box,
+                         srgb_to_linear)
 from .camera_look import Look, estimate_look, to_reference_look
 from .features import MarkDetections, to_bgr
 from .mark_prior import MarkPrior, mark_prior
@@ -141,12 +142,8 @@ CANDIDATE_K_SIGMA, CANDIDATE_PAINT_AROUND, CANDIDATE_EXPLAINED = 4.0, 0.05, 0.05
 CHANNEL_PEAKS = True
 
 
-def _srgb_to_linear(x: np.ndarray) -> np.ndarray:
-    return np.where(x <= 0.04045, x / 12.92, ((x + 0.055) / 1.055) ** 2.4).astype(np.float32)
-
-
-#: :func:`_srgb_to_linear` of the 256 values of an 8-bit channel (an image is decoded by look-up, not by power).
-_LINEAR_OF_BYTE = _srgb_to_linear(np.arange(256, dtype=np.float32) / np.float32(255.0))
+#: sRGB decoding (vision.body_paint), by the names this module's callers use
+_srgb_to_linear, _LINEAR_OF_BYTE = srgb_to_linear, LINEAR_OF_BYTE
 
 
 def scales(prior: MarkPrior) -> np.ndarray:
@@ -156,6 +153,12 @@ def scales(prior: MarkPrior) -> np.ndarray:
     lo = max(0.5, prior.radius_px[0] / np.sqrt(2) / step)
     hi = max(lo * step ** 2, prior.radius_px[1] / np.sqrt(2) * step)
     return lo * step ** np.arange(int(np.ceil(np.log(hi / lo) / np.log(step))) + 2)
+
+
+def crop_margin(prior: MarkPrior) -> int:
+    """Pixels of ground kept around the body's box for the scale space: three of the largest blur sigmas, at least
+    :data:`MIN_MARGIN_PX` (a window of the image must keep as much around the body to give the same marks)."""
+    return max(int(np.ceil(3 * scales(prior)[-1])) + 2, MIN_MARGIN_PX)
 
 
 def contrast_responses(lab: np.ndarray, sigmas: np.ndarray) -> np.ndarray:
@@ -260,7 +263,7 @@ def detect_contrast_marks(image_bgr: np.ndarray, palette: Mapping[str, tuple[int
     box = pixel_box(region)
     if box is None:
         return _detect(bgr[:0, :0], lin[:0, :0], names, palette, prior, region[:0, :0], **settings)
-    margin = max(int(np.ceil(3 * scales(prior)[-1])) + 2, MIN_MARGIN_PX)
+    margin = crop_margin(prior)
     # the crop starts on even coordinates: the encoder's 2 x 2 chroma blocks stay aligned (vision.spot_colour)
     y0, y1 = max(box[0] - margin, 0) // 2 * 2, min(box[1] + margin + 1, bgr.shape[0])
     x0, x1 = max(box[2] - margin, 0) // 2 * 2, min(box[3] + margin + 1, bgr.shape[1])
@@ -434,5 +437,5 @@ def _detect(bgr: np.ndarray, lin: np.ndarray, names: tuple[str, ...], palette: M
                          None if features is None else features[order])
 
 
-__all__ = ["ContrastMarks", "MarkPrior", "contrast_responses", "detect_contrast_marks", "mark_prior",
+__all__ = ["ContrastMarks", "MarkPrior", "contrast_responses", "crop_margin", "detect_contrast_marks", "mark_prior",
            "one_per_disc", "one_scale", "scales"]

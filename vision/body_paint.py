@@ -25,6 +25,15 @@ GROUND_SHARE_MARGIN = 0.05
 GROUND_AWAY_PX = 12
 
 
+def srgb_to_linear(x: np.ndarray) -> np.ndarray:
+    """sRGB values in [0, 1] in linear light (float32)."""
+    return np.where(x <= 0.04045, x / 12.92, ((x + 0.055) / 1.055) ** 2.4).astype(np.float32)
+
+
+#: :func:`srgb_to_linear` of the 256 values of an 8-bit channel (an image is decoded by look-up, not by power).
+LINEAR_OF_BYTE = srgb_to_linear(np.arange(256, dtype=np.float32) / np.float32(255.0))
+
+
 def paint_share(lin: np.ndarray, body_linear: np.ndarray) -> np.ndarray:
     """The share of each pixel's light the body's paint carries (float32 (H, W)), where the pixel shows that paint
     under any light, else -1: the dichromatic reflection model, a pixel ``p = a c + b w`` of the paint's colour
@@ -199,5 +208,6 @@ def body_region(silhouette: np.ndarray, mark_px: float) -> np.ndarray:
     return region
 
 
-__all__ = ["PAINT_SHARE", "PAINT_SHARE_CONNECTED", "body_paint", "body_region", "body_silhouette", "connected_paint",
-           "dilate_disc", "paint_around", "paint_pixels", "paint_share", "pixel_box"]
+__all__ = ["LINEAR_OF_BYTE", "PAINT_SHARE", "PAINT_SHARE_CONNECTED", "body_paint", "body_region", "body_silhouette",
+           "connected_paint", "dilate_disc", "paint_around", "paint_pixels", "paint_share", "pixel_box",
+           "srgb_to_linear"]

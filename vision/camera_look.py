@@ -254,6 +254,11 @@ class LookTracker:
         """Whether this frame's look should be estimated (:meth:`update`), else :meth:`current` is the look."""
         return len(self._recent) < self.window or self._frames % self.every == 0
 
+    @property
+    def latest(self) -> Look:
+        """The tracked look so far (the reference look before any estimate), without counting a frame."""
+        return self._tracked() if self._recent else Look()
+
     def current(self) -> Look:
         """The tracked look without a new estimate (counts the frame)."""
         self._frames += 1

@@ -10,7 +10,10 @@ Shi-Tomasi corners (:func:`vision.features.detect_corners`) and keeps the X-junc
 of boxes are L-corners and would let a grid shifted by one square fit as well as the true one. Either way the
 points are unordered: EvoPose needs no correspondences (eq. 1). Marks come with their colour's index in the
 model's palette (:func:`feature_extractor`), the label a point is matched by (our extension of eq. 1,
-:attr:`evopose.Model.labels`); corners are untyped.
+:attr:`evopose.Model.labels`); corners are untyped. ``contrast`` looks for the marks in a window of the image
+(:mod:`vision.window`): around the projection of a pose the target is expected near (``near``: a vehicle's last
+good one), else (given the camera and the operating area) around the body's paint found at half resolution; the
+whole image when the window gives too few.
 """
 
 from __future__ import annotations
@@ -21,12 +24,13 @@ from typing import Protocol
 import numpy as np
 
 from evopose import Bounds, Camera
-from vision.blobs import MarkPrior, detect_contrast_marks, mark_prior
+from vision.blobs import MarkPrior, crop_margin, detect_contrast_marks, mark_prior
 from vision.camera_look import LookTracker, estimate_look
 from vision.label_chroma import LabelChromaGate, spot_chroma
 from vision.features import colour_ranges, detect_colour_marks, detect_corners, x_junctions
 from vision.mark_scorer import MarkScorer, feature_names
 from vision.spot_position import SMALL_SPOT_PX
+from vision.window import grown, locate_body, target_window
 from scenarios.fleet import FEATURE_KINDS
 from scenarios.target import TargetModel
 
@@ -36,11 +40,14 @@ MAX_CORNERS, CORNER_QUALITY, CORNER_SPACING_PX = 150, 0.05, 8.0
 
 
 class FeatureExtractor(Protocol):
-    """``extract(image (H, W, 3) uint8, camera or None) -> (points (N, 2), labels (N,) or None)``: every detector
-    behind one call. ``camera`` (with its ``world_from_camera``) lets a detector know how large the target's marks
-    can be in this image (:func:`vision.blobs.mark_prior`); without it a generic range is searched."""
+    """``extract(image (H, W, 3) uint8, camera or None, near=None) -> (points (N, 2), labels (N,) or None)``: every
+    detector behind one call. ``camera`` (with its ``world_from_camera``) lets a detector know how large the target's
+    marks can be in this image (:func:`vision.blobs.mark_prior`); without it a generic range is searched. ``near``, a
+    pose (``world_from_target`` (6,)) the target is expected near (the last good estimate): ``contrast`` then looks in
+    a window around its projection first (:mod:`vision.window`); the other detectors take the whole image."""
 
-    def __call__(self, image: np.ndarray, camera: Camera | None = None) -> tuple[np.ndarray, np.ndarray | None]:
+    def __call__(self, image: np.ndarray, camera: Camera | None = None,
+                 near: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray | None]:
         ...
 
 
@@ -66,6 +73,9 @@ def resolve_features(kind: str, camera_images: bool) -> str:
 #: Once a camera's look is tracked (nine estimates), it is estimated again every this many frames
 #: (:class:`vision.camera_look.LookTracker`).
 LOOK_EVERY = 4
+#: A window around the expected target (:mod:`vision.window`) that gives fewer marks than this is searched no further:
+#: the whole image is, in the same frame (fewer than four points leave a pose from one view undetermined).
+MIN_WINDOW_MARKS = 4
 
 
 def feature_extractor(kind: str, target: TargetModel, area: Bounds | None = None,
@@ -80,11 +90,12 @@ def feature_extractor(kind: str, target: TargetModel, area: Bounds | None = None
     if kind == "auto":
         raise ValueError("resolve 'auto' first (resolve_features): whether the images come from a camera")
     if kind == "corners":
-        return lambda image, camera=None: (chessboard_corners(image), None)
+        return lambda image, camera=None, near=None: (chessboard_corners(image), None)
     if kind == "marks":
         ranges = colour_ranges(target.palette)
 
-        def hue_marks(image: np.ndarray, camera: Camera | None = None) -> tuple[np.ndarray, np.ndarray]:
+        def hue_marks(image: np.ndarray, camera: Camera | None = None,
+                      near: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
             found = detect_colour_marks(image, ranges)
             return found.points, found.labels
 
@@ -98,19 +109,38 @@ def feature_extractor(kind: str, target: TargetModel, area: Bounds | None = None
 
     looks: dict[tuple, LookTracker] = {}   # per camera (its intrinsics): a camera keeps its look
     gates: dict[tuple, LabelChromaGate] = {}   # and its encoder: whether its 2-4 px marks keep their colour
+    outline = target.body.vertices if len(target.body.vertices) else target.mark_points
 
-    def contrast_marks(image: np.ndarray, camera: Camera | None = None) -> tuple[np.ndarray, np.ndarray]:
+    def contrast_marks(image: np.ndarray, camera: Camera | None = None,
+                       near: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         prior = MarkPrior() if camera is None or area is None else mark_prior(
             camera, target.mark_radius, size, area.lo[:3], area.hi[:3])
         key = None if camera is None else (camera.fx, camera.fy, camera.cx, camera.cy, camera.width, camera.height)
         tracker = looks.setdefault(key, LookTracker(every=LOOK_EVERY))
-        look = tracker.update(estimate_look(image, body, prior.extent_px)) if tracker.due() else tracker.current()
-        found = detect_contrast_marks(image, palette, prior, body=body, scorer=scorer or "shipped", look=look)
+        followed = None if near is None or camera is None else target_window(camera, near, outline,
+                                                                             crop_margin(prior))
+        window = followed
+        if window is None and camera is not None and area is not None and body is not None:
+            # no pose to look near: the body's paint found at half resolution first (vision.window.locate_body)
+            box = locate_body(image, body, tracker.latest)
+            window = None if box is None else grown(box, crop_margin(prior), image.shape[1], image.shape[0])
+        y0, y1, x0, x1 = window or (0, image.shape[0], 0, image.shape[1])
+        part = image[y0:y1, x0:x1]
+        # the camera's look from the window when it follows a pose (the body and the ground around it); else from the
+        # whole image: a paint-box window's ground, in a cold flat look at the paper's scale, set a look that never
+        # let the pair find the robot (looks-long paper-g2-low-flat-cool: 0 good frames of 40 instead of 12)
+        seen = image if followed is None else part
+        look = tracker.update(estimate_look(seen, body, prior.extent_px)) if tracker.due() else tracker.current()
+        found = detect_contrast_marks(part, palette, prior, body=body, scorer=scorer or "shipped", look=look)
+        points = found.points + (x0, y0)
+        if window is not None and len(points) < MIN_WINDOW_MARKS:  # lost in the window: the whole image, this frame
+            found = detect_contrast_marks(image, palette, prior, body=body, scorer=scorer or "shipped", look=look)
+            points = found.points
         if prior.radius_px[1] >= SMALL_SPOT_PX:
-            return found.points, found.labels
+            return points, found.labels
         gate = gates.setdefault(key, LabelChromaGate())
-        carried = gate.update(spot_chroma(image, found.points, found.radius, look))
-        return found.points, found.labels if carried else None
+        carried = gate.update(spot_chroma(image, points, found.radius, look))
+        return points, found.labels if carried else None
 
     return contrast_marks
 
@@ -121,5 +151,5 @@ def point_extractor(kind: str, target: TargetModel, area: Bounds | None = None) 
     return lambda image: extract(image)[0]
 
 
-__all__ = ["FEATURE_KINDS", "FeatureExtractor", "chessboard_corners", "feature_extractor", "point_extractor",
-           "resolve_features"]
+__all__ = ["FEATURE_KINDS", "FeatureExtractor", "MIN_WINDOW_MARKS", "chessboard_corners", "feature_extractor",
+           "point_extractor", "resolve_features"]

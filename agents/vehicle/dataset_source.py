@@ -86,12 +86,12 @@ class DatasetCamera(SourceCamera):
                 return exact
         return matrix_from_pose(pose)
 
-    def acquire(self, index: int, stamp_ns: int) -> Frame:
+    def acquire(self, index: int, stamp_ns: int, near: np.ndarray | None = None) -> Frame:
         """The dataset's next frame, processed at fleet tick ``index``, stamped with the tick it was taken at:
         ``first_tick`` plus its number, never after ``index``."""
         if self.first_tick is None:
             self.first_tick = index
-        frame = super().acquire(index, stamp_ns)
+        frame = super().acquire(index, stamp_ns, near)
         if frame.skipped is not None:
             return frame
         taken = min(self.first_tick + frame.scene_frame, index)  # never after it is processed

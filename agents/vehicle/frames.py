@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import threading
 import time
-from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -19,7 +18,7 @@ import numpy as np
 from evopose import Camera
 from scenarios.render import render_frame
 
-from vision.extract import feature_extractor, resolve_features
+from vision.extract import FeatureExtractor, feature_extractor, resolve_features
 from scenarios.world import Scenario
 
 NS = 1_000_000_000
@@ -116,7 +115,7 @@ class Frame:
     extract_s: float = 0.0
 
 
-def default_extractor(scenario: Scenario) -> Callable[..., tuple[np.ndarray, np.ndarray | None]]:
+def default_extractor(scenario: Scenario) -> FeatureExtractor:
     """The agents' default front-end for ``scenario`` (``--features auto``): the marks by their contrast when the
     world has a camera model (its images are a camera's), else by the preset hue bands."""
     kind = resolve_features("auto", camera_images=scenario.render.camera_model is not None)
@@ -125,11 +124,11 @@ def default_extractor(scenario: Scenario) -> Callable[..., tuple[np.ndarray, np.
 
 class SimulatedCamera:
     """A vehicle's camera in a scenario: renders the frame, extracts the target's marks with their colours with
-    ``extract`` (``image (H, W, 3), camera -> (points (N, 2), labels (N,) or None)``,
+    ``extract`` (``image (H, W, 3), camera, near -> (points (N, 2), labels (N,) or None)``,
     :class:`vision.extract.FeatureExtractor`)."""
 
     def __init__(self, scenario: Scenario, vehicle: str,
-                 extract: Callable[..., tuple[np.ndarray, np.ndarray | None]] | None = None) -> None:
+                 extract: FeatureExtractor | None = None) -> None:
         self.scenario = scenario
         self.vehicle = scenario.vehicle(vehicle).name
         self.extract = extract if extract is not None else default_extractor(scenario)
@@ -137,13 +136,14 @@ class SimulatedCamera:
     def scene_frame(self, index: int) -> int:
         return index % self.scenario.frames
 
-    def acquire(self, index: int, stamp_ns: int) -> Frame:
+    def acquire(self, index: int, stamp_ns: int, near: np.ndarray | None = None) -> Frame:
+        """Frame ``index``; ``near``: the pose the target is expected near (the front-end looks around it first)."""
         scene = self.scene_frame(index)
         t0, cpu0 = time.perf_counter(), time.thread_time()
         rendered = render_frame(self.scenario, scene, self.vehicle)
         render_s, render_cpu_s = time.perf_counter() - t0, time.thread_time() - cpu0
         t1 = time.perf_counter()
-        points, labels = self.extract(rendered.image, rendered.camera)
+        points, labels = self.extract(rendered.image, rendered.camera, near)
         return Frame(index, scene, stamp_ns, rendered.image, rendered.camera, points,
                      self.scenario.target_pose(scene), render_s, labels, render_cpu_s=render_cpu_s,
                      extract_s=time.perf_counter() - t1)

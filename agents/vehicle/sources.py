@@ -259,8 +259,9 @@ class SourceCamera:
         pose = scene.world_from_camera if self.world_from_camera is None else self.world_from_camera()
         return Camera(k_cam.fx, k_cam.fy, k_cam.cx, k_cam.cy, k_cam.width, k_cam.height, k_cam.distortion, pose)
 
-    def acquire(self, index: int, stamp_ns: int) -> Frame:
-        """The source's next frame as fleet frame ``index`` (``Frame.scene_frame``: its number in the source)."""
+    def acquire(self, index: int, stamp_ns: int, near: np.ndarray | None = None) -> Frame:
+        """The source's next frame as fleet frame ``index`` (``Frame.scene_frame``: its number in the source); ``near``:
+        the pose the target is expected near (the front-end looks around it first)."""
         t0 = time.perf_counter()
         try:
             image = self.reader.read()
@@ -276,7 +277,7 @@ class SourceCamera:
                               f"the camera ({self.intrinsics_from}) is {camera.width}x{camera.height}")
         self._last_camera = camera
         t1 = time.perf_counter()
-        points, labels = self.extract(image, camera)
+        points, labels = self.extract(image, camera, near)
         return Frame(index, k, stamp_ns, image, camera, points, None, read_s, labels,
                      extract_s=time.perf_counter() - t1)
 
