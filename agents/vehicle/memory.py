@@ -8,10 +8,10 @@ threshold keeps large arrays in their own mappings, which are returned to the sy
 
 Once warm, a camera vehicle's frames allocate and free the same arrays every frame: the contrast front-end
 dozens of 0.3-4 MB ones. Each in its own mapping was mapped, faulted in page by page (zeroed by the kernel) and
-unmapped again every frame: 17 000-27 000 page faults and 27-48 ms of system time per telephoto frame, as much
-as the front-end's own work (:func:`reuse_frame_memory`; BENCHMARKS.md, "The frame loop's memory"). The frame loop
-therefore takes blocks under 4 MB from the heap, where a frame reuses what the last one freed, and keeps 16 MB of
-freed memory at its top: the frames' working set stays resident, bounded, instead.
+unmapped again every frame: on a 640 x 480 frame 19 000-27 000 page faults and 32-45 ms of system time, about as
+much as the front-end's own work (BENCHMARKS.md, "What the camera front-end costs a vehicle per frame"). The frame
+loop therefore takes blocks under 4 MB from the heap, where a frame reuses what the last one freed, and keeps 16 MB
+of freed memory at its top (:func:`reuse_frame_memory`): the frames' working set stays resident instead, ~20 MB.
 """
 
 from __future__ import annotations
