@@ -82,9 +82,12 @@ def frame_rows(dataset: Path, scenario: str, features: str) -> list[dict]:
                          else None, "max_m": max(good_errors) if good_errors else None, "wrong": wrong, "right": right,
                          "median_all_m": statistics.median(all_errors) if all_errors else None,
                          "agreed": None if agreement is None else (agreement["agreed"], agreement["frames"]),
-                         # the agent's own timing: its frames' median time (estimate and publish) and the clock's
-                         # frames it skipped because one ran late
+                         # the agent's own timing: its frames' median estimate time, the median and the slowest
+                         # whole frame (image to published pose), and the clock's frames it skipped because one
+                         # ran late
                          "frame_ms": 1000 * summary.get("frame_seconds_median", float("nan")),
+                         "total_ms": 1000 * summary.get("frame_total_s_median", float("nan")),
+                         "slowest_ms": 1000 * summary.get("frame_total_s_max", float("nan")),
                          "late": summary.get("late_frames", 0)})
     return rows
 
@@ -108,8 +111,9 @@ def markdown(rows: list[dict], command: str) -> str:
              "position error over the good frames, confident-and-wrong frames (good, > 0.5 m or > 5 deg off; on a "
              "dataset without the target every good frame), and for shared feature sets the frames on which both "
              "published the same pose; \"right\" counts the published poses within 10 cm and 5 deg of the truth, "
-             "good or not (what a stricter or looser verdict would have to work with); \"frame ms\" the median time an agent "
-             "took per frame and the clock's frames it skipped (its first frame waits for its team-mates) "
+             "good or not (what a stricter or looser verdict would have to work with); \"frame ms\" an agent's median "
+             "estimate, its median and slowest whole frame (the image to the published pose: front-end, pairing, "
+             "estimate) and the clock's frames it skipped (its first frame waits for its team-mates) "
              "(benchmarks/bench_photoreal_fleet.py says how).", "",
              "### Summary", "", "Per scale, front-end, scenario and camera look (`camera`: the datasets as rendered; "
              "another: `evopose develop --look`, the manifest's `look`); \"ticks skipped\" sums the clock's "
@@ -134,7 +138,8 @@ def markdown(rows: list[dict], command: str) -> str:
                      f"| {_cm(statistics.median(every) if every else None)} "
                      f"| {sum(r['late'] for r in done)}/{frames} |")
     lines += ["", "### Every run", "", "| dataset | front-end | scenario | vehicle | good | first good frame "
-              "| median cm | max cm | confident and wrong | right | median cm, every frame | same pose | frame ms (skipped) |",
+              "| median cm | max cm | confident and wrong | right | median cm, every frame | same pose "
+              "| frame ms: estimate, whole, slowest (skipped) |",
               "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         if r["error"]:
@@ -145,7 +150,7 @@ def markdown(rows: list[dict], command: str) -> str:
         lines.append(f"| {r['dataset']} | {r['features']} | {r['scenario']} | {r['vehicle']} | {r['good']}/"
                      f"{r['frames']} | {'-' if r['first_good'] is None else r['first_good']} | {_cm(r['median_m'])} "
                      f"| {_cm(r['max_m'])} | {r['wrong']} | {r['right']} | {_cm(r['median_all_m'])} | {agreed} "
-                     f"| {r['frame_ms']:.0f} ({r['late']}) |")
+                     f"| {r['frame_ms']:.0f}, {r['total_ms']:.0f}, {r['slowest_ms']:.0f} ({r['late']}) |")
     return "\n".join(lines) + "\n"
 
 
