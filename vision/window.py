@@ -2,10 +2,11 @@
 of the pixels.
 
 The contrast front-end (:mod:`vision.blobs`) finds the body's paint over the whole image, estimates the camera's look
-there and builds its scale space around the body: in one process 45-60 ms of CPU per 640 x 480 frame on the 20-frame
-datasets, at telephoto and at the paper's scale, about half of it the whole image's (BENCHMARKS.md, "What the camera
-front-end costs a vehicle per frame"). With its search beside it, a pair of agents on two cores missed ticks of a
-10 fps clock ("20-frame sequences at 10 fps, the clock's ticks kept"). The window is where the target is expected:
+there and builds its scale space around the body. With its search beside it, a pair of agents on two cores missed
+ticks of a 10 fps clock (BENCHMARKS.md, "20-frame sequences at 10 fps, the clock's ticks kept"). In one process, on
+the 20-frame datasets' 640 x 480 frames, the whole image's front-end took 34-56 ms of CPU beside the kernel's page
+faults (agents/vehicle/memory.py), the window's 25-41 ms once the vehicle has a good pose ("What the camera front-end
+costs a vehicle per frame"). The window is where the target is expected:
 
 - around its body's projection at the vehicle's last good pose (:func:`target_window`, the pose from
   :meth:`agents.vehicle.step.VehicleState.near`);

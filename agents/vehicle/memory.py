@@ -8,10 +8,11 @@ threshold keeps large arrays in their own mappings, which are returned to the sy
 
 Once warm, a camera vehicle's frames allocate and free the same arrays every frame: the contrast front-end
 dozens of 0.3-4 MB ones. Each in its own mapping was mapped, faulted in page by page (zeroed by the kernel) and
-unmapped again every frame: on a 640 x 480 frame 19 000-27 000 page faults and 32-45 ms of system time, about as
+unmapped again every frame: on a 640 x 480 frame 19 000-27 000 page faults and 29-43 ms of system time, about as
 much as the front-end's own work (BENCHMARKS.md, "What the camera front-end costs a vehicle per frame"). The frame
 loop therefore takes blocks under 4 MB from the heap, where a frame reuses what the last one freed, and keeps 16 MB
-of freed memory at its top (:func:`reuse_frame_memory`): the frames' working set stays resident instead, ~20 MB.
+of freed memory at its top (:func:`reuse_frame_memory`): the frames' working set stays resident instead (there
+87 -> 108 MB over the frames of two datasets, against 86 -> 91 MB pinned).
 """
 
 from __future__ import annotations
