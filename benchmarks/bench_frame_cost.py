@@ -17,14 +17,12 @@ largest frame. One process at a time: two agents on the machine's two cores shar
 from __future__ import annotations
 
 import argparse
-import json
 import statistics
-import subprocess
 import sys
 from pathlib import Path
 
-from .bench_frontend_speed import _label
 from .report import provenance
+from .trees import label, run_in_tree
 
 ROOT = Path(__file__).resolve().parents[1]
 DATASETS = ("datasets/photoreal-long/photoreal-telephoto-g2-low", "datasets/photoreal-long/photoreal-paper-g2-low")
@@ -77,14 +75,7 @@ print(json.dumps(out))
 def time_tree(tree: Path, datasets: list[Path]) -> dict:
     """Per dataset, the rows of :data:`TIMER` with ``tree``'s code (a fresh interpreter, cwd ``tree``); and the
     resident memory (bytes) after the warm-up and after every dataset's frames (``rss_warm``, ``rss_end``)."""
-    out = subprocess.run([sys.executable, "-c", TIMER, *map(str, datasets)], cwd=tree, capture_output=True,
-                         text=True, timeout=900, env={"PYTHONPATH": str(tree), "PATH": "/usr/bin:/bin"})
-    if out.returncode:
-        raise SystemExit(f"{tree}: {out.stderr.strip().splitlines()[-1] if out.stderr.strip() else out.returncode}")
-    rows = json.loads(out.stdout.strip().splitlines()[-1])
-    if not Path(rows.pop("file")).resolve().is_relative_to(tree):
-        raise SystemExit(f"{tree}: the front-end was imported from another tree")
-    return rows
+    return run_in_tree(tree, TIMER, list(map(str, datasets)))
 
 
 def summary(rows: list[list[float]]) -> dict[str, float]:
@@ -102,7 +93,7 @@ def summary(rows: list[list[float]]) -> dict[str, float]:
 
 def markdown(trees: list[Path], medians: dict[str, list[dict[str, float]]], memory: list[tuple[float, float]],
              rounds: int, command: str) -> str:
-    names = [_label(t) for t in trees]
+    names = [label(t) for t in trees]
     lines = ["## What the camera front-end costs a vehicle per frame", "",
              f"Produced by `{command}`; {provenance()}. {rounds} rounds, the trees taking turns in fresh interpreters "
              "set up as each tree's agent is (threads, malloc), one process at a time; each camera of a dataset "

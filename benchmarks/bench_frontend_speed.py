@@ -13,13 +13,12 @@ fps has 100 ms per frame for the front-end and the search together.
 from __future__ import annotations
 
 import argparse
-import json
 import statistics
-import subprocess
 import sys
 from pathlib import Path
 
 from .report import provenance
+from .trees import label, run_in_tree
 
 ROOT = Path(__file__).resolve().parents[1]
 FIXTURES = ("paper", "paper-agx", "paper-flat-cool", "telephoto", "telephoto-agx", "telephoto-flat-cool",
@@ -56,26 +55,13 @@ print(json.dumps(out))
 
 def time_tree(tree: Path, fixtures: list[Path]) -> dict[str, float]:
     """Mean seconds per image of each fixture, with ``tree``'s code (a fresh interpreter, cwd ``tree``)."""
-    out = subprocess.run([sys.executable, "-c", TIMER, *map(str, fixtures)], cwd=tree, capture_output=True,
-                         text=True, timeout=900, env={"PYTHONPATH": str(tree), "PATH": "/usr/bin:/bin",
-                                                      "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1"})
-    if out.returncode:
-        raise SystemExit(f"{tree}: {out.stderr.strip().splitlines()[-1] if out.stderr.strip() else out.returncode}")
-    times = json.loads(out.stdout.strip().splitlines()[-1])
-    if not Path(times.pop("file")).resolve().is_relative_to(tree):
-        raise SystemExit(f"{tree}: the front-end was imported from another tree")
+    times = run_in_tree(tree, TIMER, list(map(str, fixtures)), {"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1"})
     times.pop("module")
     return times
 
 
-def _label(tree: Path) -> str:
-    """A tree by its commit (short hash), or its folder's name."""
-    out = subprocess.run(["git", "-C", str(tree), "rev-parse", "--short", "HEAD"], capture_output=True, text=True)
-    return out.stdout.strip() or tree.name
-
-
 def markdown(trees: list[Path], medians: dict[str, list[float]], rounds: int, command: str) -> str:
-    names = [_label(t) for t in trees]
+    names = [label(t) for t in trees]
     lines = ["## Contrast front-end time per image, side by side", "",
              f"Produced by `{command}`; {provenance()}. {rounds} rounds, the trees taking turns in fresh "
              "interpreters, one OpenCV "
