@@ -79,7 +79,8 @@ MAX_LABEL_MISFIT = 0.35
 #: and more, a mark lit like the paint around it (:data:`vision.spot_label.LIT_SHARE` of its ring's light, the ring
 #: itself past this bar) is lit paint however dark beside the scene: a saturated red on a face in its body's shade
 #: under a low sun reflects one channel of a dim light (the second robot's red marks at telephoto: misfit 1.1-1.7 as
-#: "no lit paint" before; its recall 0.826 -> 0.860 in the reference look, the Pioneer's frames unchanged).
+#: "no lit paint" without it; with it its recall 0.826 -> 0.860 in the reference look, the Pioneer's frames
+#: unchanged: ``bench_photoreal_looks --front-ends contrast --frames 3`` on the telephoto worlds).
 MIN_RELATIVE_BRIGHTNESS = 0.2
 #: Least difference sigma (px) a scale-space level is blurred from the one below by (:func:`contrast_responses`).
 INCREMENTAL_SIGMA = 1.5
@@ -365,12 +366,13 @@ def _detect(bgr: np.ndarray, lin: np.ndarray, names: tuple[str, ...], palette: M
     lvl, ys, xs, radius, pts, labels, conf = lvl[good], ys[good], xs[good], radius[good], pts[good], labels[good], \
         conf[good]
     contrast = mag[lvl, ys, xs] / thresh[lvl]
-    pts = coverage_centroids(lin, pts, radius, spot[good], ring[good])
+    spot, ring = spot[good], ring[good]
+    pts = coverage_centroids(lin, pts, radius, spot, ring)
     # one detection per place: a stronger peak within its radius (another scale of the same spot) wins; an oblique
     # mark's two ends (where marks are 3 px and more) are one detection at their middle
     order = np.argsort(-contrast)
     same = same_spots(pts, radius)
-    ends = (one_mark_between(lin, pts, radius, labels, spot[good], ring[good]) & ~same
+    ends = (one_mark_between(lin, pts, radius, labels, spot, ring) & ~same
             if prior.radius_px[1] >= SMALL_SPOT_PX else np.zeros(same.shape, bool))
     same |= ends
     taken: list[int] = []
@@ -388,7 +390,7 @@ def _detect(bgr: np.ndarray, lin: np.ndarray, names: tuple[str, ...], palette: M
         a, b = np.unravel_index(int(np.argmax(apart)), apart.shape)
         radius[first] = float(radius[[first, *more]].max()) + 0.5 * float(apart[a, b])
         pts[first] = coverage_centroids(lin, 0.5 * (peaks[a] + peaks[b])[None], radius[first:first + 1],
-                                        spot[good][first:first + 1], ring[good][first:first + 1])[0]
+                                        spot[first:first + 1], ring[first:first + 1])[0]
     sel = np.array(sorted(taken), int)
     if silhouette is not None and len(sel) and prior.radius_px[1] >= SMALL_SPOT_PX:   # a mark's centre is on the body
         depth = cv2.distanceTransform(silhouette.astype(np.uint8), cv2.DIST_L2, 3)

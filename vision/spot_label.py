@@ -15,9 +15,11 @@ BLACK_SLACK = 0.02
 DARK_PAINT = 0.15
 #: A fitted paint lit at least this share of the light on the spot's ring (the body's paint around it) is lit paint
 #: whatever the scene's brightness (:func:`label_colours`' ``ring_light``). On the telephoto training worlds through 16
-#: random looks every share from 0.3 to 0.6 gave the same detections (without the lit-ring guard of
-#: vision.blobs, 0.2 lost precision in dark rings): the middle of that range. Prompted by the second robot's
-#: reference-look frames, so those are not held out from the rule; its seven other looks and the Pioneer's are.
+#: random looks the rule, with vision.blobs' guard that the ring itself be lit, changes no detection at any share
+#: from 0.3 to 0.6 (the Pioneer's paints are never that dark on a lit face; without the guard 0.2 lost precision in
+#: dark rings): the middle of that range. Its evidence is the second robot's reference-look frames, so those are not
+#: held out from it; its seven other looks and the Pioneer's are (BENCHMARKS.md, "Mark front-ends through camera
+#: looks").
 LIT_SHARE = 0.45
 
 
