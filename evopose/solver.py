@@ -166,7 +166,10 @@ def published(objective: PoseObjective, basin: np.ndarray, verdict: Confidence) 
     the noise fitted by EM from the pairs' residual scale): the least-squares one on the nearest pairs takes each
     pair as certain and, at the paper's scale, their residuals as the noise, which they understate."""
     pose, matches = robust_fit(objective, basin)
-    return pose, replace(verdict, covariance=mixture_covariance(objective, pose, matches))
+    cov = mixture_covariance(objective, pose, matches)
+    if not cov.ok and verdict.confident:   # no finite covariance for what goes out: not sure of it
+        return pose, replace(verdict, covariance=cov, confident=False, reason="no covariance")
+    return pose, replace(verdict, covariance=cov)
 
 
 def solution_of(problem: PoseProblem, options: SearchOptions, run: Run, seconds: float) -> Solution:

@@ -149,8 +149,11 @@ class TrackReference:
 
     def fused(self, pose: np.ndarray, cov: np.ndarray) -> "TrackReference":
         """The reference updated by an estimate ``pose`` (6,) with covariance ``cov`` (6, 6): the Kalman gain
-        ``K = P (P + C)^+`` applied to :func:`deviation`, the rotation part turned about the fixed axes."""
+        ``K = P (P + C)^+`` applied to :func:`deviation`, the rotation part turned about the fixed axes. An estimate
+        without a finite covariance carries no information (``K = 0``): the reference stands as it is."""
         P, C = self.covariance, np.asarray(cov, float)
+        if not np.all(np.isfinite(C)):
+            return self
         gain = P @ np.linalg.pinv(P + C, rcond=1e-12, hermitian=True)
         step = gain @ deviation(pose, self.pose)
         rotation = rotation_from_rotvec(step[3:]) @ rotation_from_euler(self.pose[3:])

@@ -4,20 +4,23 @@ scale (the Pioneer ~25 px wide) and at the telephoto scale; absent targets; trac
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
 
-from agents.problem.problem_file import solution_to_dict
+from agents.problem.problem_file import load_problem, solution_to_dict
 from benchmarks.problems import (absent_target, in_true_basin, make_paper_scale_problem, make_problem, observe,
                                  pose_errors)
 from evopose import PoseObjective, PoseProblem, SearchOptions, View, refine, solve, track
 from geometry import euler_from_rotation, rotation_from_euler
-from evopose.solver import POLISH_SCHEDULE
+from evopose.solver import POLISH_SCHEDULE, published
 from evopose.covariance import fixed_axis_jacobian
 from evopose.trust import ConfidenceRules, assess
 from evopose.uncertainty import (TrackReference, covariance, deviation, in_box_second_moment, mutual_matches,
                                  rotation_sigma, same_image, sum_of_squares, untruncated_variance)
+
+DATA = Path(__file__).resolve().parent / "data"
 
 
 def _paper(seed: int, cameras=("H1",), noise: float = 0.7, clutter: float = 0.2):
@@ -239,6 +242,23 @@ def test_the_track_reference_fuses_estimates_by_their_covariance_and_grows_by_th
     other = np.r_[0, 0, 0, 0.3, 0.1, 1.2]
     half = tilted.fused(other, cov)
     np.testing.assert_allclose(deviation(other, half.pose), deviation(half.pose, tilted.pose), atol=1e-9)
+    # an estimate without a finite covariance carries no information: the track stands (no exception)
+    assert tilted.fused(other, np.full((6, 6), np.inf)) is tilted
+
+
+def test_a_confident_basin_whose_published_covariance_cannot_be_computed_is_not_confident():
+    """Two paper-scale views through a faded film look (looks-long paper-g2-low-hable-faded, 9 and 7 points, a
+    wrong basin 2.98 rad rolled): the least-squares verdict is confident, the mixture covariance of the robust fit
+    is not finite. Such a frame once reached the track's Kalman update and raised there (eigh of inf), grounding
+    the agent; what goes out without a covariance is not confident."""
+    problem, options, _ = load_problem(DATA / "no_mixture_covariance.json")
+    objective = PoseObjective(problem, "mutual", None)
+    basin = np.array([0.057292, -0.134314, 0.392204, 2.977686, -0.289272, -1.997598])
+    verdict = assess(objective, basin, None, options.confidence)
+    assert verdict.confident and verdict.covariance.ok
+    pose, out = published(objective, basin, verdict)
+    assert not out.covariance.ok and not out.confident and out.reason == "no covariance"
+    assert np.all(np.isfinite(pose))
 
 
 def test_a_jump_within_one_frames_uncertainty_is_caught_by_the_track_of_a_slow_target():

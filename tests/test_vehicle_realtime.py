@@ -117,3 +117,36 @@ def test_pairing_is_by_stamp_and_a_silent_teammate_is_reported_stale_once_then_f
     s = out["summary"]
     assert paired.is_set() and s["stale_events"] == 1 and s["multi_view_frames"] >= 1
     assert np.isfinite(s["error_position"])
+
+
+def test_a_frame_whose_estimate_raises_is_reported_and_the_vehicle_goes_on(monkeypatch):
+    """A bug in one frame's estimate (injected: the step raises on the third frame) does not ground the vehicle: the
+    frame is reported (``frame-error``, counted in the summary), the estimator starts afresh, and the later frames are
+    estimated and good again."""
+    import agents.vehicle.roles as roles
+
+    real_step, calls, raised_at = roles.step, [0], []
+
+    def faulty(state, inputs):
+        calls[0] += 1
+        if calls[0] == 3:
+            raised_at.append(inputs.index)
+            raise FloatingPointError("injected")
+        return real_step(state, inputs)
+
+    monkeypatch.setattr(roles, "step", faulty)
+    events: queue.Queue = queue.Queue()
+    thread, out = _agent("H1", "rt-fault", "none", 8, SessionOptions(listen=(f"tcp/127.0.0.1:{free_port()}",)),
+                         events, threading.Event())
+    thread.join(120)
+    assert not thread.is_alive()
+    records = []
+    while not events.empty():
+        records.append(events.get())
+    errors = [r for r in records if r.get("event") == "frame-error"]
+    assert errors == [{"event": "frame-error", "vehicle": "H1", "frame": raised_at[0],
+                       "error": "FloatingPointError: injected"}]
+    s = out["summary"]
+    assert s["frame_errors"] == 1 and s["frames"] == 8 and s["estimates"] == 7
+    frames = [r for r in records if r.get("event") == "frame"]
+    assert frames[-1]["frame"] > raised_at[0] and frames[-1]["good"]

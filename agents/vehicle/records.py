@@ -60,6 +60,7 @@ class RunRecord:
     solves: int = 0
     late_frames: int = 0
     stale_events: int = 0  #: times a live team-mate's data went stale (frozen or cut off)
+    frame_errors: int = 0  #: frames whose estimate raised (a bug): the vehicle reset its estimator and went on
     multi_view_frames: int = 0
     first_good_s: float | None = None
     first_confirmed_s: float | None = None
