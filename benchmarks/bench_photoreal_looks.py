@@ -171,6 +171,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--jobs", type=int, default=2)
     parser.add_argument("--frames", type=int, default=None, help="the first N frames of each dataset (default: all)")
     parser.add_argument("--out", type=Path, default=DEFAULT_OUT)
+    parser.add_argument("--pool-models", default=None, metavar="NAME",
+                        help="report every target model under this one name (datasets of many robots, one each)")
     parser.add_argument("--scorer", type=Path, default=None,
                         help="a mark scorer file (evopose train-scorer) for the contrast front-ends (default: shipped)")
     args = parser.parse_args(argv)
@@ -193,6 +195,8 @@ def main(argv: list[str] | None = None) -> int:
     with ProcessPoolExecutor(max_workers=max(1, args.jobs)) as pool:
         for row in pool.map(evaluate, *zip(*jobs), [front_ends] * len(jobs), [args.frames] * len(jobs),
                             [args.scorer] * len(jobs)):
+            if args.pool_models:
+                row["model"] = args.pool_models
             rows.append(row)
             print(f"{row['dataset']:34s} {row['look']:12s} " + "  ".join(
                 "{} {:.2f}/{:.2f}/{:.2f}".format(n, *_rates(row["counts"][n])) for n in front_ends), flush=True)

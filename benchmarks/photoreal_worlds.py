@@ -90,7 +90,7 @@ SETS = {"benchmark": (WORLDS, GEOMETRIES, LIGHTINGS, tuple(SCALES)),
         "husky": (ROOT / "benchmarks" / "worlds" / "photoreal-husky", GEOMETRIES,
                   {k: LIGHTINGS[k] for k in ("high", "low")}, tuple(SCALES)),
         "palettes": (PALETTE_WORLDS, TRAIN_GEOMETRIES, {k: TRAIN_LIGHTINGS[k] for k in ("mid", "dawn")}, ("paper",)),
-        "bodies": (BODY_WORLDS, TRAIN_GEOMETRIES, {k: TRAIN_LIGHTINGS[k] for k in ("mid", "dawn")}, ("paper",))}
+        "bodies": (BODY_WORLDS, TRAIN_GEOMETRIES, {k: TRAIN_LIGHTINGS[k] for k in ("mid", "dawn")}, tuple(SCALES))}
 #: Per set: the shipped world each scale extends and the worlds' name prefix (default: SCALES, "photoreal").
 SET_BASES = {"husky": (HUSKY_SCALES, "photoreal-husky"), "palettes": (SCALES, "photoreal-palettes"),
              "bodies": (SCALES, "photoreal-bodies")}

@@ -15,13 +15,14 @@ from scenarios.world import load_scenario
 ROOT = Path(__file__).resolve().parents[1]
 
 
-@pytest.mark.parametrize("world_set", ["palettes", "bodies"])
-def test_the_committed_training_robots_worlds_and_models_are_the_generators(tmp_path, monkeypatch, world_set):
+@pytest.mark.parametrize("world_set, count", [("palettes", 12), ("bodies", 24)])
+def test_the_committed_training_robots_worlds_and_models_are_the_generators(tmp_path, monkeypatch, world_set, count):
+    """Recoloured robots at the paper's scale; random robots at both scales (each world its own robot)."""
     committed_folder = worlds.SETS[world_set][0]
     folder = tmp_path / world_set
     monkeypatch.setitem(worlds.SETS, world_set, (folder, *worlds.SETS[world_set][1:]))
     written = worlds.write_worlds(world_set)
-    assert len(written) == 12
+    assert len(written) == count
     for path in written:
         committed = committed_folder / path.relative_to(folder)
         assert committed.read_text(encoding="utf-8") == path.read_text(encoding="utf-8"), committed
