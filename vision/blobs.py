@@ -28,13 +28,12 @@ scale a mark has at the target's distance. So (docs/design.md, "The feature fron
    must lie on or inside a patch of that paint seen under any light (:mod:`vision.body_paint`: the dichromatic
    reflection model, paint plus the light's own colour, and glossy faces touching it); clutter in the marks' own
    hues lies on the ground and is dropped, and so is a spot on the body's outline, which paint does not ring
-   (:data:`MIN_PAINT_AROUND`; at 3 px and more, looked for up to :data:`RING_GAPS_PX` out, past a lens's blend of
-   mark and paint). Where marks are 3 px and more, a mark is also ringed by *one* paint it stands out
-   from on every side (:data:`MIN_SURROUND`); a contrast peak on an outline (a blend of two paints) is not.
-   The scale space is then built only around the body (2.8-3.4x faster on a 640 x 480 frame) and its threshold
-   taken from the ground beside it.
-   The marks of one target lie within its image extent; with the prior's extent the densest such cluster is
-   kept and far specks are dropped.
+   (:data:`MIN_PAINT_AROUND`). Where marks are 3 px and more, a fitted context model
+   (:mod:`vision.mark_context`) weighs that paint ring (1-3 px out, past a lens's blend), whether *one* paint
+   surrounds the spot, its scale and contrast beside the others' and its label's fit (without a model: the
+   hand-set bars :data:`MIN_SURROUND` and the common scale, :func:`vision.mark_selection.one_scale`). The scale
+   space is built only around the body (2.8-3.4x faster on a 640 x 480 frame), its threshold taken from the
+   ground beside it. The marks of one target lie within its image extent: the densest such cluster is kept.
 
 Images are OpenCV BGR ``uint8`` (H, W, 3); points ``(u, v)`` pixels with pixel centres at integers.
 """
@@ -52,8 +51,10 @@ from .body_paint import (LINEAR_OF_BYTE, body_paint, body_region, body_silhouett
 from .camera_look import Look, estimate_look, to_reference_look
 from .features import MarkDetections, to_bgr
 from .mark_prior import MarkPrior, mark_prior
+from .mark_context import context_features, is_context_model, shipped_context
 from .mark_scorer import MarkScorer, candidate_features, feature_names, shipped
-from .mark_selection import densest_cluster, one_mark_between, one_per_disc, one_scale, same_spots, surrounded
+from .mark_selection import (densest_cluster, merge_oblique_marks, one_mark_between, one_per_disc, one_scale,
+                             same_spots, surrounded)
 from .spot_colour import label_small_spots, labels_of, ring_colours, spot_misfits
 from .spot_position import SMALL_SPOT_PX, coverage_centroids, round_peaks
 from .spot_label import label_colours
@@ -200,7 +201,8 @@ class ContrastMarks(MarkDetections):
     label_confidence: np.ndarray = None  # type: ignore[assignment]
     radius: np.ndarray = None  # type: ignore[assignment]
     contrast: np.ndarray = None  # type: ignore[assignment]
-    #: (K, F) the scorer's features (vision.mark_scorer.candidate_features), or None: no scorer ran
+    #: (K, F) the scorer's features (vision.mark_scorer.candidate_features; where marks are 3 px and more
+    #: vision.mark_context.context_features), or None: no scorer ran
     features: np.ndarray | None = None
 
 
@@ -219,9 +221,12 @@ def detect_contrast_marks(image_bgr: np.ndarray, palette: Mapping[str, tuple[int
 
     ``scorer``, for marks under :data:`SMALL_SPOT_PX` on a body: which candidates are marks
     (:mod:`vision.mark_scorer`): ``"shipped"`` the shipped model (palette-relative: any palette), or a
-    :class:`MarkScorer`; the candidates are
+    :class:`MarkScorer`; where marks are 3 px and more the context model (:mod:`vision.mark_context`: the shipped
+    one, or a :class:`MarkScorer` of its features given here) decides instead of the hand-set context bars (paint
+    ring, surround, common scale); the small-spot candidates are
     then taken with the lenient :data:`CANDIDATE_K_SIGMA` bars (``k_sigma`` is not used). ``"all"``: every
-    such candidate, with its features (to fit a scorer); None: the hand-set bars alone.
+    such candidate, with its features (to fit a scorer; where marks are 3 px and more every spot before the context
+    bars, with its context features); None: the hand-set bars alone.
 
     ``look``: what the camera's look did to the colours (:mod:`vision.camera_look`), undone before anything is
     compared with the paint colours: ``"auto"`` estimated from this image and the body's paint, a :class:`Look`
@@ -241,14 +246,15 @@ def detect_contrast_marks(image_bgr: np.ndarray, palette: Mapping[str, tuple[int
         bgr = to_reference_look(bgr, look)
     if isinstance(scorer, str) and scorer not in ("shipped", "all"):
         raise ValueError(f"scorer must be a MarkScorer, 'shipped', 'all' or None, got {scorer!r}")
-    if scorer == "shipped":  # palette-relative features: any palette (a scorer file of other features: the bars)
-        fitted = shipped()
+    context = (scorer if is_context_model(scorer) or scorer in ("all", None) else shipped_context())
+    if scorer == "shipped" or is_context_model(scorer):  # palette-relative features: any palette (a scorer file of
+        fitted = shipped()                                  # other features: the bars)
         scorer = fitted if fitted is not None and fitted.names == feature_names(names) else None
     if isinstance(scorer, MarkScorer) and scorer.names != feature_names(names):
         raise ValueError(f"the mark scorer was fitted on the features {', '.join(scorer.names)}; the front-end "
                          f"computes {', '.join(feature_names(names))}")
     settings = dict(k_sigma=k_sigma, max_edge_ratio=max_edge_ratio, max_misfit=max_misfit, max_marks=max_marks,
-                    scorer=scorer)
+                    scorer=scorer, context=context)
     lin = _LINEAR_OF_BYTE[bgr]
     if body is None:
         return _detect(bgr, lin, names, palette, prior, None, **settings)
@@ -277,6 +283,7 @@ def detect_contrast_marks(image_bgr: np.ndarray, palette: Mapping[str, tuple[int
 def _detect(bgr: np.ndarray, lin: np.ndarray, names: tuple[str, ...], palette: Mapping[str, tuple[int, int, int]],
             prior: MarkPrior, region: np.ndarray | None, *, k_sigma: float, max_edge_ratio: float,
             max_misfit: float | None, max_marks: int, scorer: MarkScorer | str | None,
+            context: MarkScorer | str | None = None,
             body: tuple[int, int, int] | None = None, paint: np.ndarray | None = None,
             sure: np.ndarray | None = None, silhouette: np.ndarray | None = None) -> ContrastMarks:
     """:func:`detect_contrast_marks` in ``bgr`` (H, W, 3) uint8 (``lin`` the same in linear light, float32), the
@@ -363,20 +370,19 @@ def _detect(bgr: np.ndarray, lin: np.ndarray, names: tuple[str, ...], palette: M
         max_misfit = MAX_LABEL_MISFIT_ON_BODY if region is not None and prior.radius_px[1] < SMALL_SPOT_PX \
             else MAX_LABEL_MISFIT
     good = misfit <= max_misfit
-    lvl, ys, xs, radius, pts, labels, conf = lvl[good], ys[good], xs[good], radius[good], pts[good], labels[good], \
-        conf[good]
+    lvl, ys, xs, radius, pts, labels, conf, misfit = lvl[good], ys[good], xs[good], radius[good], pts[good], \
+        labels[good], conf[good], misfit[good]
     contrast = mag[lvl, ys, xs] / thresh[lvl]
     spot, ring = spot[good], ring[good]
     pts = coverage_centroids(lin, pts, radius, spot, ring)
-    # one detection per place: a stronger peak within its radius (another scale of the same spot) wins; an oblique
-    # mark's two ends (where marks are 3 px and more) are one detection at their middle
+    # one detection per place: a stronger peak within its radius (another scale of one spot) wins; an oblique mark's
+    # two ends (at 3 px and more) are one detection at their middle (vision.mark_selection.merge_oblique_marks)
     order = np.argsort(-contrast)
     same = same_spots(pts, radius)
     ends = (one_mark_between(lin, pts, radius, labels, spot, ring) & ~same
             if prior.radius_px[1] >= SMALL_SPOT_PX else np.zeros(same.shape, bool))
     same |= ends
-    taken: list[int] = []
-    one_mark: dict[int, list[int]] = {}   # the peaks of an oblique mark, under the first taken
+    taken, one_mark = [], {}   # the peaks kept; an oblique mark's other peaks under its first taken (int -> [int])
     for i in order.tolist():
         if not same[i, taken].any():
             taken.append(i)
@@ -384,13 +390,7 @@ def _detect(bgr: np.ndarray, lin: np.ndarray, names: tuple[str, ...], palette: M
             one_mark.setdefault(taken[int(np.flatnonzero(ends[i, taken])[0])], []).append(i)
         if len(taken) >= max_marks:
             break
-    for first, more in one_mark.items():   # the mark: its radius half its farthest two peaks' span, its centre the
-        peaks = pts[[first, *more]]        # centroid of its colour's coverage from their middle (as one round spot's)
-        apart = np.hypot(*(peaks[:, None, :] - peaks[None, :, :]).transpose(2, 0, 1))
-        a, b = np.unravel_index(int(np.argmax(apart)), apart.shape)
-        radius[first] = float(radius[[first, *more]].max()) + 0.5 * float(apart[a, b])
-        pts[first] = coverage_centroids(lin, 0.5 * (peaks[a] + peaks[b])[None], radius[first:first + 1],
-                                        spot[first:first + 1], ring[first:first + 1])[0]
+    merge_oblique_marks(lin, pts, radius, spot, ring, one_mark)
     sel = np.array(sorted(taken), int)
     if silhouette is not None and len(sel) and prior.radius_px[1] >= SMALL_SPOT_PX:   # a mark's centre is on the body
         depth = cv2.distanceTransform(silhouette.astype(np.uint8), cv2.DIST_L2, 3)
@@ -398,20 +398,27 @@ def _detect(bgr: np.ndarray, lin: np.ndarray, names: tuple[str, ...], palette: M
         ok = (cu >= 0) & (cv >= 0) & (cu < depth.shape[1]) & (cv < depth.shape[0])
         sel = sel[ok][depth[cv[ok], cu[ok]] > INSIDE_SHARE * radius[sel[ok]]]
     large = prior.radius_px[1] >= SMALL_SPOT_PX
-    if paint is not None and len(sel):  # a mark on a face is ringed by the body's paint
-        share = np.max([paint_around(paint, pts[sel], radius[sel], gap) for gap in
-                        (RING_GAPS_PX if large else RING_GAPS_PX[:1])], axis=0)
-        sel = sel[share >= (CANDIDATE_PAINT_AROUND if scoring else MIN_PAINT_AROUND)]
-    if large and len(sel):   # a mark is ringed by one paint it stands out from
-        sel = sel[surrounded(lab, pts[sel], radius[sel]) >= MIN_SURROUND]
+    features = None   # where marks are 3 px and more a context model weighs the spots' context (vision.mark_context)
+    if large and context is not None and paint is not None and silhouette is not None:
+        features = context_features(lab, paint, silhouette, pts[sel], radius[sel], contrast[sel], misfit[sel],
+                                    conf[sel], RING_GAPS_PX, prior.extent_px or float(max(h, w)))
+        keep = context.marks(features) if isinstance(context, MarkScorer) else slice(None)   # "all": every spot
+        sel, features = sel[keep], features[keep]
+    else:
+        if paint is not None and len(sel):  # a mark on a face is ringed by the body's paint
+            share = np.max([paint_around(paint, pts[sel], radius[sel], gap) for gap in
+                            (RING_GAPS_PX if large else RING_GAPS_PX[:1])], axis=0)
+            sel = sel[share >= (CANDIDATE_PAINT_AROUND if scoring else MIN_PAINT_AROUND)]
+        if large and len(sel):   # a mark is ringed by one paint it stands out from
+            sel = sel[surrounded(lab, pts[sel], radius[sel]) >= MIN_SURROUND]
     pts, labels, conf, radius, contrast = pts[sel], labels[sel], conf[sel], radius[sel], contrast[sel]
-    if prior.radius_px[1] >= SMALL_SPOT_PX and len(pts) > 2:   # marks of one target share a scale
+    if large and features is None and len(pts) > 2:   # marks of one target share a scale
         keep = one_scale(radius, contrast)
         pts, labels, conf, radius, contrast = pts[keep], labels[keep], conf[keep], radius[keep], contrast[keep]
-    if prior.extent_px is not None and len(pts) > 1:
+    if prior.extent_px is not None and len(pts) > 1 and not (large and context == "all"):
         keep = densest_cluster(pts, contrast, 0.75 * prior.extent_px)
         pts, labels, conf, radius, contrast = pts[keep], labels[keep], conf[keep], radius[keep], contrast[keep]
-    features = None
+        features = None if features is None else features[keep]
     if body is not None and prior.radius_px[1] < SMALL_SPOT_PX and len(pts):
         # 2-4 px spots: the label through the encoder's 4:2:0 chroma (vision.spot_colour); the crop is even-aligned
         palette_bgr = np.array([palette[n] for n in names], np.uint8)

@@ -26,6 +26,7 @@ import numpy as np
 from evopose import Bounds, Camera
 from vision.blobs import MarkPrior, crop_margin, detect_contrast_marks, mark_prior
 from vision.camera_look import LookTracker, estimate_look
+from vision.mark_context import is_context_model
 from vision.label_chroma import LabelChromaGate, spot_chroma
 from vision.features import colour_ranges, detect_colour_marks, detect_corners, x_junctions
 from vision.mark_scorer import MarkScorer, feature_names
@@ -103,7 +104,7 @@ def feature_extractor(kind: str, target: TargetModel, area: Bounds | None = None
     if kind != "contrast":
         raise ValueError(f"features must be one of {', '.join(FEATURE_KINDS)}, got {kind!r}")
     palette, size, body = dict(target.palette), target.size, target.body_colour
-    if scorer is not None and scorer.names != feature_names(tuple(palette)):
+    if scorer is not None and not is_context_model(scorer) and scorer.names != feature_names(tuple(palette)):
         raise ValueError(f"the mark scorer was fitted on the features {', '.join(scorer.names)}; this model's are "
                          f"{', '.join(feature_names(tuple(palette)))}")
 

@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .spot_position import coverage_centroids
+
 #: Where marks are 3 px and more: least radius of a spot as a share of the marks' own scale (:func:`one_scale`).
 SCALE_CONSENSUS = 0.55
 #: ... and least contrast as a share of the strong spots' (the 80th percentile): a target's marks are painted
@@ -148,4 +150,21 @@ def densest_cluster(pts: np.ndarray, weight: np.ndarray, radius: float) -> np.nd
     return np.nonzero(np.linalg.norm(pts - mean, axis=1) <= radius)[0]
 
 
-__all__ = ["densest_cluster", "one_mark_between", "one_per_disc", "one_scale", "same_spots", "surrounded"]
+def merge_oblique_marks(lin: np.ndarray, pts: np.ndarray, radius: np.ndarray, spot: np.ndarray, ring: np.ndarray,
+                        marks: dict[int, list[int]]) -> None:
+    """Each oblique mark's peaks (``marks``: the first taken -> the others, :func:`one_mark_between`) made one, in
+    place in ``pts`` (K, 2) and ``radius`` (K,) at the first: its radius half its farthest two peaks' span beyond the
+    larger peak's, its centre the centroid of its colour's coverage (:func:`vision.spot_position.coverage_centroids`
+    in ``lin`` (H, W, 3), with the peaks' ``spot`` and ``ring`` colours (K, 3)) from their middle, as one round
+    spot's."""
+    for first, more in marks.items():
+        peaks = pts[[first, *more]]
+        apart = np.hypot(*(peaks[:, None, :] - peaks[None, :, :]).transpose(2, 0, 1))
+        a, b = np.unravel_index(int(np.argmax(apart)), apart.shape)
+        radius[first] = float(radius[[first, *more]].max()) + 0.5 * float(apart[a, b])
+        pts[first] = coverage_centroids(lin, 0.5 * (peaks[a] + peaks[b])[None], radius[first:first + 1],
+                                        spot[first:first + 1], ring[first:first + 1])[0]
+
+
+__all__ = ["densest_cluster", "merge_oblique_marks", "one_mark_between", "one_per_disc", "one_scale", "same_spots",
+           "surrounded"]

@@ -1,4 +1,5 @@
-"""``evopose train-scorer``: fit the contrast front-end's mark scorer (:mod:`vision.mark_scorer`) on datasets.
+"""``evopose train-scorer``: fit the contrast front-end's mark scorer (:mod:`vision.mark_scorer`) on datasets, or
+with ``scale="telephoto"`` its context model for marks of 3 px and more (:mod:`vision.mark_context`).
 
 Every camera image of every dataset (docs/datasets.md) goes through the contrast front-end with ``scorer="all"``:
 the lenient candidates and their features. A candidate within ``match_px`` of a mark's projected centre (seen or
@@ -9,7 +10,9 @@ Its threshold keeps as many marks as the hand-set bars do on the same frames (``
 geometry held out: the scorer is as sensitive as the bars and drops more of the rest. Fewer marks cost the search
 more than false points do (on the nine 20-frame Cycles sequences, a scorer at the break-even of kept marks and
 precision, recall 0.76 against the bars' 0.81, left the fleet good on 272 of 360 frames against 308).
-Only cameras whose marks are under ``SMALL_SPOT_PX`` (the paper's scale) have candidates to score.
+Only cameras whose marks are under ``SMALL_SPOT_PX`` (the paper's scale) have candidates to score; with
+``scale="telephoto"`` only the others, each spot before the hand-set context bars with its context features, matched
+within 3 px (the feature benchmark's radius there), its threshold again keeping the bars' share of the marks.
 """
 
 from __future__ import annotations
@@ -21,6 +24,7 @@ import cv2
 import numpy as np
 
 from vision import mark_scorer
+from vision.mark_context import CONTEXT_FEATURES
 from vision.blobs import SMALL_SPOT_PX, detect_contrast_marks, mark_prior
 from vision.features import match_to_truth
 from scenarios.dataset import open_dataset
@@ -30,10 +34,12 @@ from scenarios.errors import WorldError
 
 #: A candidate this close to a mark's projection (px) is that mark (the feature benchmark's radius at this scale).
 MATCH_PX = 1.5
+#: ... per scale: the paper's (marks under SMALL_SPOT_PX) and telephoto (the others).
+SCALE_MATCH_PX = {"paper": MATCH_PX, "telephoto": 3.0}
 
 
 def candidates(directories: Sequence[Path], match_px: float = MATCH_PX,
-               progress: Callable[[str], None] | None = None, looks: int = 0, seed: int = 0
+               progress: Callable[[str], None] | None = None, looks: int = 0, seed: int = 0, scale: str = "paper"
                ) -> tuple[np.ndarray, np.ndarray, np.ndarray, tuple[str, ...], float]:
     """The features (K, F) of every small-spot candidate in the datasets, whether each is a mark (K,) bool, its
     group (K,): the datasets whose cameras start at the same places (:func:`_place`) are one group, and the feature
@@ -41,7 +47,11 @@ def candidates(directories: Sequence[Path], match_px: float = MATCH_PX,
 
     ``looks``: each frame of a Cycles dataset that kept its radiance (``raw/*.exr``) is also developed through this
     many random camera looks (:func:`scenarios.looks.random_look`, seeded by ``seed``), the front-end estimating
-    each one's look as it does on a camera's images: a scorer that has seen many looks, judged on named ones."""
+    each one's look as it does on a camera's images: a scorer that has seen many looks, judged on named ones.
+    ``scale``: ``"paper"`` (marks under SMALL_SPOT_PX, :mod:`vision.mark_scorer`'s features) or ``"telephoto"``
+    (the others, :data:`vision.mark_context.CONTEXT_FEATURES`)."""
+    if scale not in SCALE_MATCH_PX:
+        raise ValueError(f"scale must be one of {', '.join(SCALE_MATCH_PX)}, got {scale!r}")
     rng = np.random.default_rng(seed)
     rows, marks, groups, names, places = [], [], [], None, {}
     by_bars = 0
@@ -51,7 +61,7 @@ def candidates(directories: Sequence[Path], match_px: float = MATCH_PX,
         world = dataset.world()
         area = world.bounds()
         colours = tuple(world.model.palette)
-        here = mark_scorer.feature_names(colours)
+        here = mark_scorer.feature_names(colours) if scale == "paper" else CONTEXT_FEATURES
         if names is not None and here != names:
             raise WorldError(f"{directory}: its model's colours {colours} differ from the first dataset's")
         names = here
@@ -62,7 +72,7 @@ def candidates(directories: Sequence[Path], match_px: float = MATCH_PX,
                     raise WorldError(f"{dataset.image_path(cam, k)}: not an image OpenCV can read")
                 prior = mark_prior(dataset.camera(cam, k), world.model.mark_radius, world.model.size, area.lo[:3],
                                    area.hi[:3])
-                if prior.radius_px[1] >= SMALL_SPOT_PX:
+                if (prior.radius_px[1] >= SMALL_SPOT_PX) != (scale == "telephoto"):
                     continue
                 uv = np.array([m.uv for m in dataset.truth(k).cameras[cam].marks], float).reshape(-1, 2)
                 exr = Path(directory) / cam / "raw" / f"{k:06d}.exr"
@@ -88,8 +98,9 @@ def candidates(directories: Sequence[Path], match_px: float = MATCH_PX,
         if progress is not None:
             progress(f"{directory}: {sum(len(m) for m in marks)} candidates so far")
     if names is None or not rows:
-        raise WorldError("no small-spot candidates in the datasets (the scorer is for marks under "
-                         f"{SMALL_SPOT_PX} px: the paper's scale)")
+        raise WorldError(f"no {'small-spot' if scale == 'paper' else 'telephoto'} candidates in the datasets (the "
+                         f"scorer is for marks {'under' if scale == 'paper' else 'of'} {SMALL_SPOT_PX} px"
+                         f"{'' if scale == 'paper' else ' and more'}: --scale {scale})")
     is_mark = np.concatenate(marks)
     return np.concatenate(rows), is_mark, np.concatenate(groups), names, min(by_bars / max(is_mark.sum(), 1), 1.0)
 
@@ -101,15 +112,16 @@ def _place(dataset) -> tuple:
                  for name in dataset.cameras)
 
 
-def train(directories: Sequence[Path], out: Path, *, l2: float = 30.0, match_px: float = MATCH_PX,
-          progress: Callable[[str], None] | None = None, looks: int = 0, seed: int = 0) -> dict:
+def train(directories: Sequence[Path], out: Path, *, l2: float = 30.0, match_px: float | None = None,
+          progress: Callable[[str], None] | None = None, looks: int = 0, seed: int = 0, scale: str = "paper") -> dict:
     """Fit a scorer on ``directories`` and write it to ``out``; a summary (candidates, marks, threshold, and the
     fitting data's recall and precision of marks among the candidates it keeps). The threshold keeps the share of
     marks the bars find (:func:`vision.mark_scorer.fit` with ``keep``), each geometry (:func:`_place`) scored by
-    a model fitted on the others."""
-    features, is_mark, groups, names, by_bars = candidates(directories, match_px, progress, looks, seed)
+    a model fitted on the others. ``match_px`` None: the scale's (:data:`SCALE_MATCH_PX`)."""
+    match_px = SCALE_MATCH_PX.get(scale, MATCH_PX) if match_px is None else match_px
+    features, is_mark, groups, names, by_bars = candidates(directories, match_px, progress, looks, seed, scale)
     fitted_on = "evopose train-scorer " + " ".join(Path(d).name for d in directories) + (
-        f" --looks {looks} --seed {seed}" if looks else "")
+        f" --looks {looks} --seed {seed}" if looks else "") + (" --scale telephoto" if scale == "telephoto" else "")
     scorer = mark_scorer.fit(features, is_mark, names, l2=l2, groups=groups, keep=by_bars, fitted_on=fitted_on)
     out.parent.mkdir(parents=True, exist_ok=True)
     scorer.save(out)
@@ -120,4 +132,4 @@ def train(directories: Sequence[Path], out: Path, *, l2: float = 30.0, match_px:
             "precision": float(np.sum(kept & is_mark) / max(kept.sum(), 1))}
 
 
-__all__ = ["MATCH_PX", "candidates", "train"]
+__all__ = ["MATCH_PX", "SCALE_MATCH_PX", "candidates", "train"]

@@ -113,7 +113,8 @@ def register(app: typer.Typer) -> None:
         = "auto",
         mark_scorer: Annotated[Path | None, typer.Option(
             help="With --features contrast: the mark scorer for 2-4 px marks, a JSON file of `evopose train-scorer` "
-                 "(default: the shipped one, fitted on rendered worlds).")] = None,
+                 "(default: the shipped one, fitted on rendered worlds), or the context model for marks of 3 px and "
+                 "more (`evopose train-scorer --scale telephoto`).")] = None,
         as_json: Annotated[bool, typer.Option("--json", help="One JSON object per event on stdout.")] = False,
         connect: Connect = None, listen: Listen = None, mode: Mode = None, config: ConfigFile = None,
         multicast: Multicast = False,

@@ -171,13 +171,19 @@ def train_scorer_command(
     looks: Annotated[int, typer.Option(min=0, max=50, help="Also develop each frame of a dataset with raw EXRs "
                                                           "through this many random camera looks.")] = 0,
     seed: Annotated[int, typer.Option(help="Seed of the random looks.")] = 0,
+    scale: Annotated[str, typer.Option(help="paper: the mark scorer of 2-4 px marks; telephoto: the context model "
+                                            "of marks of 3 px and more (vision/mark_context.json).")] = "paper",
     as_json: Annotated[bool, typer.Option("--json", help="Print the summary as JSON.")] = False,
 ) -> None:
-    """Fit the contrast front-end's mark scorer (2-4 px marks) on rendered datasets with truth."""
-    from vision.train_scorer import train
+    """Fit the contrast front-end's mark scorer (2-4 px marks) or context model (--scale telephoto) on rendered
+    datasets with truth."""
+    from vision.train_scorer import SCALE_MATCH_PX, train
 
+    if scale not in SCALE_MATCH_PX:
+        raise typer.BadParameter(f"expected one of {', '.join(SCALE_MATCH_PX)}, got {scale!r}", param_hint="--scale")
     console = Console(stderr=True)
-    summary = train(datasets, out, l2=l2, progress=None if as_json else console.print, looks=looks, seed=seed)
+    summary = train(datasets, out, l2=l2, progress=None if as_json else console.print, looks=looks, seed=seed,
+                    scale=scale)
     if as_json:
         print(json_line(summary))
         return

@@ -1,0 +1,88 @@
+"""Which telephoto spots are marks, from their context: a fitted model over what surrounds each spot.
+
+Where marks are 3 px and more (:data:`vision.spot_position.SMALL_SPOT_PX`) the contrast front-end
+(:mod:`vision.blobs`) used to keep a spot by a cascade of hand-set bars, each chosen on the Pioneer: a ring of the
+body's paint around it, one paint it stands out from all round, the marks' common scale, their common contrast
+(:mod:`vision.mark_selection`). On robots it never met those bars cost precision: 12 random robots at telephoto
+(``benchmarks/random_bodies.py``) through their reference and 3 random looks, recall 0.772 / precision 0.804,
+against the Pioneer's training worlds' 0.935 / 0.951. The same measures weighed together by a logistic model on
+their quadratic expansion (:class:`vision.mark_scorer.MarkScorer`, ``evopose train-scorer --scale telephoto``)
+fitted on the Pioneer's telephoto training worlds and the random robots through random looks, each robot's geometry
+held out in turn, kept 0.758 / 0.935 of the random robots' marks and 0.933 / 0.960 of the Pioneer's (BENCHMARKS.md
+has the benchmark's worlds and the second robot, which it never saw).
+
+Every measure is relative to the spot itself, to the others of its image or to the target's extent, never a
+colour: one model serves any robot and palette. Shapes: points (K, 2) pixels ``(u, v)``, per-spot arrays (K,).
+"""
+
+from __future__ import annotations
+
+from functools import lru_cache
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from .body_paint import paint_around
+from .mark_scorer import MarkScorer, load
+from .mark_selection import surrounded
+
+#: The context model's measures of a spot (:func:`context_features`), in this order.
+CONTEXT_FEATURES = (
+    "paint_around",        # share of a 1 px ring 1-3 px outside the spot that is the body's paint (the best gap)
+    "surrounded",          # share of 16 directions in which the spot's surroundings are their usual colour
+    "log_scale_ratio",     # log of its radius over the marks' scale (the contrast-weighted median radius)
+    "log_contrast_ratio",  # log of its contrast over the strong spots' (the 80th percentile)
+    "label_misfit",        # its fitted paint colour's misfit (vision.spot_label)
+    "label_confidence",    # the margin of its label over the next
+    "depth_radii",         # its centre's depth in the body's silhouette, in its radii (capped at 5)
+    "log_contrast",        # log of its contrast over its level's threshold
+    "log_radius_extent",   # log of its radius over the target's extent in pixels
+    "nearest_radii",       # the nearest other spot, in its radii (capped at 10)
+)
+#: The shipped context model (``evopose train-scorer --scale telephoto``).
+SHIPPED_CONTEXT = Path(__file__).with_name("mark_context.json")
+
+
+def context_features(lab: np.ndarray, paint: np.ndarray, silhouette: np.ndarray, points: np.ndarray,
+                     radius: np.ndarray, contrast: np.ndarray, misfit: np.ndarray, confidence: np.ndarray,
+                     ring_gaps: tuple[float, ...], extent_px: float) -> np.ndarray:
+    """The :data:`CONTEXT_FEATURES` (K, 10) of the spots at ``points`` of ``radius``, ``contrast``, label
+    ``misfit`` and ``confidence`` in an image whose CIE Lab is ``lab`` (H, W, 3) float32, the body's paint ``paint``
+    and closed silhouette ``silhouette`` (H, W) bool; the paint ring's share is the best of the rings ``ring_gaps`` px
+    beyond each radius; ``extent_px`` the target's largest extent in pixels."""
+    points = np.asarray(points, float).reshape(-1, 2)
+    radius, contrast = np.asarray(radius, float), np.asarray(contrast, float)
+    if not len(points):
+        return np.zeros((0, len(CONTEXT_FEATURES)))
+    share = np.max([paint_around(paint, points, radius, gap) for gap in ring_gaps], axis=0)
+    around = surrounded(lab, points, radius)
+    order = np.argsort(radius)
+    weight = np.cumsum(contrast[order] ** 2)
+    scale = float(radius[order][np.searchsorted(weight, 0.5 * weight[-1])])
+    strong = float(np.quantile(contrast, 0.8))
+    depth = cv2.distanceTransform(silhouette.astype(np.uint8), cv2.DIST_L2, 3)
+    u = np.clip(np.rint(points[:, 0]).astype(int), 0, depth.shape[1] - 1)
+    v = np.clip(np.rint(points[:, 1]).astype(int), 0, depth.shape[0] - 1)
+    apart = np.hypot(*(points[:, None, :] - points[None, :, :]).transpose(2, 0, 1))
+    np.fill_diagonal(apart, np.inf)
+    nearest = apart.min(axis=1) / radius if len(points) > 1 else np.full(len(points), np.inf)
+    return np.stack([share, around, np.log(radius / scale), np.log(np.maximum(contrast, 1e-6) / max(strong, 1e-6)),
+                     np.asarray(misfit, float), np.asarray(confidence, float), np.minimum(depth[v, u] / radius, 5.0),
+                     np.log(np.maximum(contrast, 1e-6)), np.log(radius / max(extent_px, 1.0)),
+                     np.minimum(nearest, 10.0)], axis=1)
+
+
+def is_context_model(scorer: object) -> bool:
+    """Whether ``scorer`` is a context model (its features are :data:`CONTEXT_FEATURES`), not a small-spot one."""
+    return isinstance(scorer, MarkScorer) and scorer.names == CONTEXT_FEATURES
+
+
+@lru_cache(maxsize=1)
+def shipped_context() -> MarkScorer | None:
+    """The shipped context model, read once (None when the file is absent: the hand-set bars decide)."""
+    return load(SHIPPED_CONTEXT) if SHIPPED_CONTEXT.is_file() else None
+
+
+__all__ = ["CONTEXT_FEATURES", "SHIPPED_CONTEXT", "context_features", "is_context_model",
+           "shipped_context"]
