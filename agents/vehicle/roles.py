@@ -124,16 +124,8 @@ class Vehicle(ABC):
             except SourceEnded:  # a video file or image sequence has no more frames: a clean end, not an error
                 self.emit({"event": "end-of-source", "vehicle": self.config.vehicle, "frames": self.record.frames})
                 break
-            except Exception as err:  # noqa: BLE001 -- a bug in one frame's estimate must not ground the vehicle
-                self.record.frame_errors += 1
-                self.emit({"event": "frame-error", "vehicle": self.config.vehicle, "frame": n,
-                           "error": f"{type(err).__name__}: {err}"[:500]})
-                self.recover()
             self.record.frames += 1
         return self.summary()
-
-    def recover(self) -> None:
-        """After a frame that raised: start the role's estimate afresh (nothing to undo by default)."""
 
     def next_frame(self, n: int | None, stop: threading.Event) -> int | None:
         """Wait for the clock's frame after ``n`` (None: stopped); roles that work between frames do it here."""
@@ -180,11 +172,6 @@ class CameraVehicle(Vehicle):
         self._image_ready: float | None = None  # perf_counter when the first frame's image existed
 
     # -- set-up ---------------------------------------------------------------------------------
-
-    def recover(self) -> None:
-        """After a frame whose estimate raised: a search from scratch, no published track, no window to follow
-        (the estimator's state may be what raised)."""
-        self.state = replace(self.state, estimator=EstimatorState(), published=None, follow=None)
 
     def subscribe(self) -> None:
         if self.policy.shares is not None:
@@ -332,7 +319,14 @@ class CameraVehicle(Vehicle):
         inputs = FrameInputs(n, mine, paired, self.knowledge(), self.take_hints() if takes else None,
                              frame.truth, self.hints.take_latest() if takes else None,
                              self.policy.search_share_of_frame * self.period_s)
-        self.state, messages, event = step(self.state, inputs)
+        try:
+            self.state, messages, event = step(self.state, inputs)
+        except Exception as err:  # noqa: BLE001 -- a bug in one frame's estimate must not ground the vehicle:
+            self.record.frame_errors += 1  # reported; the estimate starts afresh (its state may be what raised)
+            self.emit({"event": "frame-error", "vehicle": self.config.vehicle, "frame": n,
+                       "error": f"{type(err).__name__}: {err}"[:500]})
+            self.state = replace(self.state, estimator=EstimatorState(), published=None, follow=None)
+            return
         for message in messages:
             self.send(message)
         event = event.from_source(frame.scene_frame, frame.skipped)
