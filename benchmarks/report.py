@@ -22,7 +22,7 @@ ORDER = ("solvers", "solver_regression", "softposit", "solver_phases", "confiden
          "footprint", "agent_memory", "photoreal_features", "photoreal_features_sweep", "photoreal_features_telephoto_sweep",
          "photoreal_features_opencv_camera", "photoreal_features_train",
          "photoreal_fleet", "photoreal_fleet_long", "photoreal_fleet_paper_long", "photoreal_tracking",
-         "photoreal_encoding", "photoreal_looks", "photoreal_looks_husky", "photoreal_looks_bodies_telephoto",
+         "photoreal_encoding", "photoreal_looks", "photoreal_looks_husky", "photoreal_looks_bodies_telephoto", "photoreal_looks_context",
          "photoreal_looks_train_telephoto",
          "photoreal_fleet_looks",
          "photoreal_fleet_looks_paper", "photoreal_fleet_husky", "photoreal_fleet_realtime", "photoreal_fleet_looks_long",
@@ -52,6 +52,8 @@ TITLES = {
     "photoreal_looks_husky": "Mark front-ends through camera looks: the second robot (Husky-like UGV)",
     "photoreal_looks_bodies_telephoto": "Mark front-ends through camera looks: random robots at telephoto (no rule "
                                         "chosen on them)",
+    "photoreal_looks_context": "Mark front-ends through camera looks: the telephoto context model beside the hand-set "
+                               "bars (opt-in)",
     "photoreal_looks_train_telephoto": "Mark front-ends through camera looks: the telephoto training worlds, random "
                                        "looks (where the telephoto rules are chosen)",
 }

@@ -28,12 +28,12 @@ scale a mark has at the target's distance. So (docs/design.md, "The feature fron
    must lie on or inside a patch of that paint seen under any light (:mod:`vision.body_paint`: the dichromatic
    reflection model, paint plus the light's own colour, and glossy faces touching it); clutter in the marks' own
    hues lies on the ground and is dropped, and so is a spot on the body's outline, which paint does not ring
-   (:data:`MIN_PAINT_AROUND`). Where marks are 3 px and more, a fitted context model
-   (:mod:`vision.mark_context`) weighs that paint ring (1-3 px out, past a lens's blend), whether *one* paint
-   surrounds the spot, its scale and contrast beside the others' and its label's fit (without a model: the
-   hand-set bars :data:`MIN_SURROUND` and the common scale, :func:`vision.mark_selection.one_scale`). The scale
-   space is built only around the body (2.8-3.4x faster on a 640 x 480 frame), its threshold taken from the
-   ground beside it. The marks of one target lie within its image extent: the densest such cluster is kept.
+   (:data:`MIN_PAINT_AROUND`). Where marks are 3 px and more that ring is looked for 1-3 px out (past a lens's
+   blend), *one* paint must surround the spot (:data:`MIN_SURROUND`) and the marks share a scale
+   (:func:`vision.mark_selection.one_scale`); or, opted in, a fitted context model weighs those
+   (:mod:`vision.mark_context`). The scale space is built only around the body (2.8-3.4x faster on a 640 x 480
+   frame), its threshold taken from the ground beside it. The marks of one target lie within its image extent:
+   the densest such cluster is kept.
 
 Images are OpenCV BGR ``uint8`` (H, W, 3); points ``(u, v)`` pixels with pixel centres at integers.
 """
@@ -51,7 +51,7 @@ from .body_paint import (LINEAR_OF_BYTE, body_paint, body_region, body_silhouett
 from .camera_look import Look, estimate_look, to_reference_look
 from .features import MarkDetections, to_bgr
 from .mark_prior import MarkPrior, mark_prior
-from .mark_context import context_features, is_context_model, shipped_context
+from .mark_context import context_features, is_context_model
 from .mark_scorer import MarkScorer, candidate_features, feature_names, shipped
 from .mark_selection import (densest_cluster, merge_oblique_marks, one_mark_between, one_per_disc, one_scale,
                              same_spots, surrounded)
@@ -221,9 +221,9 @@ def detect_contrast_marks(image_bgr: np.ndarray, palette: Mapping[str, tuple[int
 
     ``scorer``, for marks under :data:`SMALL_SPOT_PX` on a body: which candidates are marks
     (:mod:`vision.mark_scorer`): ``"shipped"`` the shipped model (palette-relative: any palette), or a
-    :class:`MarkScorer`; where marks are 3 px and more the context model (:mod:`vision.mark_context`: the shipped
-    one, or a :class:`MarkScorer` of its features given here) decides instead of the hand-set context bars (paint
-    ring, surround, common scale); the small-spot candidates are
+    :class:`MarkScorer`; where marks are 3 px and more a context model given here (a :class:`MarkScorer` of
+    :mod:`vision.mark_context`'s features, e.g. its shipped file) decides instead of the hand-set context bars
+    (paint ring, surround, common scale), the default; the small-spot candidates are
     then taken with the lenient :data:`CANDIDATE_K_SIGMA` bars (``k_sigma`` is not used). ``"all"``: every
     such candidate, with its features (to fit a scorer; where marks are 3 px and more every spot before the context
     bars, with its context features); None: the hand-set bars alone.
@@ -246,7 +246,7 @@ def detect_contrast_marks(image_bgr: np.ndarray, palette: Mapping[str, tuple[int
         bgr = to_reference_look(bgr, look)
     if isinstance(scorer, str) and scorer not in ("shipped", "all"):
         raise ValueError(f"scorer must be a MarkScorer, 'shipped', 'all' or None, got {scorer!r}")
-    context = (scorer if is_context_model(scorer) or scorer in ("all", None) else shipped_context())
+    context = scorer if is_context_model(scorer) or scorer == "all" else None   # opt-in (vision.mark_context)
     if scorer == "shipped" or is_context_model(scorer):  # palette-relative features: any palette (a scorer file of
         fitted = shipped()                                  # other features: the bars)
         scorer = fitted if fitted is not None and fitted.names == feature_names(names) else None

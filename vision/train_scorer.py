@@ -12,7 +12,8 @@ more than false points do (on the nine 20-frame Cycles sequences, a scorer at th
 precision, recall 0.76 against the bars' 0.81, left the fleet good on 272 of 360 frames against 308).
 Only cameras whose marks are under ``SMALL_SPOT_PX`` (the paper's scale) have candidates to score; with
 ``scale="telephoto"`` only the others, each spot before the hand-set context bars with its context features, matched
-within 3 px (the feature benchmark's radius there), its threshold again keeping the bars' share of the marks.
+within 3 px (the feature benchmark's radius there); the shipped one's threshold keeps 98 % of the marks (``keep``,
+the issue's recall bar), each geometry held out.
 """
 
 from __future__ import annotations
@@ -113,16 +114,20 @@ def _place(dataset) -> tuple:
 
 
 def train(directories: Sequence[Path], out: Path, *, l2: float = 30.0, match_px: float | None = None,
-          progress: Callable[[str], None] | None = None, looks: int = 0, seed: int = 0, scale: str = "paper") -> dict:
+          progress: Callable[[str], None] | None = None, looks: int = 0, seed: int = 0, scale: str = "paper",
+          keep: float | None = None) -> dict:
     """Fit a scorer on ``directories`` and write it to ``out``; a summary (candidates, marks, threshold, and the
     fitting data's recall and precision of marks among the candidates it keeps). The threshold keeps the share of
     marks the bars find (:func:`vision.mark_scorer.fit` with ``keep``), each geometry (:func:`_place`) scored by
-    a model fitted on the others. ``match_px`` None: the scale's (:data:`SCALE_MATCH_PX`)."""
+    a model fitted on the others; ``keep``, a share of the marks to keep instead (the shipped context model: 0.98,
+    the issue's recall bar). ``match_px`` None: the scale's (:data:`SCALE_MATCH_PX`)."""
     match_px = SCALE_MATCH_PX.get(scale, MATCH_PX) if match_px is None else match_px
     features, is_mark, groups, names, by_bars = candidates(directories, match_px, progress, looks, seed, scale)
     fitted_on = "evopose train-scorer " + " ".join(Path(d).name for d in directories) + (
-        f" --looks {looks} --seed {seed}" if looks else "") + (" --scale telephoto" if scale == "telephoto" else "")
-    scorer = mark_scorer.fit(features, is_mark, names, l2=l2, groups=groups, keep=by_bars, fitted_on=fitted_on)
+        f" --looks {looks} --seed {seed}" if looks else "") + (" --scale telephoto" if scale == "telephoto" else "") + (
+        f" --keep {keep:g}" if keep is not None else "")
+    scorer = mark_scorer.fit(features, is_mark, names, l2=l2, groups=groups, keep=by_bars if keep is None else keep,
+                             fitted_on=fitted_on)
     out.parent.mkdir(parents=True, exist_ok=True)
     scorer.save(out)
     kept = scorer.marks(features)

@@ -173,6 +173,8 @@ def train_scorer_command(
     seed: Annotated[int, typer.Option(help="Seed of the random looks.")] = 0,
     scale: Annotated[str, typer.Option(help="paper: the mark scorer of 2-4 px marks; telephoto: the context model "
                                             "of marks of 3 px and more (vision/mark_context.json).")] = "paper",
+    keep: Annotated[float | None, typer.Option(min=0.5, max=0.999, help="The threshold keeps this share of the marks "
+                                               "(held out by geometry); default: the hand-set bars' share.")] = None,
     as_json: Annotated[bool, typer.Option("--json", help="Print the summary as JSON.")] = False,
 ) -> None:
     """Fit the contrast front-end's mark scorer (2-4 px marks) or context model (--scale telephoto) on rendered
@@ -183,7 +185,7 @@ def train_scorer_command(
         raise typer.BadParameter(f"expected one of {', '.join(SCALE_MATCH_PX)}, got {scale!r}", param_hint="--scale")
     console = Console(stderr=True)
     summary = train(datasets, out, l2=l2, progress=None if as_json else console.print, looks=looks, seed=seed,
-                    scale=scale)
+                    scale=scale, keep=keep)
     if as_json:
         print(json_line(summary))
         return
