@@ -183,9 +183,32 @@ def assess(objective: PoseObjective, pose: np.ndarray, alternatives: np.ndarray 
     margin = (s_alt - s_best) / cov.residual_variance if np.isfinite(s_alt) else np.inf
     reason = ("no covariance" if not cov.ok else "few matches" if n_pairs < rules.min_pairs
               else "unmatched marks" if unmatched > rules.max_unmatched
-              else "loose fit" if cov.residual_variance > rules.max_residual_px ** 2
+              else "loose fit" if fit_variance(matches, int(np.count_nonzero(objective.problem.bounds.free)))
+              > rules.max_residual_px ** 2
               else "ambiguous" if margin < rules.margin else "")
     return Confidence(reason == "", cov, n_pairs, unmatched, float(margin), runner_up, reason, s_best, s_alt)
+
+
+#: A pair whose squared residual exceeds this many times the pairs' robust variance is left out of the loose-fit
+#: test: 5 sigmas (a 2-D Gaussian's |r|^2 / sigma^2 is chi-squared with 2 degrees of freedom, past 25 once in 270 000
+#: pairs), so a robust variance read from twenty pairs, itself off by tens of percent, leaves out no true pair.
+FIT_CUTOFF_CHI2 = 25.0
+
+
+def fit_variance(matches, n_free: int) -> float:
+    """The residual variance per pixel coordinate of the mutual pairs ``matches`` (:class:`Matches`) that the
+    loose-fit rule judges, ``n_free`` parameters fitted: over the pairs within :data:`FIT_CUTOFF_CHI2` of their
+    robust variance (the median of ``|r|^2`` over ``2 ln 2``). One pair of a point with a mark whose own point was
+    not found (13 px off at telephoto, among twenty within 3 px) no longer makes a right pose a loose fit; the
+    chance pairs of an absent target, spread throughout, still do (inf: too few pairs)."""
+    w = matches.weights[matches.view]
+    use = w > 0
+    r2, w = np.sum(np.asarray(matches.residuals, float)[use] ** 2, axis=1), w[use]
+    if 2 * len(r2) - n_free < 1:
+        return np.inf
+    keep = r2 <= FIT_CUTOFF_CHI2 * float(np.median(r2)) / (2 * np.log(2))
+    dof = 2 * int(np.count_nonzero(keep)) - n_free
+    return float(np.sum(w[keep] * r2[keep]) / dof) if dof >= 1 else np.inf
 
 
 def imprecise(marks: np.ndarray, cov: np.ndarray, rules: ConfidenceRules = ConfidenceRules()) -> bool:

@@ -329,3 +329,29 @@ def test_one_camera_at_paper_scale_finds_the_basin_but_not_the_range_two_cameras
     assert range_sigma > extent / 3 > 5 * np.sqrt(np.linalg.eigvalsh(two.covariance[:3, :3]).max())
     assert imprecise(alone.problem.model.points, np.full((6, 6), np.inf))
     assert not imprecise(alone.problem.model.points, one.covariance, ConfidenceRules(max_position_sigma=10.0))
+
+
+def test_one_far_pair_does_not_make_a_close_fit_loose_but_chance_pairs_do():
+    """The loose-fit rule's variance (evopose.trust.fit_variance): twenty pairs within a pixel and one 13 px off (a
+    point mutually nearest a mark whose own point was not found; the second robot's telephoto g3-low frame 1 read
+    9.1 px^2 against the 9 allowed because of it) judge as the twenty do; pairs spread as chance pairs are (an absent
+    target) stay loose."""
+    from evopose.covariance import Matches
+    from evopose.trust import ConfidenceRules, fit_variance
+
+    rng = np.random.default_rng(3)
+    close = rng.normal(0.0, 0.7, size=(20, 2))
+
+    def matches(residuals: np.ndarray) -> Matches:
+        m = len(residuals)
+        return Matches(np.zeros(m, int), np.arange(m), np.arange(m), residuals, np.array([m]), np.array([m]),
+                       np.ones(1))
+
+    bar = ConfidenceRules().max_residual_px ** 2
+    with_far = np.vstack([close, [[13.0, 3.0]]])
+    plain = float(np.sum(with_far ** 2) / (2 * len(with_far) - 6))   # what the rule read before: the far pair
+    assert fit_variance(matches(with_far), 6) == pytest.approx(np.sum(close ** 2) / (2 * 20 - 6))  # left out
+    assert fit_variance(matches(with_far), 6) < 0.2 * plain
+    chance = rng.uniform(-8.0, 8.0, size=(20, 2))        # pairs anywhere within a wide tau
+    assert fit_variance(matches(chance), 6) > bar
+    assert fit_variance(matches(close[:3]), 6) == np.inf  # fewer coordinates than parameters
