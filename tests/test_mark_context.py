@@ -72,7 +72,7 @@ def test_through_a_flat_cold_camera_the_context_model_drops_what_the_bars_kept()
     assert with_model["precision"] >= bars["precision"] + 0.1, (with_model, bars)
 
 
-def test_train_scorer_fits_a_context_model_the_agent_takes(tmp_path):
+def test_train_scorer_fits_a_context_model_and_names_a_bad_scale(tmp_path):
     out = tmp_path / "context.json"
     result = subprocess.run([sys.executable, "-m", "agents.cli", "train-scorer", str(DATA / "telephoto"),
                              str(DATA / "husky-telephoto"), "--scale", "telephoto", "--out", str(out), "--json"],
@@ -82,15 +82,31 @@ def test_train_scorer_fits_a_context_model_the_agent_takes(tmp_path):
     assert summary["candidates"] > summary["marks"] > 0
     model = load(out)
     assert is_context_model(model) and model.fitted_on.endswith("--scale telephoto")
-    # the agents' extraction takes it as --mark-scorer (a small-spot scorer's feature check does not refuse it)
-    from scenarios.target import load_model
-    from vision.extract import feature_extractor
-
-    extract = feature_extractor("contrast", load_model(ROOT / "scenarios" / "models" / "pioneer.yaml"), None, model)
-    image = cv2.imread(str(DATA / "telephoto" / "H1" / "000000.jpg"))
-    points, _ = extract(image)
-    assert len(points) > 0
     bad = subprocess.run([sys.executable, "-m", "agents.cli", "train-scorer", str(DATA / "telephoto"), "--scale",
                           "huge", "--out", str(tmp_path / "x.json")], cwd=ROOT, capture_output=True, text=True,
                          timeout=120)
     assert bad.returncode == 2 and "--scale" in bad.stderr and "Traceback" not in bad.stderr, bad.stderr
+
+
+def test_the_agents_extraction_uses_a_context_model_it_is_given():
+    # as --mark-scorer (a small-spot scorer's feature check does not refuse it): on the flat-cool telephoto frames,
+    # each camera's frames in order as a vehicle extracts them, the bars keep lit-paint specks the model drops
+    # (measured: 115 points with the default, 95 with the shipped model, the marks found either way)
+    from scenarios.dataset import open_dataset
+    from vision.extract import feature_extractor
+    from vision.features import match_to_truth
+
+    data = open_dataset(DATA / "telephoto-flat-cool")
+    world = data.world()
+    counts = {}
+    for name, model in (("bars", None), ("model", shipped_context())):
+        points = found = 0
+        for cam in data.cameras:
+            extract = feature_extractor("contrast", world.model, world.bounds(), model)
+            for k in range(data.frames):
+                got, _ = extract(cv2.imread(str(data.image_path(cam, k))), data.camera(cam, k))
+                whole = np.array([m.uv for m in data.truth(k).cameras[cam].marks if m.fully_visible])
+                points, found = points + len(got), found + len(match_to_truth(got, whole, 3.0)[0])
+        counts[name] = (points, found)
+    assert counts["model"][0] <= counts["bars"][0] - 10, counts
+    assert counts["model"][1] >= counts["bars"][1] - 1, counts

@@ -355,3 +355,20 @@ def test_one_far_pair_does_not_make_a_close_fit_loose_but_chance_pairs_do():
     chance = rng.uniform(-8.0, 8.0, size=(20, 2))        # pairs anywhere within a wide tau
     assert fit_variance(matches(chance), 6) > bar
     assert fit_variance(matches(close[:3]), 6) == np.inf  # fewer coordinates than parameters
+
+
+def test_a_right_pose_with_one_far_pair_is_no_loose_fit():
+    """The second robot's telephoto g3-low frame 1 as two agents saw it with the context model (16 and 9 points;
+    the tracked pose, right to 0.3 cm): the pairs' plain variance 9.13 px^2 failed the loose-fit bar of 9 and the pair
+    never found the robot in that world's 4 frames; the rule's own variance leaves out the one pair 13 px off."""
+    from evopose.covariance import mutual_matches
+    from evopose.trust import ConfidenceRules, assess, fit_variance
+
+    problem, _, _ = load_problem(DATA / "one_far_pair.json")
+    objective = PoseObjective(problem, "mutual", None)
+    pose = np.array([-0.006094, 0.016741, -0.00091, -0.010459, -0.005285, 2.400506])
+    rules = ConfidenceRules()
+    verdict = assess(objective, pose, None, rules)
+    assert verdict.covariance.residual_variance > rules.max_residual_px ** 2   # the plain variance: loose
+    assert fit_variance(mutual_matches(objective, pose), 6) < 0.5 * rules.max_residual_px ** 2
+    assert verdict.confident and verdict.reason == "", verdict.reason

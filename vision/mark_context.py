@@ -83,7 +83,7 @@ def is_context_model(scorer: object) -> bool:
 
 @lru_cache(maxsize=1)
 def shipped_context() -> MarkScorer | None:
-    """The shipped context model, read once (None when the file is absent: the hand-set bars decide)."""
+    """The shipped context model, read once (None when the file is absent)."""
     return load(SHIPPED_CONTEXT) if SHIPPED_CONTEXT.is_file() else None
 
 
