@@ -31,7 +31,8 @@ def test_a_spot_on_a_painted_face_and_one_beside_the_body_measure_as_such():
     paint[np.hypot(*np.mgrid[:100, :140][::-1] - points[:2, :, None, None]).min(axis=0) <= 4] = False  # the marks' holes
     silhouette = np.zeros_like(paint)
     silhouette[20:80, 20:80] = True
-    f = context_features(lab, paint, silhouette, points, np.array([4.0, 4.0, 4.0]), np.array([6.0, 6.0, 3.0]),
+    depth = cv2.distanceTransform(silhouette.astype(np.uint8), cv2.DIST_L2, 3)
+    f = context_features(lab, paint, depth, points, np.array([4.0, 4.0, 4.0]), np.array([6.0, 6.0, 3.0]),
                          np.array([0.05, 0.05, 0.05]), np.array([0.5, 0.5, 0.5]), (1.0, 2.0, 3.0), 60.0)
     col = {name: f[:, i] for i, name in enumerate(CONTEXT_FEATURES)}
     assert f.shape == (3, len(CONTEXT_FEATURES))
@@ -41,7 +42,7 @@ def test_a_spot_on_a_painted_face_and_one_beside_the_body_measure_as_such():
     np.testing.assert_allclose(col["log_scale_ratio"], 0.0)                  # one scale
     assert col["log_contrast_ratio"][2] < col["log_contrast_ratio"][0] == col["log_contrast_ratio"][1]
     np.testing.assert_allclose(col["nearest_radii"][:2], np.hypot(20, 20) / 4.0)
-    assert context_features(lab, paint, silhouette, np.zeros((0, 2)), np.zeros(0), np.zeros(0), np.zeros(0),
+    assert context_features(lab, paint, depth, np.zeros((0, 2)), np.zeros(0), np.zeros(0), np.zeros(0),
                             np.zeros(0), (1.0,), 60.0).shape == (0, len(CONTEXT_FEATURES))
 
 

@@ -31,9 +31,8 @@ scale a mark has at the target's distance. So (docs/design.md, "The feature fron
    (:data:`MIN_PAINT_AROUND`). Where marks are 3 px and more that ring is looked for 1-3 px out (past a lens's
    blend), *one* paint must surround the spot (:data:`MIN_SURROUND`) and the marks share a scale
    (:func:`vision.mark_selection.one_scale`); or, opted in, a fitted context model weighs those
-   (:mod:`vision.mark_context`). The scale space is built only around the body (2.8-3.4x faster on a 640 x 480
-   frame), its threshold taken from the ground beside it. The marks of one target lie within its image extent:
-   the densest such cluster is kept.
+   (:mod:`vision.mark_context`). The scale space is built only around the body (2.8-3.4x faster on 640 x 480), its
+   threshold from the ground beside it. The marks of one target lie within its extent: the densest cluster is kept.
 
 Images are OpenCV BGR ``uint8`` (H, W, 3); points ``(u, v)`` pixels with pixel centres at integers.
 """
@@ -392,15 +391,16 @@ def _detect(bgr: np.ndarray, lin: np.ndarray, names: tuple[str, ...], palette: M
             break
     merge_oblique_marks(lin, pts, radius, spot, ring, one_mark)
     sel = np.array(sorted(taken), int)
-    if silhouette is not None and len(sel) and prior.radius_px[1] >= SMALL_SPOT_PX:   # a mark's centre is on the body
-        depth = cv2.distanceTransform(silhouette.astype(np.uint8), cv2.DIST_L2, 3)
+    large = prior.radius_px[1] >= SMALL_SPOT_PX
+    depth = (cv2.distanceTransform(silhouette.astype(np.uint8), cv2.DIST_L2, 3)   # into the body's silhouette
+             if silhouette is not None and len(sel) and large else None)
+    if depth is not None:   # a mark's centre is on the body
         cu, cv = np.rint(pts[sel]).astype(int).T
         ok = (cu >= 0) & (cv >= 0) & (cu < depth.shape[1]) & (cv < depth.shape[0])
         sel = sel[ok][depth[cv[ok], cu[ok]] > INSIDE_SHARE * radius[sel[ok]]]
-    large = prior.radius_px[1] >= SMALL_SPOT_PX
     features = None   # where marks are 3 px and more a context model weighs the spots' context (vision.mark_context)
-    if large and context is not None and paint is not None and silhouette is not None:
-        features = context_features(lab, paint, silhouette, pts[sel], radius[sel], contrast[sel], misfit[sel],
+    if context is not None and paint is not None and depth is not None:   # (depth: at 3 px and more, with a body)
+        features = context_features(lab, paint, depth, pts[sel], radius[sel], contrast[sel], misfit[sel],
                                     conf[sel], RING_GAPS_PX, prior.extent_px or float(max(h, w)))
         keep = context.marks(features) if isinstance(context, MarkScorer) else slice(None)   # "all": every spot
         sel, features = sel[keep], features[keep]

@@ -23,7 +23,6 @@ from __future__ import annotations
 from functools import lru_cache
 from pathlib import Path
 
-import cv2
 import numpy as np
 
 from .body_paint import paint_around
@@ -47,13 +46,14 @@ CONTEXT_FEATURES = (
 SHIPPED_CONTEXT = Path(__file__).with_name("mark_context.json")
 
 
-def context_features(lab: np.ndarray, paint: np.ndarray, silhouette: np.ndarray, points: np.ndarray,
+def context_features(lab: np.ndarray, paint: np.ndarray, depth: np.ndarray, points: np.ndarray,
                      radius: np.ndarray, contrast: np.ndarray, misfit: np.ndarray, confidence: np.ndarray,
                      ring_gaps: tuple[float, ...], extent_px: float) -> np.ndarray:
     """The :data:`CONTEXT_FEATURES` (K, 10) of the spots at ``points`` of ``radius``, ``contrast``, label
     ``misfit`` and ``confidence`` in an image whose CIE Lab is ``lab`` (H, W, 3) float32, the body's paint ``paint``
-    and closed silhouette ``silhouette`` (H, W) bool; the paint ring's share is the best of the rings ``ring_gaps`` px
-    beyond each radius; ``extent_px`` the target's largest extent in pixels."""
+    (H, W) bool and each pixel's depth into the body's closed silhouette ``depth`` (H, W) px (its distance
+    transform); the paint ring's share is the best of the rings ``ring_gaps`` px beyond each radius; ``extent_px``
+    the target's largest extent in pixels."""
     points = np.asarray(points, float).reshape(-1, 2)
     radius, contrast = np.asarray(radius, float), np.asarray(contrast, float)
     if not len(points):
@@ -64,7 +64,6 @@ def context_features(lab: np.ndarray, paint: np.ndarray, silhouette: np.ndarray,
     weight = np.cumsum(contrast[order] ** 2)
     scale = float(radius[order][np.searchsorted(weight, 0.5 * weight[-1])])
     strong = float(np.quantile(contrast, 0.8))
-    depth = cv2.distanceTransform(silhouette.astype(np.uint8), cv2.DIST_L2, 3)
     u = np.clip(np.rint(points[:, 0]).astype(int), 0, depth.shape[1] - 1)
     v = np.clip(np.rint(points[:, 1]).astype(int), 0, depth.shape[0] - 1)
     apart = np.hypot(*(points[:, None, :] - points[None, :, :]).transpose(2, 0, 1))
