@@ -82,55 +82,45 @@ def _recentred(lin: np.ndarray, peaks: np.ndarray, radius: np.ndarray, spot: np.
                ) -> np.ndarray:
     """:func:`coverage_centroids` of spots of :data:`SMALL_SPOT_PX` and more (K, 2): each window re-centred on its
     coverage's centroid, never farther than the spot's radius from its peak, until it moves under 0.05 px or after
-    :data:`CENTROID_STEPS`. All spots take each step together, those whose window has one shape in one array (the
-    same sums, in the same order, as one window at a time: the same positions to the bit)."""
+    :data:`CENTROID_STEPS`. The spots of one radius take each step together, in windows of one shape (the pixels
+    within reach and inside the image weigh, the rest count zero)."""
     h, w = lin.shape[:2]
     centre = peaks.astype(float)
-    reach = radius + 1.5
-    # each spot's coverage once, over a window every re-centred one lies in (the centre stays within the radius of
-    # the peak): a pixel's coverage is its own, wherever the window lies
-    levels, level = np.unique(radius, return_inverse=True)
-    coverage, origin, slot = [], np.zeros((len(peaks), 2), int), np.zeros(len(peaks), int)
-    for n, r in enumerate(levels):
-        at = np.flatnonzero(level == n)
-        margin = int(np.ceil(2 * r + 1.5)) + 2
-        origin[at] = np.floor(peaks[at]).astype(int) - margin
-        slot[at] = np.arange(len(at))
-        xs = np.clip(origin[at, 0, None] + np.arange(2 * margin + 2), 0, w - 1)          # (N, 2 margin + 2)
-        ys = np.clip(origin[at, 1, None] + np.arange(2 * margin + 2), 0, h - 1)
-        window = lin[ys[:, :, None], xs[:, None, :]] - ring[at, None, None, :]
-        coverage.append(mark_coverage(window, (spot[at] - ring[at])[:, None, None, :]))
-    moving = np.arange(len(peaks))
-    for _ in range(CENTROID_STEPS):
-        if not len(moving):
-            break
-        u, v = centre[moving, 0], centre[moving, 1]
-        x0 = np.maximum(np.floor(u - reach[moving]).astype(int), 0)
-        x1 = np.minimum(np.ceil(u + reach[moving]).astype(int) + 1, w)
-        y0 = np.maximum(np.floor(v - reach[moving]).astype(int), 0)
-        y1 = np.minimum(np.ceil(v + reach[moving]).astype(int) + 1, h)
-        shape = ((y1 - y0) * (w + 1) + (x1 - x0)) * len(levels) + level[moving]
-        still = np.zeros(len(moving), bool)
-        for s in np.unique(shape):
-            at = np.flatnonzero(shape == s)
-            i = moving[at]
-            xx = x0[at, None] + np.arange(x1[at[0]] - x0[at[0]])[None, :]                # (N, w)
-            yy = y0[at, None] + np.arange(y1[at[0]] - y0[at[0]])[None, :]                # (N, h)
-            xg, yg = xx[:, None, :], yy[:, :, None]
-            inside = np.hypot(xg - u[at, None, None], yg - v[at, None, None]) <= reach[i, None, None]
-            a = coverage[level[i[0]]][slot[i, None, None], yg - origin[i, 1, None, None],
-                                      xg - origin[i, 0, None, None]] * inside
+    for r in np.unique(radius):
+        at = np.flatnonzero(radius == r)
+        reach = r + 1.5
+        # each spot's coverage once, over a window every re-centred one lies in (the centre stays within the radius
+        # of the peak; a window of `span` from floor(u - reach) ends by u + reach + 2): a pixel's coverage is its own
+        margin = int(np.ceil(2 * r + 1.5)) + 3
+        origin = np.floor(peaks[at]).astype(int) - margin                                  # (N, 2)
+        gx = origin[:, 0, None] + np.arange(2 * margin + 2)                                 # (N, G) columns
+        gy = origin[:, 1, None] + np.arange(2 * margin + 2)                                 # (N, G) rows
+        window = lin[np.clip(gy, 0, h - 1)[:, :, None], np.clip(gx, 0, w - 1)[:, None, :]] - ring[at, None, None, :]
+        coverage = mark_coverage(window, (spot[at] - ring[at])[:, None, None, :])
+        coverage *= ((gy >= 0) & (gy < h))[:, :, None] & ((gx >= 0) & (gx < w))[:, None, :]
+        span = int(np.ceil(2 * reach)) + 2
+        offsets = np.arange(span)
+        moving = np.arange(len(at))
+        for _ in range(CENTROID_STEPS):
+            if not len(moving):
+                break
+            i = at[moving]
+            u, v = centre[i, 0], centre[i, 1]
+            x0, y0 = np.floor(u - reach).astype(int), np.floor(v - reach).astype(int)
+            xg, yg = (x0[:, None] + offsets)[:, None, :], (y0[:, None] + offsets)[:, :, None]   # (N, 1, S), (N, S, 1)
+            inside = np.hypot(xg - u[:, None, None], yg - v[:, None, None]) <= reach
+            a = coverage[moving[:, None, None], yg - origin[moving, 1, None, None],
+                         xg - origin[moving, 0, None, None]] * inside
             total = a.sum(axis=(1, 2))
             found = total > 1e-6
             total = np.where(found, total, 1.0)
             moved = np.stack([(a * xg).sum(axis=(1, 2)) / total, (a * yg).sum(axis=(1, 2)) / total], axis=1)
             offset = moved - peaks[i]
-            moved = peaks[i] + offset * np.minimum(1.0, radius[i] / np.maximum(np.hypot(offset[:, 0], offset[:, 1]),
-                                                                               1e-9))[:, None]
+            moved = peaks[i] + offset * np.minimum(1.0, r / np.maximum(np.hypot(offset[:, 0], offset[:, 1]),
+                                                                       1e-9))[:, None]
             step = np.hypot(*(moved - centre[i]).T)
             centre[i[found]] = moved[found]
-            still[at] = found & (step >= 0.05)
-        moving = moving[still]
+            moving = moving[found & (step >= 0.05)]
     return centre
 
 
