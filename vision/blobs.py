@@ -6,10 +6,11 @@ balance. A hue threshold sees the saturated red body and misses a pale sunlit ye
 *contrast*: a mark is a small spot that differs from the ring around it, in luminance or chroma, at the
 scale a mark has at the target's distance. So (docs/design.md, "The feature front-end"):
 
-1. **Scale space** (:func:`contrast_responses`): the image in an opponent space (CIE L*a*b*: lightness and two
+1. **Scale space** (:mod:`vision.scale_space`): the image in an opponent space (CIE L*a*b*: lightness and two
    chroma axes), blurred at scales sigma_i = r / sqrt(2) for the mark radii r the geometry allows
    (:class:`MarkPrior`); a difference of Gaussians per channel is the scale-normalised Laplacian, whose
-   magnitude over the three channels peaks at a disc's centre and scale.
+   magnitude over the three channels peaks at a disc's centre and scale; built on the image halved where the
+   target is large (:data:`vision.scale_space.HALVE_FROM_EXTENT_PX`), everything after it at full resolution.
 2. **Candidates** (:func:`detect_contrast_marks`): local maxima in position and scale (in position only for marks
    under :data:`SMALL_SPOT_PX`, 3-5 px apart, where a neighbour's response outgrows a weak mark's) above a threshold of
    ``k_sigma`` times the image's own robust spread of the response (the ground's texture and the sensor's
@@ -57,9 +58,9 @@ from .mark_selection import (densest_cluster, merge_oblique_marks, one_mark_betw
 from .spot_colour import label_small_spots, labels_of, ring_colours, spot_misfits
 from .spot_position import SMALL_SPOT_PX, coverage_centroids, round_peaks
 from .spot_label import label_colours
+from .scale_space import (STEPS_PER_OCTAVE, contrast_responses, crop_margin, magnitude, scale_space_image,
+                          scales)
 
-#: Scale steps per octave of the scale space.
-STEPS_PER_OCTAVE = 3
 #: A candidate's response must exceed this many robust spreads (1.4826 MAD) of its level's response.
 K_SIGMA = 6.0
 #: Largest ratio of the Hessian's eigenvalues (a disc seen at 70 deg from its normal is 3:1; an edge is >> 10).
@@ -82,10 +83,6 @@ MAX_LABEL_MISFIT = 0.35
 #: "no lit paint" without it; with it its recall 0.826 -> 0.860 in the reference look, the Pioneer's frames
 #: unchanged: ``bench_photoreal_looks --front-ends contrast --frames 3`` on the telephoto worlds).
 MIN_RELATIVE_BRIGHTNESS = 0.2
-#: Least difference sigma (px) a scale-space level is blurred from the one below by (:func:`contrast_responses`).
-INCREMENTAL_SIGMA = 1.5
-#: Weight of the chroma axes against lightness in the response (CIE Lab units).
-CHROMA_WEIGHT = 1.0
 #: The body's paint is closed over gaps up to this share of the target's extent too (at the paper's scale marks
 #: 3-5 px apart break a face's paint into pieces).
 BODY_GAP = 0.12
@@ -126,9 +123,8 @@ MIN_SURROUND = 0.5
 #: telephoto frames, precision 0.90 -> 0.82; the same veto that kept MIN_PAINT_AROUND), so that robot is not held
 #: out from this choice.
 RING_GAPS_PX = (1.0, 2.0, 3.0)
-#: Least pixels beside the body for the response's spread to be taken there (else over the whole crop), and the
-#: least margin of ground kept around the body (the spread is the ground's texture, not the body's outline).
-MIN_BACKGROUND_PX, MIN_MARGIN_PX = 200, 48
+#: Least pixels beside the body for the response's spread to be taken there (else over the whole crop).
+MIN_BACKGROUND_PX = 200
 #: At most about this many pixels beside the body are sampled for the response's spread (a robust statistic).
 MAX_SPREAD_SAMPLES = 20000
 #: With the body context, where the prior's largest mark radius is under :data:`SMALL_SPOT_PX`, a spot may misfit
@@ -145,51 +141,6 @@ CHANNEL_PEAKS = True
 
 #: sRGB decoding (vision.body_paint), by the names this module's callers use
 _srgb_to_linear, _LINEAR_OF_BYTE = srgb_to_linear, LINEAR_OF_BYTE
-
-
-def scales(prior: MarkPrior) -> np.ndarray:
-    """The blur sigmas of the scale space, pixels: one step below the smallest mark's sigma = r / sqrt(2) to one
-    above the largest (a DoG between levels i and i + 1 is centred between them)."""
-    step = 2 ** (1 / STEPS_PER_OCTAVE)
-    lo = max(0.5, prior.radius_px[0] / np.sqrt(2) / step)
-    hi = max(lo * step ** 2, prior.radius_px[1] / np.sqrt(2) * step)
-    return lo * step ** np.arange(int(np.ceil(np.log(hi / lo) / np.log(step))) + 2)
-
-
-def crop_margin(prior: MarkPrior) -> int:
-    """Pixels of ground kept around the body's box for the scale space: three of the largest blur sigmas, at least
-    :data:`MIN_MARGIN_PX` (a window of the image must keep as much around the body to give the same marks)."""
-    return max(int(np.ceil(3 * scales(prior)[-1])) + 2, MIN_MARGIN_PX)
-
-
-def contrast_responses(lab: np.ndarray, sigmas: np.ndarray) -> np.ndarray:
-    """Difference-of-Gaussian stack of an L*a*b* image (H, W, 3) float32, shape (S - 1, H, W, 3): the
-    scale-normalised Laplacian per channel between the blurs at ``sigmas[i]`` and ``sigmas[i + 1]`` (divided by
-    ``k - 1``)."""
-    # a coarse level blurred from the one before by the difference sigma (Gaussians compose: s_i+1^2 = s_i^2 + d^2),
-    # a kernel 0.6 the size of blurring the image at s_i+1 itself; where d is under INCREMENTAL_SIGMA px a sampled
-    # kernel is no Gaussian, and the image is blurred directly
-    levels = np.empty((len(sigmas), *lab.shape), np.float32)
-    for i, s in enumerate(sigmas):   # each level blurred straight into the stack (no copy)
-        d = float(np.sqrt(s ** 2 - sigmas[i - 1] ** 2)) if i else 0.0
-        if d >= INCREMENTAL_SIGMA:
-            cv2.GaussianBlur(levels[i - 1], (0, 0), d, dst=levels[i])
-        else:
-            cv2.GaussianBlur(lab, (0, 0), float(s), dst=levels[i])
-    k = sigmas[1] / sigmas[0]
-    dog = np.subtract(levels[1:], levels[:-1])
-    dog /= np.float32(k - 1)
-    return dog
-
-
-def _magnitude(dog: np.ndarray) -> np.ndarray:
-    """sqrt(L^2 + w^2 (a^2 + b^2)) of a (..., 3) stack, (...): the same operations, in place."""
-    w = np.float32(CHROMA_WEIGHT)
-    out = np.square(dog[..., 1])
-    out += np.square(dog[..., 2])
-    out *= w * w
-    out += np.square(dog[..., 0])
-    return np.sqrt(out, out=out)
 
 
 @dataclass(frozen=True)
@@ -232,7 +183,7 @@ def detect_contrast_marks(image_bgr: np.ndarray, palette: Mapping[str, tuple[int
     (e.g. a track's), or None (the image is taken as the reference look shows it).
 
     With a body the scale space is built only around it: the box of :func:`body_region` grown by three of the
-    largest blur sigmas, at least :data:`MIN_MARGIN_PX` (no paint in the image: no marks)."""
+    largest blur sigmas, at least :data:`vision.scale_space.MIN_MARGIN_PX` (no paint in the image: no marks)."""
     bgr = to_bgr(image_bgr)
     names = tuple(palette)
     if not names:
@@ -298,6 +249,9 @@ def _detect(bgr: np.ndarray, lin: np.ndarray, names: tuple[str, ...], palette: M
         k_sigma = CANDIDATE_K_SIGMA
     img = bgr.astype(np.float32) / 255.0
     lab = cv2.cvtColor(img, cv2.COLOR_BGR2Lab)
+    full_prior = prior   # the scale space may be built on the image halved (vision.scale_space)
+    space, prior, region = scale_space_image(lab, prior, region)
+    halve = space is not lab
     sigmas = scales(prior)
     level_radius = np.sqrt(sigmas[:-1] * sigmas[1:]) * np.sqrt(2)
     step = 2 ** (1 / STEPS_PER_OCTAVE)
@@ -306,8 +260,8 @@ def _detect(bgr: np.ndarray, lin: np.ndarray, names: tuple[str, ...], palette: M
     # nor its neighbour's (its dilation counts as zero), so the coarsest blurs, the costliest, are left out
     used = int(np.flatnonzero(fits)[-1]) + 1 if fits.any() else 1
     sigmas, level_radius, fits = sigmas[:used + 1], level_radius[:used], fits[:used]
-    dog = contrast_responses(lab, sigmas)
-    mag = _magnitude(dog)                                                # (S - 1, H, W)
+    dog = contrast_responses(space, sigmas)
+    mag = magnitude(dog)                                                 # (S - 1, H, W)
     # threshold per level: robust spread of the response over the image (texture and noise); around a body, over
     # what lies beside it (the ground's texture, as over a whole image, not the marks and edges of the body)
     beside = None if region is None else ~cv2.dilate(region.astype(np.uint8), np.ones((7, 7), np.uint8)).astype(bool)
@@ -350,6 +304,11 @@ def _detect(bgr: np.ndarray, lin: np.ndarray, names: tuple[str, ...], palette: M
         lvl, ys, xs, radius = lvl[on], ys[on], xs[on], radius[on]
     ok, pts = round_peaks(dog, lvl, ys, xs, max_edge_ratio)
     lvl, ys, xs, radius, pts = lvl[ok], ys[ok], xs[ok], radius[ok], pts[ok]
+    at = (lvl, ys, xs)   # the peaks in the scale space; from here on full resolution
+    prior = full_prior
+    if halve:
+        pts, radius = 2 * pts + 0.5, 2 * radius
+        ys, xs = np.clip(np.rint(pts[:, 1]).astype(int), 0, h - 1), np.clip(np.rint(pts[:, 0]).astype(int), 0, w - 1)
     # colours: the spot (finest blur at the centre) and its ring (median around, outside the mark), linear light
     spot = np.array([lin[y, x] if r < 1.5 else cv2.GaussianBlur(lin[max(y - 2, 0):y + 3, max(x - 2, 0):x + 3],
                                                                 (0, 0), 0.5 * r)[min(y, 2), min(x, 2)]
@@ -369,9 +328,10 @@ def _detect(bgr: np.ndarray, lin: np.ndarray, names: tuple[str, ...], palette: M
         max_misfit = MAX_LABEL_MISFIT_ON_BODY if region is not None and prior.radius_px[1] < SMALL_SPOT_PX \
             else MAX_LABEL_MISFIT
     good = misfit <= max_misfit
+    at = tuple(a[good] for a in at)
     lvl, ys, xs, radius, pts, labels, conf, misfit = lvl[good], ys[good], xs[good], radius[good], pts[good], \
         labels[good], conf[good], misfit[good]
-    contrast = mag[lvl, ys, xs] / thresh[lvl]
+    contrast = mag[at] / thresh[lvl]
     spot, ring = spot[good], ring[good]
     pts = coverage_centroids(lin, pts, radius, spot, ring)
     # one detection per place: a stronger peak within its radius (another scale of one spot) wins; an oblique mark's
