@@ -142,12 +142,14 @@ class Cooperation:
             solution = track(previous.with_(pose=start), list(views), problem=problem, options=self.options,
                              seed=np.random.default_rng([self.seed, frame]), lost_mismatch=self.lost_mismatch,
                              hints=extra if len(extra) else None, search_when_lost=False)
+            if not own_last:  # the track starts afresh (a team-mate's or a search's pose): a confirming search
+                st = st.without_anchor()   # in progress no longer confirms the pose it began beside
             if solution.converged:
                 st, solution = self._confirmed(replace(st, search=None), solution, problem, frame, deadline,
                                                generations, clock)
                 return self._keep(st, solution, problem, False, clock())
             if st.search is None:  # lost: search again, with the lost pose as a hint
-                st = replace(st, last=None)
+                st = replace(st.without_anchor(), last=None)
                 problem = problem.with_hints(np.concatenate([problem.hints, solution.pose[None]]))
         if st.search is None:
             optimiser = self._optimiser(problem, generations)
@@ -185,9 +187,12 @@ class Cooperation:
         found = solution_of(search.problem, self.options, run, run.seconds)
         if not (found.converged and found.confident):
             return st, solution
-        if confirms(found.pose, found.covariance, search.anchor):  # the pose tracked then: confident again
+        if search.anchor is not None and confirms(found.pose, found.covariance, search.anchor):
+            # the pose tracked then, and tracked since without a break: confident again
             return st, solution.with_(confident=True, confidence=found.confidence, track_reference=None)
-        moved = pose_difference(solution.pose, search.anchor)  # the target's motion since the search began
+        # the target's motion since the search began, where the track since then is one chain (else none: tracking
+        # from the found pose takes up what the target moved in the meantime)
+        moved = np.zeros(6) if search.anchor is None else pose_difference(solution.pose, search.anchor)
         relocated = track(found.with_(pose=found.pose + moved), list(problem.views), problem=problem,
                           options=self.options,
                           seed=np.random.default_rng([self.seed, frame, 3]), lost_mismatch=self.lost_mismatch,

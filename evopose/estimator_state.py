@@ -77,7 +77,8 @@ class SearchInProgress:
     #: the clock's instant when it started, and when its best first matched closely (or None)
     started: float
     close_at: float | None = None
-    #: a confirming search: the tracked pose at the frame it started (its answer is compared with this)
+    #: a confirming search: the tracked pose at the frame it started (its answer is compared with this); None once that
+    #: track was lost or replaced (:meth:`EstimatorState.without_anchor`)
     anchor: np.ndarray | None = None
     #: where its random stream stands (:func:`random_key`): each slice draws from :func:`generator` of it
     key: dict | None = None
@@ -120,6 +121,14 @@ class EstimatorState:
     last_converged: tuple[int, np.ndarray] | None = None
     motion: tuple[int, np.ndarray] | None = None
     idle: int = 0
+
+    def without_anchor(self) -> "EstimatorState":
+        """The state whose confirming search (if any) no longer stands beside a tracked pose: the track it began
+        beside was lost or replaced, so the pose it finds is not compared with that one (:attr:`SearchInProgress.anchor`
+        None) but tracked onto the newest views (:meth:`evopose.cooperative.Cooperation._confirmed`)."""
+        if self.confirm is None or self.confirm.anchor is None:
+            return self
+        return replace(self, confirm=replace(self.confirm, anchor=None))
 
     @property
     def searching(self) -> bool:
