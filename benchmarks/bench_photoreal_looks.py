@@ -59,11 +59,15 @@ def _scale_of(world_name: str) -> str:
 
 
 def evaluate(directory: Path, look: str, front_ends: tuple[str, ...] = FRONT_ENDS, frames: int | None = None,
-             scorer: Path | None = None) -> dict:
+             scorer: Path | None = None, halve_from: float | None = None) -> dict:
     """Counts ``{front_end: [visible marks, found, detections, correct, right labels]}`` of one dataset developed
     through ``look`` (its first ``frames`` frames; None: all), with the dataset's world name, scale and the seconds
-    per front-end. ``scorer``: a mark scorer file the contrast front-ends take (None: the shipped one)."""
-    from vision import mark_scorer
+    per front-end. ``scorer``: a mark scorer file the contrast front-ends take (None: the shipped one);
+    ``halve_from``: :data:`vision.scale_space.HALVE_FROM_EXTENT_PX` for this worker (None: as shipped)."""
+    from vision import mark_scorer, scale_space
+
+    if halve_from is not None:   # this worker's front-end builds its scale space halved from this extent (px)
+        scale_space.HALVE_FROM_EXTENT_PX = halve_from
     from scenarios.photoreal.develop import develop_exr
     from vision.blobs import SMALL_SPOT_PX, detect_contrast_marks, mark_prior
     from vision.features import colour_ranges, detect_colour_marks, match_to_truth
@@ -175,7 +179,12 @@ def main(argv: list[str] | None = None) -> int:
                         help="report every target model under this one name (datasets of many robots, one each)")
     parser.add_argument("--scorer", type=Path, default=None,
                         help="a mark scorer file (evopose train-scorer) for the contrast front-ends (default: shipped)")
+    parser.add_argument("--halve-from", type=float, default=None, metavar="PX",
+                        help="build the scale space on the image halved for targets this many pixels across or more "
+                             "(default: vision.scale_space.HALVE_FROM_EXTENT_PX; inf: never)")
     args = parser.parse_args(argv)
+    if args.halve_from is not None and not args.halve_from > 0:
+        parser.error(f"--halve-from: a positive extent in pixels (inf: never), got {args.halve_from}")
     if args.scorer is not None and not args.scorer.is_file():
         parser.error(f"--scorer: no file {args.scorer}")
     looks = [lk.strip() for lk in args.looks.split(",") if lk.strip()]
@@ -194,7 +203,7 @@ def main(argv: list[str] | None = None) -> int:
     rows = []
     with ProcessPoolExecutor(max_workers=max(1, args.jobs)) as pool:
         for row in pool.map(evaluate, *zip(*jobs), [front_ends] * len(jobs), [args.frames] * len(jobs),
-                            [args.scorer] * len(jobs)):
+                            [args.scorer] * len(jobs), [args.halve_from] * len(jobs)):
             if args.pool_models:
                 row["model"] = args.pool_models
             rows.append(row)
