@@ -304,7 +304,7 @@ def _detect(bgr: np.ndarray, lin: np.ndarray, names: tuple[str, ...], palette: M
         lvl, ys, xs, radius = lvl[on], ys[on], xs[on], radius[on]
     ok, pts = round_peaks(dog, lvl, ys, xs, max_edge_ratio)
     lvl, ys, xs, radius, pts = lvl[ok], ys[ok], xs[ok], radius[ok], pts[ok]
-    at = (lvl, ys, xs)   # the peaks in the scale space; from here on full resolution
+    in_space = (lvl, ys, xs)   # the peaks in the scale space; from here on full resolution
     prior = full_prior
     if halve:
         pts, radius = 2 * pts + 0.5, 2 * radius
@@ -328,10 +328,10 @@ def _detect(bgr: np.ndarray, lin: np.ndarray, names: tuple[str, ...], palette: M
         max_misfit = MAX_LABEL_MISFIT_ON_BODY if region is not None and prior.radius_px[1] < SMALL_SPOT_PX \
             else MAX_LABEL_MISFIT
     good = misfit <= max_misfit
-    at = tuple(a[good] for a in at)
+    in_space = tuple(a[good] for a in in_space)
     lvl, ys, xs, radius, pts, labels, conf, misfit = lvl[good], ys[good], xs[good], radius[good], pts[good], \
         labels[good], conf[good], misfit[good]
-    contrast = mag[at] / thresh[lvl]
+    contrast = mag[in_space] / thresh[lvl]
     spot, ring = spot[good], ring[good]
     pts = coverage_centroids(lin, pts, radius, spot, ring)
     # one detection per place: a stronger peak within its radius (another scale of one spot) wins; an oblique mark's
