@@ -142,8 +142,10 @@ class Cooperation:
             solution = track(previous.with_(pose=start), list(views), problem=problem, options=self.options,
                              seed=np.random.default_rng([self.seed, frame]), lost_mismatch=self.lost_mismatch,
                              hints=extra if len(extra) else None, search_when_lost=False)
-            if not own_last:  # the track starts afresh (a team-mate's or a search's pose): a confirming search
-                st = st.without_anchor()   # in progress no longer confirms the pose it began beside
+            if not own_last and (st.last is None or not confirms(start, st.last.covariance, st.last.pose)):
+                # the track jumped (a team-mate's or a search's pose elsewhere than the own track, under its
+                # covariance): a confirming search in progress no longer confirms the pose it began beside
+                st = st.without_anchor()
             if solution.converged:
                 st, solution = self._confirmed(replace(st, search=None), solution, problem, frame, deadline,
                                                generations, clock)
