@@ -32,6 +32,8 @@ joined is good.
 
 from __future__ import annotations
 
+from functools import cached_property
+
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Annotated
@@ -201,10 +203,11 @@ class TargetModel:
         pts = self.body.vertices if len(self.body.vertices) else self.mark_points
         return float(np.max(np.ptp(pts, axis=0)))
 
-    @property
+    @cached_property
     def body_colour(self) -> tuple[int, int, int] | None:
         """The colour (BGR) covering most of the body's surface, or None without a body: the paint a camera sees
-        around the marks (the contrast front-end's context, :func:`vision.blobs.detect_contrast_marks`)."""
+        around the marks (the contrast front-end's context, :func:`vision.blobs.detect_contrast_marks`). Computed
+        once per model (the second robot's mesh took ~90 ms, and the front-end's callers read it per image)."""
         if not len(self.body):
             return None
         area: dict[tuple[int, int, int], float] = {}

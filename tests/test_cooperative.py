@@ -263,3 +263,26 @@ def test_a_confirming_search_whose_track_was_replaced_confirms_nothing_of_the_ne
         frame += 1
         st, estimate = coop.estimate(st, views, frame=frame, generations=4)
     assert st.confirm is None and estimate.solution.confident, frame   # the search ended and found this pose
+
+
+def test_a_team_mates_pose_within_the_tracks_covariance_keeps_the_confirming_search_anchored(exp2):
+    # hint mode: a team-mate's pose that fits about as well (the hint margin) is taken as the track's start; where it
+    # lies within the own track's covariance it refines that track, no jump, so the confirming search beside it
+    # keeps its anchor (its answer is compared with the pose and moved by the target's motion); a pose elsewhere
+    # (the right one, half a turn from this wrong track) drops it
+    from evopose.cooperative import Cooperation
+    from evopose.estimator_state import EstimatorState
+
+    scenario, frames = exp2
+    views, _ = _views(frames, ("H1", "H2"))
+    truth = frames["H1"].truth
+    coop = Cooperation(scenario.model.evopose_model(), scenario.bounds(), seed=0)
+    wrong = truth + np.array([0.0, 0.0, 0.0, 0.0, 0.0, np.pi])
+    st, first = coop.estimate(EstimatorState(), views, frame=0, candidates=wrong[None], generations=1)
+    assert not first.solution.confident and st.confirm is not None and st.confirm.anchor is not None
+    near = st.last.pose + np.array([0.001, 0.0, 0.0, 0.0, 0.0, 0.0005])   # 1 mm, 0.03 deg: well within its sigmas
+    assert np.array_equal(coop.start(st, coop.problem(views), near[None], 0.1), near)   # the hint is the start
+    kept, _ = coop.estimate(st, views, frame=1, candidates=near[None], candidate_margin=0.1, generations=1)
+    assert kept.confirm is not None and kept.confirm.anchor is not None
+    jumped, _ = coop.estimate(st, views, frame=1, candidates=truth[None], candidate_margin=0.1, generations=1)
+    assert jumped.confirm is None or jumped.confirm.anchor is None

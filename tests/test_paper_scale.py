@@ -119,3 +119,38 @@ def test_a_hint_that_fits_about_as_well_wins_only_with_the_margin():
     np.testing.assert_allclose(estimator._start(problem, nearby[None], 0.1), nearby, atol=1e-12)
     far = own + np.array([2.0, 2.0, 0.0, 0.0, 0.0, 1.0])  # fits much worse: never taken
     assert np.array_equal(estimator._start(problem, far[None], 0.1), own)
+
+
+def _after_a_wrong_best(typed: bool) -> float:
+    """H1's yaw error (deg) on the 8th frame of exp2-paper-scale, in process, after H2's first feature set carried as
+    its best the truth turned half round (a mistaken or hostile team-mate); ``typed``: the points carry their colours."""
+    from protocol import FeatureSet
+
+    scenario = load_scenario("exp2-paper-scale")
+    cams = {v: SimulatedCamera(scenario, v) for v in ("H1", "H2")}
+    state = VehicleState(Cooperation(scenario.model.evopose_model(), scenario.bounds(), seed=0),
+                         share_policy("features"), "H1", "pioneer")
+    for n in range(8):
+        frames = {v: cams[v].acquire(n, n * 100_000_000) for v in cams}
+        views = {v: own_view(v, frames[v].stamp_ns, frames[v].camera, frames[v].points,
+                             frames[v].labels if typed else None) for v in cams}
+        mate = views["H2"]
+        best = tuple(float(x) for x in frames["H2"].truth + np.array([0, 0, 0, 0, 0, np.pi])) if n == 0 else None
+        sent = FeatureSet(sender="H2", seq=n, stamp_ns=mate.stamp_ns, target="pioneer", camera=mate.camera,
+                          points=mate.points.astype("<f4").tobytes(), best=best,
+                          labels=None if mate.labels is None else mate.labels.astype(np.uint8).tobytes())
+        state, _, event = step(state, FrameInputs(n, views["H1"], (mate_view("H2", sent, None),),
+                                                  truth=frames["H1"].truth))
+        assert not (event.trust.good and abs(angle_difference(event.pose[5], frames["H1"].truth[5])) > 0.1)
+    return float(np.degrees(abs(angle_difference(event.pose[5], frames["H1"].truth[5]))))
+
+
+def test_a_team_mates_wrong_best_pose_is_searched_past_with_the_marks_colours():
+    assert _after_a_wrong_best(typed=True) < 5.0   # measured: right from frame 1, good from frame 2
+
+
+@pytest.mark.xfail(strict=True, reason="known weakness (docs/limits.md): on untyped paper-scale views a team-mate's "
+                                       "wrong best pose, judged with no rival, holds the vehicle unsure in its basin "
+                                       "(measured 178-180 deg off on all 8 frames); never good, never searched past")
+def test_a_team_mates_wrong_best_pose_is_searched_past_without_them():
+    assert _after_a_wrong_best(typed=False) < 5.0
