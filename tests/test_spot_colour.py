@@ -109,3 +109,28 @@ def test_a_saturated_mark_as_lit_as_its_ring_is_its_paint_however_dark_beside_th
     _, misfit, _ = label_colours(np.array([[0.004, 0.004, 0.012]]), ring, pal[:3], scene_bar, bleached=True,
                                  ring_light=light)
     assert not np.isfinite(misfit[0])
+
+
+def test_a_spot_lighter_than_its_ring_is_no_paint_far_darker_than_the_body():
+    # the second robot's black is 1/43 of its yellow's luminance: a black mark is darker than the paint beside it
+    # under any light they share, so a glint on a dark tyre (a grey spot lighter than its ring) is not one
+    husky = {"red": (35, 35, 200), "blue": (200, 90, 20), "violet": (190, 40, 130), "black": (30, 30, 30)}
+    pal = _srgb_to_linear(np.array(list(husky.values()), np.float32) / 255).astype(float)
+    body = _srgb_to_linear(np.array((20, 195, 240), np.float32) / 255).astype(float)
+    glint, tyre = np.array([[0.05, 0.05, 0.055]]), np.array([[0.015, 0.015, 0.016]])
+    labels, misfit, _ = label_colours(glint, tyre, pal)
+    assert list(husky)[labels[0]] == "black" and misfit[0] < 0.35     # any grey fits black at some light
+    labels, misfit, _ = label_colours(glint, tyre, pal, body_linear=body)
+    assert list(husky)[labels[0]] != "black" or not np.isfinite(misfit[0])
+    # a black mark on the yellow paint is darker than its ring: still black
+    mark, paint = np.array([[0.006, 0.007, 0.008]]), np.array([[0.008, 0.107, 0.162]])
+    labels, misfit, _ = label_colours(mark, paint, pal, body_linear=body)
+    assert list(husky)[labels[0]] == "black" and misfit[0] < 0.35
+    # the converse on the Pioneer: its yellow (8.6 times its red's luminance) is no spot darker than its ring
+    pioneer = _srgb_to_linear(np.array(list(PALETTE.values()), np.float32) / 255).astype(float)
+    red = _srgb_to_linear(np.array(BODY, np.float32) / 255).astype(float)
+    dim_yellow, lit_ring = np.array([[0.003, 0.09, 0.11]]), np.array([[0.02, 0.12, 0.14]])
+    labels, misfit, _ = label_colours(dim_yellow, lit_ring, pioneer)
+    assert list(PALETTE)[labels[0]] == "yellow" and np.isfinite(misfit[0])
+    labels, misfit, _ = label_colours(dim_yellow, lit_ring, pioneer, body_linear=red)
+    assert list(PALETTE)[labels[0]] != "yellow" or not np.isfinite(misfit[0])

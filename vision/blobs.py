@@ -22,7 +22,9 @@ scale a mark has at the target's distance. So (docs/design.md, "The feature fron
    brightness ``s``, lies on the line from the background through the observed spot (a blend
    ``p = a c + (1 - a) b``), in linear light; where marks are 3 px and more, a bright spot may also be its colour
    bleached toward white (a tone curve's highlights); a confidence from the margin to the second colour. A spot
-   that fits no paint colour (a body corner, a shadow) is dropped. Spots under :data:`SMALL_SPOT_PX` on a body
+   that fits no paint colour (a body corner, a shadow) is dropped; where marks are 3 px and more, so is a spot lighter
+   than its ring labelled a paint far darker than the body's (a wheel's glint as the second robot's black), and the
+   converse (:func:`vision.spot_label.contrary_lightness`). Spots under :data:`SMALL_SPOT_PX` on a body
    take their label from :mod:`vision.spot_colour` instead, which models the encoder's 4:2:0 chroma, and drop a
    spot whose colour explains too little of it (the body's own shading).
 5. **Context**: the marks lie on the target's body. Given the body's paint colour (the model's), a candidate
@@ -323,7 +325,8 @@ def _detect(bgr: np.ndarray, lin: np.ndarray, names: tuple[str, ...], palette: M
                                 ring.astype(float) @ body_lin / float(body_lin @ body_lin), np.inf))
     labels, misfit, conf = label_colours(spot.astype(float), ring.astype(float), pal.astype(float),
                                          MIN_RELATIVE_BRIGHTNESS * scene,
-                                         bleached=prior.radius_px[1] >= SMALL_SPOT_PX, ring_light=ring_light)
+                                         bleached=prior.radius_px[1] >= SMALL_SPOT_PX, ring_light=ring_light,
+                                         body_linear=None if ring_light is None else body_lin)
     if max_misfit is None:
         max_misfit = MAX_LABEL_MISFIT_ON_BODY if region is not None and prior.radius_px[1] < SMALL_SPOT_PX \
             else MAX_LABEL_MISFIT

@@ -21,6 +21,25 @@ DARK_PAINT = 0.15
 #: held out from it; its seven other looks and the Pioneer's are (BENCHMARKS.md, "Mark front-ends through camera
 #: looks").
 LIT_SHARE = 0.45
+#: Luminance weights of linear BGR (Rec. 709).
+LUMA_BGR = np.array([0.0722, 0.7152, 0.2126])
+#: A paint this many times darker or brighter than the body's (luminance) is so under any light a mark and the
+#: paint beside it share (:func:`contrary_lightness`): a clear day's sun lights a face up to about eight times as
+#: much as its shade does, so a mark's ring half in shade does not reverse it. Set from that ratio, not fitted. Of the
+#: shipped paints it holds the second robot's black (1/43 of its yellow) and the Pioneer's yellow (8.6 times its red).
+LIGHTNESS_ORDER = 8.0
+
+
+def contrary_lightness(spot: np.ndarray, ring: np.ndarray, palette_linear: np.ndarray,
+                       body_linear: np.ndarray) -> np.ndarray:
+    """Which paint colours (C,) each spot (K, 3) cannot be by its lightness against its ring (K, 3), bool (K, C):
+    a paint :data:`LIGHTNESS_ORDER` times darker than the body's (luminance, linear BGR ``palette_linear`` (C, 3),
+    ``body_linear`` (3,)) painted on the body and lit as the paint beside it is darker than that paint under any
+    light and any monotone look, so a spot lighter than its ring is not that paint; a paint that many times brighter,
+    not a spot darker than its ring."""
+    ratio = (palette_linear @ LUMA_BGR) / max(float(body_linear @ LUMA_BGR), 1e-9)     # (C,)
+    lighter = (spot @ LUMA_BGR > ring @ LUMA_BGR)[:, None]                               # (K, 1)
+    return ((ratio <= 1 / LIGHTNESS_ORDER)[None, :] & lighter) | ((ratio >= LIGHTNESS_ORDER)[None, :] & ~lighter)
 
 
 def _unlit(s: np.ndarray, colour: np.ndarray, min_brightness: float, ring_light: np.ndarray | None) -> np.ndarray:
@@ -65,7 +84,8 @@ def bleached_misfit(spot: np.ndarray, ring: np.ndarray, palette_linear: np.ndarr
 
 def label_colours(spot: np.ndarray, ring: np.ndarray, palette_linear: np.ndarray,
                   min_brightness: float = 0.0, bleached: bool = False,
-                  ring_light: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                  ring_light: np.ndarray | None = None,
+                  body_linear: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Which paint colour each spot is (linear BGR): ``spot`` (K, 3) the colour at its centre, ``ring`` (K, 3) its
     surroundings, ``palette_linear`` (C, 3) the model's colours. A spot blends its mark's colour ``s c`` (``s``
     the unknown light on it) with the ring: ``ring + t (spot - ring) = s c`` for some ``t >= 1``. Least squares in
@@ -73,7 +93,8 @@ def label_colours(spot: np.ndarray, ring: np.ndarray, palette_linear: np.ndarray
     the best colour and ``confidence`` (K,) in [0, 1]: 1 - best misfit / second misfit. A fitted colour whose
     brightness (channel sum, linear) is under ``min_brightness`` fits no paint. ``bleached``: a spot brighter than
     its ring may also be its colour bleached toward white (:func:`bleached_misfit`), where marks are large enough
-    that their centre is the mark's own colour."""
+    that their centre is the mark's own colour. ``body_linear`` (3,), the body's paint: a colour whose lightness
+    against the body's contradicts the spot's against its ring fits no paint (:func:`contrary_lightness`)."""
     k, c = len(spot), len(palette_linear)
     if k == 0:
         return np.zeros(0, int), np.zeros(0), np.zeros(0)
@@ -101,6 +122,8 @@ def label_colours(spot: np.ndarray, ring: np.ndarray, palette_linear: np.ndarray
             misfit[_unlit(s, colour, min_brightness, ring_light), j] = np.inf
     if bleached:
         misfit = np.minimum(misfit, bleached_misfit(spot, ring, palette_linear, min_brightness, ring_light))
+    if body_linear is not None:
+        misfit[contrary_lightness(spot, ring, palette_linear, np.asarray(body_linear, float))] = np.inf
     order = np.argsort(misfit, axis=1)
     best = misfit[np.arange(k), order[:, 0]]
     second = misfit[np.arange(k), order[:, 1]] if c > 1 else np.full(k, np.inf)
@@ -109,4 +132,5 @@ def label_colours(spot: np.ndarray, ring: np.ndarray, palette_linear: np.ndarray
     return order[:, 0], best, confidence
 
 
-__all__ = ["BLACK_SLACK", "DARK_PAINT", "MAX_BLEND", "bleached_misfit", "label_colours"]
+__all__ = ["BLACK_SLACK", "DARK_PAINT", "LIGHTNESS_ORDER", "MAX_BLEND", "bleached_misfit", "contrary_lightness",
+           "label_colours"]
