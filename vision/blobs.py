@@ -48,8 +48,8 @@ from dataclasses import dataclass, replace
 import cv2
 import numpy as np
 
-from .body_paint import (LINEAR_OF_BYTE, body_paint, body_region, body_silhouette, paint_around, pixel_box,
-                         srgb_to_linear)
+from .body_paint import (LINEAR_OF_BYTE, blown_pixels, body_paint, body_region, body_silhouette, paint_around,
+                         pixel_box, srgb_to_linear)
 from .camera_look import Look, estimate_look, to_reference_look
 from .features import MarkDetections, to_bgr
 from .mark_prior import MarkPrior, mark_prior
@@ -194,6 +194,7 @@ def detect_contrast_marks(image_bgr: np.ndarray, palette: Mapping[str, tuple[int
         raise ValueError(f"look must be a Look, 'auto' or None, got {look!r}")
     if look == "auto":
         look = estimate_look(bgr, body, prior.extent_px)
+    blown = None if body is None else blown_pixels(bgr)   # as the camera gave it, before the look is undone
     if isinstance(look, Look):
         bgr = to_reference_look(bgr, look)
     if isinstance(scorer, str) and scorer not in ("shipped", "all"):
@@ -216,7 +217,7 @@ def detect_contrast_marks(image_bgr: np.ndarray, palette: Mapping[str, tuple[int
     # the paper's scale the sure paint alone lost the marks on such faces (recall 0.772 -> 0.808, precision 0.606
     # -> 0.569: benchmarks/bench_photoreal_features.py on datasets/photoreal/photoreal-paper-g*, either region),
     # and the spots the gloss adds are the body's shading that MIN_EXPLAINED drops
-    sure, paint = body_paint(lin, body_linear)
+    sure, paint = body_paint(lin, body_linear, blown)   # an over-exposed face touching it too
     silhouette = body_silhouette(paint, prior.radius_px[1], gap)
     region = body_region(silhouette, prior.radius_px[1])
     box = pixel_box(region)

@@ -23,6 +23,8 @@ PAINT_SHARE_CONNECTED = 0.18
 GROUND_SHARE_MARGIN = 0.05
 #: The ground's share is read this far (pixels) and more from the sure paint.
 GROUND_AWAY_PX = 12
+#: An 8-bit channel this high is clipped (the sensor's or the encoder's top, within JPEG's error).
+CLIPPED = 250
 
 
 def srgb_to_linear(x: np.ndarray) -> np.ndarray:
@@ -89,12 +91,25 @@ def connected_share(share: np.ndarray, sure: np.ndarray) -> float:
     return float(min(max(PAINT_SHARE_CONNECTED, np.quantile(below, 0.9) + GROUND_SHARE_MARGIN), PAINT_SHARE))
 
 
-def body_paint(lin: np.ndarray, body_linear: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def blown_pixels(bgr: np.ndarray) -> np.ndarray:
+    """Which pixels of a camera image (BGR uint8 (H, W, 3), as the camera gave it) were lit past its range in some
+    channels and not in all (bool (H, W)): a saturated face over-exposed keeps its paint's darkest channel, while its
+    clipped ones no longer hold its hue (a yellow top face clipped in red and green is lemon, which the paint's
+    dichromatic fit refuses). A pixel clipped in every channel is the light's colour, no paint's."""
+    top, bottom = bgr.max(axis=2), bgr.min(axis=2)
+    return (top >= CLIPPED) & (bottom < CLIPPED)
+
+
+def body_paint(lin: np.ndarray, body_linear: np.ndarray,
+               blown: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """The body's paint, bool (H, W) each: the sure pixels (:func:`paint_pixels`) and those with the glossy faces
-    touching them (:func:`connected_paint`), from one :func:`paint_share`."""
+    touching them (:func:`connected_paint`), from one :func:`paint_share`; with ``blown`` (H, W) bool
+    (:func:`blown_pixels`), the over-exposed pixels touching the sure paint too (hysteresis, as a glossy face)."""
     share = paint_share(lin, body_linear)
     sure = share >= PAINT_SHARE
     weak = share >= connected_share(share, sure)
+    if blown is not None:
+        weak |= blown
     count, patches = cv2.connectedComponents(weak.astype(np.uint8), connectivity=8)
     touching = np.zeros(count, bool)
     touching[np.unique(patches[sure])] = True
@@ -208,6 +223,6 @@ def body_region(silhouette: np.ndarray, mark_px: float) -> np.ndarray:
     return region
 
 
-__all__ = ["LINEAR_OF_BYTE", "PAINT_SHARE", "PAINT_SHARE_CONNECTED", "body_paint", "body_region", "body_silhouette",
+__all__ = ["CLIPPED", "LINEAR_OF_BYTE", "blown_pixels", "PAINT_SHARE", "PAINT_SHARE_CONNECTED", "body_paint", "body_region", "body_silhouette",
            "connected_paint", "dilate_disc", "paint_around", "paint_pixels", "paint_share", "pixel_box",
            "srgb_to_linear"]
