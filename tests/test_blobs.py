@@ -153,25 +153,29 @@ def test_a_glossy_face_is_paint_where_it_touches_the_surely_painted_body_and_gre
     assert not paint[20:].any() and not paint[:, 30:].any()
 
 
-def test_an_over_exposed_face_touching_the_sure_paint_is_paint_and_a_white_glare_is_not():
+def test_an_over_exposed_face_is_paint_and_a_white_glare_or_warm_ground_clipped_in_red_is_not():
     # the second robot's yellow top face through vivid-warm: clipped in red and green (BGR ~ (3, 253, 254)), lemon,
-    # which the yellow paint's dichromatic fit refuses; its side face, not clipped, is surely paint
-    from vision.body_paint import LINEAR_OF_BYTE, blown_pixels, body_paint, srgb_to_linear
+    # which the yellow paint's dichromatic fit refuses; a clipped channel is a lower bound of its light
+    from vision.body_paint import LINEAR_OF_BYTE, body_paint, clipped_channels, paint_share, srgb_to_linear
 
     yellow = srgb_to_linear(np.array([20, 195, 240], np.float32) / 255)
     image = np.full((60, 80, 3), 120, np.uint8)                   # grey ground
     image[10:30, 10:40] = (3, 253, 254)                           # the blown top face
     image[30:45, 10:40] = (8, 150, 190)                           # the side face below it
     image[10:30, 50:70] = (3, 253, 254)                           # a blown yellow patch apart from the body
-    image[30:45, 40:50] = (255, 255, 255)                         # white glare beside the side face
+    image[30:45, 40:50] = (250, 255, 255)                         # white glare beside the side face
+    image[45:55, 10:40] = (215, 232, 255)                         # warm sunlit ground clipped in red, below it
     lin = LINEAR_OF_BYTE[image]
     sure, paint = body_paint(lin, yellow)
-    assert sure[35, 20] and not paint[20, 20]                     # without: the top face is no paint
-    blown = blown_pixels(image)
-    assert blown[20, 20] and not blown[35, 45] and not blown[5, 5]
-    sure, paint = body_paint(lin, yellow, blown)
-    assert paint[10:45, 10:40].all()                              # with: the whole body
-    assert not paint[10:30, 50:70].any() and not paint[35, 45] and not paint[5, 5]
+    assert sure[35, 20] and not paint[20, 20]                     # the top face as if unclipped: no paint
+    sure, paint = body_paint(lin, yellow, clipped_channels(image))
+    assert sure[20, 20] and sure[20, 60] and paint[10:45, 10:40].all()   # the face is the paint's, sure
+    assert not paint[35, 45] and not paint[50, 20] and not paint[5, 5]
+    # the Pioneer's red (equal green and blue) lit past the exposure in red alone is still its paint
+    red = srgb_to_linear(np.array([40, 40, 150], np.float32) / 255)
+    sunlit = np.array([[[60, 62, 255], [120, 125, 255], [200, 210, 255]]], np.uint8)
+    share = paint_share(LINEAR_OF_BYTE[sunlit], red, clipped_channels(sunlit))[0]
+    assert share[0] > 0.9 and share[1] > 0.5 and 0 <= share[2] < 0.18   # the last: a pink glare
 
 
 def test_a_mark_on_a_face_is_ringed_by_paint_and_a_spot_on_or_beside_the_outline_is_not():

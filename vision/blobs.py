@@ -48,7 +48,7 @@ from dataclasses import dataclass, replace
 import cv2
 import numpy as np
 
-from .body_paint import (LINEAR_OF_BYTE, blown_pixels, body_paint, body_region, body_silhouette, paint_around,
+from .body_paint import (LINEAR_OF_BYTE, body_paint, body_region, body_silhouette, clipped_channels, paint_around,
                          pixel_box, srgb_to_linear)
 from .camera_look import Look, estimate_look, to_reference_look
 from .features import MarkDetections, to_bgr
@@ -194,10 +194,9 @@ def detect_contrast_marks(image_bgr: np.ndarray, palette: Mapping[str, tuple[int
         raise ValueError(f"look must be a Look, 'auto' or None, got {look!r}")
     if look == "auto":
         look = estimate_look(bgr, body, prior.extent_px)
-    # where marks are 3 px and more, a face lit past the exposure is paint too (as the camera gave it, before the look
-    # is undone); at the paper's scale it added the warm ground's clipped pixels (the Pioneer through vivid-warm,
-    # precision 0.873 -> 0.809 on three worlds) and there is no mark's paint ring to save
-    blown = blown_pixels(bgr) if body is not None and prior.radius_px[1] >= SMALL_SPOT_PX else None
+    # a channel the camera clipped is a lower bound of the light (vision.body_paint: a face lit past the exposure
+    # keeps its paint), read as the camera gave it, before the look is undone
+    clipped = clipped_channels(bgr) if body is not None else None
     if isinstance(look, Look):
         bgr = to_reference_look(bgr, look)
     if isinstance(scorer, str) and scorer not in ("shipped", "all"):
@@ -220,7 +219,7 @@ def detect_contrast_marks(image_bgr: np.ndarray, palette: Mapping[str, tuple[int
     # the paper's scale the sure paint alone lost the marks on such faces (recall 0.772 -> 0.808, precision 0.606
     # -> 0.569: benchmarks/bench_photoreal_features.py on datasets/photoreal/photoreal-paper-g*, either region),
     # and the spots the gloss adds are the body's shading that MIN_EXPLAINED drops
-    sure, paint = body_paint(lin, body_linear, blown)   # an over-exposed face touching it too
+    sure, paint = body_paint(lin, body_linear, clipped)   # a channel the camera clipped: a lower bound
     silhouette = body_silhouette(paint, prior.radius_px[1], gap)
     region = body_region(silhouette, prior.radius_px[1])
     box = pixel_box(region)

@@ -1,9 +1,10 @@
 """The target's body in a camera image: where its marks can be (docs/design.md, "The feature front-end").
 
 The marks lie on the body's paint. A pixel shows that paint under any light when the dichromatic reflection model
-fits it (:func:`paint_pixels`); a glossy face whose paint carries less of its light is paint where it touches the
-surely painted pixels (:func:`connected_paint`); the region a mark may lie in is that paint closed over the marks'
-holes and notches (:func:`body_region`). Images are linear-light BGR float32 (H, W, 3).
+fits it (:func:`paint_pixels`; a channel the camera clipped only bounds the fit, :func:`censored_share`); a glossy
+face whose paint carries less of its light is paint where it touches the surely painted pixels
+(:func:`connected_paint`); the region a mark may lie in is that paint closed over the marks' holes and notches
+(:func:`body_region`). Images are linear-light BGR float32 (H, W, 3).
 """
 
 from __future__ import annotations
@@ -36,12 +37,65 @@ def srgb_to_linear(x: np.ndarray) -> np.ndarray:
 LINEAR_OF_BYTE = srgb_to_linear(np.arange(256, dtype=np.float32) / np.float32(255.0))
 
 
-def paint_share(lin: np.ndarray, body_linear: np.ndarray) -> np.ndarray:
+def clipped_channels(bgr: np.ndarray) -> np.ndarray:
+    """Which channels of a camera image (BGR uint8 (H, W, 3), as the camera gave it) were lit past its range (bool
+    (H, W, 3)): :data:`CLIPPED` and up. Such a channel is a lower bound of its light, not its value: a saturated face
+    over-exposed keeps its hue only in its other channels (a yellow face clipped in red and green is lemon)."""
+    return np.asarray(bgr) >= CLIPPED
+
+
+def censored_share(lin: np.ndarray, clipped: np.ndarray, body_linear: np.ndarray) -> np.ndarray:
+    """:func:`paint_share` of pixels (N, 3) linear BGR some of whose channels were clipped (``clipped`` (N, 3) bool,
+    at least one channel not): ``p = a c + b w``, ``a >= 0``, ``b`` (at least minus the tolerance), fitted within
+    :data:`PAINT_RESIDUAL` on the channels not clipped and at least as bright as each clipped one (the light was more
+    than the sensor held), with the least paint ``a`` consistent with both (the least share: a blown white glare is
+    not paint); -1 where none is (float32 (N,))."""
+    c = np.asarray(body_linear, np.float64)
+    p = np.asarray(lin, np.float64)
+    clipped = np.asarray(clipped, bool)
+    share = np.full(len(p), -1.0)
+    tol = PAINT_RESIDUAL * np.linalg.norm(p, axis=1) + PAINT_NOISE                   # (N,)
+    for pattern in {tuple(m) for m in clipped.tolist()}:
+        m = np.array(pattern)
+        if m.all() or not m.any():
+            continue
+        at = np.flatnonzero((clipped == m).all(axis=1))
+        q, t = p[at], tol[at]
+        free, over = np.flatnonzero(~m), np.flatnonzero(m)
+        mq, mc = q[:, free].mean(axis=1), float(c[free].mean())   # b = mq - a mc fits the free channels' mean
+        lo, hi = np.zeros(len(at)), (mq + t) / max(mc, 1e-12)   # a >= 0; b >= -t
+        ok = np.ones(len(at), bool)
+        for j in over:                          # a c_j + b >= p_j - t
+            slope, need = c[j] - mc, q[:, j] - mq - t
+            if slope > 1e-9:
+                lo = np.maximum(lo, need / slope)
+            elif slope < -1e-9:
+                hi = np.minimum(hi, need / slope)
+            else:
+                ok &= need <= 0
+        if len(free) == 2:                      # the two free channels' residual, |d - a dc| / sqrt(2) <= t
+            i, k = free
+            d, dc = q[:, i] - q[:, k], c[i] - c[k]
+            if abs(dc) > 1e-9:
+                ends = np.sort(np.stack([(d - np.sqrt(2) * t) / dc, (d + np.sqrt(2) * t) / dc]), axis=0)
+                lo, hi = np.maximum(lo, ends[0]), np.minimum(hi, ends[1])
+            else:
+                ok &= np.abs(d) <= np.sqrt(2) * t
+        ok &= lo <= hi
+        a = lo
+        b = np.maximum(mq - a * mc, 0.0)
+        paint = a * c.sum()
+        share[at] = np.where(ok & (a > 0), paint / np.maximum(paint + 3 * b, 1e-9), np.where(ok, 0.0, -1.0))
+    return share.astype(np.float32)
+
+
+def paint_share(lin: np.ndarray, body_linear: np.ndarray, clipped: np.ndarray | None = None) -> np.ndarray:
     """The share of each pixel's light the body's paint carries (float32 (H, W)), where the pixel shows that paint
     under any light, else -1: the dichromatic reflection model, a pixel ``p = a c + b w`` of the paint's colour
     ``c`` (the body lit by the sun, or only by the sky in a shadow) and the light's own colour ``w`` (neutral in a
     white-balanced image: the gloss reflecting the sky), ``a, b >= 0``, fitted within :data:`PAINT_RESIDUAL` of the
-    pixel (grey ground fits ``w`` alone, share ~0; the marks' hues fit neither, -1)."""
+    pixel (grey ground fits ``w`` alone, share ~0; the marks' hues fit neither, -1). ``clipped`` (H, W, 3) bool:
+    the channels the camera clipped (:func:`clipped_channels`), whose pixels are fitted by :func:`censored_share`."""
     c = body_linear.astype(np.float32)
     basis = np.stack([c, np.ones(3, np.float32)], axis=1)                       # (3, 2): [c, w]
     coef = lin @ np.linalg.pinv(basis).T.astype(np.float32)                       # (H, W, 2)
@@ -62,7 +116,12 @@ def paint_share(lin: np.ndarray, body_linear: np.ndarray) -> np.ndarray:
     paint = a * float(c.sum())
     share = paint / np.maximum(paint + 3 * b, 1e-9)
     fits = (a > 0) & (residual <= PAINT_RESIDUAL * norm + PAINT_NOISE) & (norm > 0.005)
-    return np.where(fits, share, np.float32(-1)).astype(np.float32)
+    share = np.where(fits, share, np.float32(-1)).astype(np.float32)
+    if clipped is not None:
+        some = clipped.any(axis=2) & ~clipped.all(axis=2)
+        if some.any():
+            share[some] = censored_share(lin[some], clipped[some], c)
+    return share
 
 
 def paint_pixels(lin: np.ndarray, body_linear: np.ndarray, min_share: float = PAINT_SHARE) -> np.ndarray:
@@ -91,25 +150,14 @@ def connected_share(share: np.ndarray, sure: np.ndarray) -> float:
     return float(min(max(PAINT_SHARE_CONNECTED, np.quantile(below, 0.9) + GROUND_SHARE_MARGIN), PAINT_SHARE))
 
 
-def blown_pixels(bgr: np.ndarray) -> np.ndarray:
-    """Which pixels of a camera image (BGR uint8 (H, W, 3), as the camera gave it) were lit past its range in some
-    channels and not in all (bool (H, W)): a saturated face over-exposed keeps its paint's darkest channel, while its
-    clipped ones no longer hold its hue (a yellow top face clipped in red and green is lemon, which the paint's
-    dichromatic fit refuses). A pixel clipped in every channel is the light's colour, no paint's."""
-    top, bottom = bgr.max(axis=2), bgr.min(axis=2)
-    return (top >= CLIPPED) & (bottom < CLIPPED)
-
-
 def body_paint(lin: np.ndarray, body_linear: np.ndarray,
-               blown: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+               clipped: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """The body's paint, bool (H, W) each: the sure pixels (:func:`paint_pixels`) and those with the glossy faces
-    touching them (:func:`connected_paint`), from one :func:`paint_share`; with ``blown`` (H, W) bool
-    (:func:`blown_pixels`), the over-exposed pixels touching the sure paint too (hysteresis, as a glossy face)."""
-    share = paint_share(lin, body_linear)
+    touching them (:func:`connected_paint`), from one :func:`paint_share` (``clipped``: its channels the camera
+    clipped, (H, W, 3) bool)."""
+    share = paint_share(lin, body_linear, clipped)
     sure = share >= PAINT_SHARE
     weak = share >= connected_share(share, sure)
-    if blown is not None:
-        weak |= blown
     count, patches = cv2.connectedComponents(weak.astype(np.uint8), connectivity=8)
     touching = np.zeros(count, bool)
     touching[np.unique(patches[sure])] = True
@@ -223,6 +271,6 @@ def body_region(silhouette: np.ndarray, mark_px: float) -> np.ndarray:
     return region
 
 
-__all__ = ["CLIPPED", "LINEAR_OF_BYTE", "blown_pixels", "PAINT_SHARE", "PAINT_SHARE_CONNECTED", "body_paint", "body_region", "body_silhouette",
+__all__ = ["CLIPPED", "LINEAR_OF_BYTE", "censored_share", "clipped_channels", "PAINT_SHARE", "PAINT_SHARE_CONNECTED", "body_paint", "body_region", "body_silhouette",
            "connected_paint", "dilate_disc", "paint_around", "paint_pixels", "paint_share", "pixel_box",
            "srgb_to_linear"]
