@@ -271,6 +271,6 @@ def body_region(silhouette: np.ndarray, mark_px: float) -> np.ndarray:
     return region
 
 
-__all__ = ["CLIPPED", "LINEAR_OF_BYTE", "censored_share", "clipped_channels", "PAINT_SHARE", "PAINT_SHARE_CONNECTED", "body_paint", "body_region", "body_silhouette",
-           "connected_paint", "dilate_disc", "paint_around", "paint_pixels", "paint_share", "pixel_box",
-           "srgb_to_linear"]
+__all__ = ["CLIPPED", "LINEAR_OF_BYTE", "PAINT_SHARE", "PAINT_SHARE_CONNECTED", "body_paint", "body_region",
+           "body_silhouette", "censored_share", "clipped_channels", "connected_paint", "dilate_disc", "paint_around",
+           "paint_pixels", "paint_share", "pixel_box", "srgb_to_linear"]
