@@ -55,11 +55,12 @@ def censored_share(lin: np.ndarray, clipped: np.ndarray, body_linear: np.ndarray
     clipped = np.asarray(clipped, bool)
     share = np.full(len(p), -1.0)
     tol = PAINT_RESIDUAL * np.linalg.norm(p, axis=1) + PAINT_NOISE                   # (N,)
-    for pattern in {tuple(m) for m in clipped.tolist()}:
-        m = np.array(pattern)
+    code = clipped.astype(np.uint8) @ np.array([1, 2, 4], np.uint8)                  # (N,) which channels, as bits
+    for pattern in np.unique(code).tolist():
+        m = (pattern >> np.arange(3)) & 1 == 1
         if m.all() or not m.any():
             continue
-        at = np.flatnonzero((clipped == m).all(axis=1))
+        at = np.flatnonzero(code == pattern)
         q, t = p[at], tol[at]
         free, over = np.flatnonzero(~m), np.flatnonzero(m)
         mq, mc = q[:, free].mean(axis=1), float(c[free].mean())   # b = mq - a mc fits the free channels' mean
@@ -117,8 +118,11 @@ def paint_share(lin: np.ndarray, body_linear: np.ndarray, clipped: np.ndarray | 
     share = paint / np.maximum(paint + 3 * b, 1e-9)
     fits = (a > 0) & (residual <= PAINT_RESIDUAL * norm + PAINT_NOISE) & (norm > 0.005)
     share = np.where(fits, share, np.float32(-1)).astype(np.float32)
-    if clipped is not None:
-        some = clipped.any(axis=2) & ~clipped.all(axis=2)
+    if clipped is not None and clipped.any():
+        planes = clipped.view(np.uint8)                # the clipped channels per pixel, summed plane by plane (a
+        count = planes[..., 0] + planes[..., 1]        # reduction over the short last axis costs ten times more)
+        count += planes[..., 2]
+        some = (count > 0) & (count < 3)
         if some.any():
             share[some] = censored_share(lin[some], clipped[some], c)
     return share
