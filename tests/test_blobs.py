@@ -485,3 +485,19 @@ def test_a_large_spots_recentring_is_each_spots_own_also_at_the_image_border():
     np.testing.assert_allclose(together, alone, atol=1e-9)
     # the whole discs are found (a disc the border cuts: the centre of its visible part)
     assert np.all(np.hypot(*(together - centres)[3:].T) < 0.1), together - centres
+
+
+def test_a_mark_on_an_over_exposed_face_is_found_through_the_front_end():
+    # the wiring of vision.body_paint.censored_share into detect_contrast_marks: a red mark on a yellow top face
+    # clipped in red and green (lemon, as the second robot's through vivid-warm) is ringed by paint and found
+    husky = {"red": (35, 35, 200), "blue": (200, 90, 20), "violet": (190, 40, 130), "black": (30, 30, 30)}
+    s = 8
+    big = np.zeros((120 * s, 160 * s, 3), np.float32)
+    big[:] = (118, 120, 124)                                              # grey ground
+    cv2.rectangle(big, (40 * s, 30 * s), (120 * s, 60 * s), (3, 253, 254), -1)    # the blown top face
+    cv2.rectangle(big, (40 * s, 60 * s), (120 * s, 90 * s), (8, 150, 190), -1)    # its side face in the sun
+    cv2.circle(big, (80 * s, 45 * s), 6 * s, (20, 25, 150), -1)                  # a red mark on the top face
+    image = cv2.resize(big, (160, 120), interpolation=cv2.INTER_AREA).astype(np.uint8)
+    found = detect_contrast_marks(image, husky, MarkPrior((4.0, 8.0)), body=(20, 195, 240), look=None)
+    pairs = match_to_truth(found.points, np.array([[79.5, 44.5]]), 3.0)[0]
+    assert len(pairs) == 1 and found.colours()[pairs[0][0]] == "red"

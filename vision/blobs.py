@@ -334,7 +334,7 @@ def _detect(bgr: np.ndarray, lin: np.ndarray, names: tuple[str, ...], palette: M
     labels, misfit, conf = label_colours(spot.astype(float), ring.astype(float), pal.astype(float),
                                          MIN_RELATIVE_BRIGHTNESS * scene,
                                          bleached=prior.radius_px[1] >= SMALL_SPOT_PX, ring_light=ring_light,
-                                         body_linear=None if ring_light is None else body_lin)
+                                         body_linear=body_lin if prior.radius_px[1] >= SMALL_SPOT_PX else None)
     if max_misfit is None:
         max_misfit = MAX_LABEL_MISFIT_ON_BODY if region is not None and prior.radius_px[1] < SMALL_SPOT_PX \
             else MAX_LABEL_MISFIT

@@ -23,7 +23,7 @@ import numpy as np
 
 from evopose import Camera
 
-from .body_paint import LINEAR_OF_BYTE, body_paint, pixel_box, srgb_to_linear
+from .body_paint import LINEAR_OF_BYTE, body_paint, clipped_channels, pixel_box, srgb_to_linear
 from .camera_look import Look, to_reference_look
 from .features import to_bgr
 
@@ -79,8 +79,9 @@ def locate_body(image_bgr: np.ndarray, body: tuple[int, int, int], look: Look | 
     paint."""
     bgr = to_bgr(image_bgr)
     small = cv2.resize(bgr, (bgr.shape[1] // 2, bgr.shape[0] // 2), interpolation=cv2.INTER_AREA)
+    clipped = clipped_channels(small)   # as the camera gave it (vision.blobs.detect_contrast_marks reads it so too)
     small = to_reference_look(small, look) if isinstance(look, Look) else small
-    _, paint = body_paint(LINEAR_OF_BYTE[small], srgb_to_linear(np.array(body, np.float32) / 255.0))
+    _, paint = body_paint(LINEAR_OF_BYTE[small], srgb_to_linear(np.array(body, np.float32) / 255.0), clipped)
     box = pixel_box(cv2.morphologyEx(paint.astype(np.uint8), cv2.MORPH_OPEN, np.ones((2, 2), np.uint8)))
     return None if box is None else (2 * box[0], 2 * box[1] + 2, 2 * box[2], 2 * box[3] + 2)
 
