@@ -9,6 +9,8 @@ face whose paint carries less of its light is paint where it touches the surely 
 
 from __future__ import annotations
 
+from functools import lru_cache
+
 import cv2
 import numpy as np
 
@@ -180,17 +182,30 @@ def paint_around(paint: np.ndarray, points: np.ndarray, radius: np.ndarray, gap:
     reach = np.ceil(radius + gap + 1).astype(int)
     for n in np.unique(reach):   # the points whose window has one size together
         at = np.flatnonzero(reach == n)
-        u, v = points[at, 0, None, None], points[at, 1, None, None]
+        inner = radius[at] + gap
+        yy, xx = _ring_offsets(int(n), float(inner.min()), float(inner.max()) + 1)     # (M,) each
+        u, v = points[at, 0, None], points[at, 1, None]
         cu, cv = np.rint(u).astype(int), np.rint(v).astype(int)
-        yy, xx = np.mgrid[-n:n + 1, -n:n + 1]
-        d = np.hypot(xx + cu - u, yy + cv - v)                                       # (N, 2n + 1, 2n + 1)
-        inner = radius[at, None, None] + gap
-        ring = (d >= inner) & (d <= inner + 1)
+        d = np.hypot(xx + cu - u, yy + cv - v)                                           # (N, M)
+        ring = (d >= inner[:, None]) & (d <= inner[:, None] + 1)
         ys, xs = yy + cv, xx + cu
         inside = ring & (ys >= 0) & (ys < h) & (xs >= 0) & (xs < w)
         painted = inside & (paint[np.clip(ys, 0, h - 1), np.clip(xs, 0, w - 1)] != 0)
-        share[at] = np.count_nonzero(painted, axis=(1, 2)) / np.maximum(np.count_nonzero(ring, axis=(1, 2)), 1)
+        share[at] = np.count_nonzero(painted, axis=1) / np.maximum(np.count_nonzero(ring, axis=1), 1)
     return share
+
+
+@lru_cache(maxsize=256)
+def _ring_offsets(n: int, inner: float, outer: float) -> tuple[np.ndarray, np.ndarray]:
+    """The offsets (rows, columns (M,) each) within ``-n..n`` of a point's nearest pixel that can lie ``inner`` to
+    ``outer`` px from the point (within half a pixel of that pixel along each axis): any ring
+    :func:`paint_around` counts lies among them."""
+    a = np.arange(-n, n + 1, dtype=float)
+    near = np.maximum(np.abs(a) - 0.5, 0.0)
+    far = np.abs(a) + 0.5
+    least, most = np.hypot(near[:, None], near[None, :]), np.hypot(far[:, None], far[None, :])
+    rows, cols = np.nonzero((least <= outer + 1e-6) & (most >= inner - 1e-6))
+    return rows - n, cols - n
 
 
 def pixel_box(mask: np.ndarray) -> tuple[int, int, int, int] | None:
