@@ -55,6 +55,7 @@ from .features import MarkDetections, to_bgr
 from .mark_prior import MarkPrior, mark_prior
 from .mark_context import context_features, is_context_model
 from .mark_scorer import MarkScorer, candidate_features, feature_names, shipped
+from .order_stats import median
 from .mark_selection import (densest_cluster, merge_oblique_marks, one_mark_between, one_per_disc, one_scale,
                              same_spots, surrounded)
 from .spot_colour import label_small_spots, labels_of, ring_colours, spot_misfits
@@ -280,8 +281,8 @@ def _detect(bgr: np.ndarray, lin: np.ndarray, names: tuple[str, ...], palette: M
         sample = mag.reshape(len(mag), -1)[:, at[::max(1, len(at) // MAX_SPREAD_SAMPLES)]]
     else:
         sample = mag[:, ::3, ::3].reshape(len(mag), -1)
-    med = np.median(sample, axis=1)
-    spread = 1.4826 * np.median(np.abs(sample - med[:, None]), axis=1)
+    med = median(sample, axis=1)
+    spread = 1.4826 * median(np.abs(sample - med[:, None]), axis=1)
     thresh = med + k_sigma * np.maximum(spread, 1e-3)
     # local maxima in position and scale among the levels whose scale fits a mark (a disc of radius r peaks at
     # sigma = r / sqrt(2); a dog level's scale lies between its two blurs): at the largest fitting level a peak may
@@ -325,7 +326,7 @@ def _detect(bgr: np.ndarray, lin: np.ndarray, names: tuple[str, ...], palette: M
                      for y, x, r in zip(ys.tolist(), xs.tolist(), radius.tolist())]).reshape(-1, 3)
     ring = ring_colours(lin, np.stack([xs, ys], axis=1).astype(float), radius)
     pal = _srgb_to_linear(np.array([palette[n] for n in names], np.float32) / 255.0)
-    scene = float(np.median(lin[::4, ::4].sum(axis=2)))
+    scene = float(median(lin[::4, ::4].sum(axis=2).reshape(-1)))
     # the light on each ring's paint, where the ring is lit itself (a dark spot in a dark ring stays no paint)
     body_lin = None if body is None else _LINEAR_OF_BYTE[np.asarray(body, np.uint8)].astype(float)
     ring_light = (None if body_lin is None or prior.radius_px[1] < SMALL_SPOT_PX

@@ -37,6 +37,7 @@ import numpy as np
 from geometry import angle_difference, wrap_angle
 
 from .body_paint import pixel_box
+from .order_stats import median
 
 #: Pixels whose luma is outside this range carry no chroma worth measuring (black, or clipped).
 LUMA_RANGE = (24.0, 245.0)
@@ -114,14 +115,14 @@ def neutral_chroma(q: np.ndarray, usable: np.ndarray) -> tuple[np.ndarray, float
         return np.array(REFERENCE_NEUTRAL, np.float32), 0.02
     # the two chroma axes as contiguous columns: a median per axis is the (N, 2) median's, in less time
     qa, qb = q[..., 0].reshape(-1)[at], q[..., 1].reshape(-1)[at]
-    n = np.array([np.median(qa), np.median(qb)], q.dtype)
+    n = np.array([median(qa), median(qb)], q.dtype)
     for _ in range(3):
         d = np.hypot(qa - n[0], qb - n[1])
         near = d <= np.quantile(d, NEUTRAL_SHARE)
-        n = np.array([np.median(qa[near]), np.median(qb[near])], q.dtype)
+        n = np.array([median(qa[near]), median(qb[near])], q.dtype)
     d = np.hypot(qa - n[0], qb - n[1])
     near = d[d <= np.quantile(d, NEUTRAL_SHARE)]
-    return n.astype(np.float32), float(max(1.4826 * np.median(np.abs(near - np.median(near))), 0.005))
+    return n.astype(np.float32), float(max(1.4826 * median(np.abs(near - median(near))), 0.005))
 
 
 def body_chroma(q: np.ndarray, usable: np.ndarray, neutral: np.ndarray, spread: float, paint_q: np.ndarray,
@@ -162,8 +163,8 @@ def body_chroma(q: np.ndarray, usable: np.ndarray, neutral: np.ndarray, spread: 
     top = np.quantile(r_patch, 0.9)
     if top < max(MIN_BODY_CHROMA, MIN_BODY_SPREADS * spread):
         return None, 0
-    upper = rel[patch][r_patch >= np.median(r_patch)]
-    direction = np.median(upper, axis=0)
+    upper = rel[patch][r_patch >= median(r_patch)]
+    direction = median(upper, axis=0)
     return direction / max(float(np.hypot(*direction)), 1e-9) * top, best_n
 
 
