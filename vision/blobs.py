@@ -305,7 +305,7 @@ def _detect(bgr: np.ndarray, lin: np.ndarray, names: tuple[str, ...], palette: M
                 chd = np.stack([cv2.dilate(m, kernel) for m in ch])
                 peak |= (ch >= chd) & (ch > 0) & (mag > thresh[:, None, None]) & fits[:, None, None]
     peak[:, :2, :] = peak[:, -2:, :] = peak[:, :, :2] = peak[:, :, -2:] = False
-    lvl, ys, xs = np.nonzero(peak)
+    lvl, ys, xs = np.unravel_index(np.flatnonzero(peak), peak.shape)   # (np.nonzero of a 3-D mask: 15x the time)
     radius = level_radius[lvl]
     if len(lvl) > 4 * max_marks:   # strongest first
         top = np.argsort(-mag[lvl, ys, xs])[:4 * max_marks]
