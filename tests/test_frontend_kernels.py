@@ -61,3 +61,18 @@ def test_paint_rings_count_the_paint_pixels_of_each_ring_as_one_ring_at_a_time_d
             inside = (ys >= 0) & (ys < 60) & (xs >= 0) & (xs < 80)
             expected.append(np.count_nonzero(paint[ys[inside], xs[inside]]) / max(int(ring.sum()), 1))
         assert np.array_equal(paint_around(paint, points, radius, gap), np.array(expected))
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_a_median_by_one_sort_is_numpys_median_to_the_bit(dtype):
+    from vision.order_stats import median
+    rng = np.random.default_rng(10)
+    for _ in range(300):
+        shape = (int(rng.integers(1, 9)), int(rng.integers(1, 400)))
+        a = (rng.standard_normal(shape) ** 3).astype(dtype)
+        if rng.random() < 0.3:   # ties
+            a = np.round(a, 1).astype(dtype)
+        for axis in (0, 1, -1):
+            got, want = median(a, axis=axis), np.median(a, axis=axis)
+            assert got.dtype == want.dtype and np.array_equal(got, want)
+        assert median(a.reshape(-1)) == np.median(a)
