@@ -56,11 +56,16 @@ FOUND = (
     "29-67 %. Seed 101 reads 67/70/67 % and 54/54/54 % for the same groups; both seeds pooled 58/60/57 % and "
     "68/66/66 %. (4) Tried on seed 101, not kept: the fit's effective parameters tr(I_c I_o^-1) as the noise's "
     "lost degrees of freedom (stays ~6: at the low fitted noise the responsibilities are 0 or 1), Student's t "
-    "(nu / (nu - 2): H1 33 -> 23 %, H1+H2 19 -> 19 %), a prior on the noise at POINT_NOISE_PX with 4-8 degrees of "
-    "freedom (H1 33 -> 17-23 %, H1+H2 19 -> 19-21 %, telephoto 28 -> 24 %; it would also widen the sub-pixel "
-    "covariances of camera frames), EM started from a wider noise (the same fixed point). The wrong-basin confident "
-    "answers behind the section's 96.5 % precision are imprecise already and mostly ones where eq. (1) prefers the "
-    "wrong pose; the covariance enters `confident` only through the distinct-rival test.")
+    "(nu / (nu - 2): H1 33 -> 23 %, H1+H2 19 -> 19 %), the noise as a seventh parameter of the observed information "
+    "(its coupling with the pose, a Schur complement: rotation sigmas x1.00 at the median), a prior on the noise at "
+    "POINT_NOISE_PX with 4-8 degrees of freedom (H1 33 -> 17-23 %, H1+H2 19 -> 19-21 %, telephoto 28 -> 24 %; held "
+    "out on seed 7 with 4: H1 22 -> 17 %, H2 22 -> 11 %, H1+H2 and telephoto unchanged; it would also widen the "
+    "sub-pixel covariances of camera frames), EM started from a wider noise (the same fixed point). All of these "
+    "are local, and a fit that chose its pairs is a fixed point of each: at the answer the points fit the low "
+    "noise. A frame alone does not tell it; knowledge from outside the frame would (the camera's noise fused over "
+    "its confident frames, or stated per camera). The wrong-basin confident answers behind the confidence section's "
+    "96.5 % precision are imprecise already and mostly ones where eq. (1) prefers the wrong pose; the covariance "
+    "enters `confident` only through the distinct-rival test.")
 
 
 def _information_at(objective, pose: np.ndarray, sigma2: float, shares: np.ndarray) -> np.ndarray:
