@@ -1,13 +1,14 @@
 """Why the published covariance is too tight on some answers (issue 35): the noise it is scaled by, read at the pose
 fitted to the same points, against the true noise; and the same covariance with the true noise.
 
-    NUMBA_NUM_THREADS=1 python -m benchmarks.covariance_noise [--seed 7] [--per-group 60]
+    NUMBA_NUM_THREADS=1 python -m benchmarks.covariance_noise [--seed 7] [--per-group 60] [--regression]
                                                            [--out benchmarks/results/covariance_noise.md]
 
 An analysis, not a figure to hold: nothing in the solver is chosen on it. On the seeded problems of
 ``benchmarks.bench_confidence`` (paper H1, H2, H1+H2, telephoto; :func:`benchmarks.bench_confidence.make`) each
 solve's published covariance (:func:`evopose.mixture.mixture_covariance`, eq. (1)'s marginal likelihood, Louis'
-observed information) is recomputed at the published pose in three ways, over the confident answers:
+observed information) is recomputed at the published pose in three ways, over the confident answers
+(``--regression``: on the fixed problem set of ``benchmarks.solver_regression`` instead, printed only):
 
 * as published: the noise ``sigma`` fitted by EM at the published pose (:func:`evopose.mixture.mixture_fit`);
 * with the true noise: the same observed information at the problem's own ``sigma`` (the generator's);
@@ -83,8 +84,9 @@ def _information_at(objective, pose: np.ndarray, sigma2: float, shares: np.ndarr
     return from_information(objective, pose, info, sigma2, 0).matrix
 
 
-def one(group: str, seed: int, index: int) -> dict:
-    """Solve one problem; its errors and the three noises and two covariances of the module docstring."""
+def one(group: str, seed: int, index: int, sp=None) -> dict:
+    """Solve problem ``index`` of ``group`` (``sp``, a :class:`benchmarks.problems.SyntheticProblem`, when given);
+    its errors and the three noises and two covariances of the module docstring."""
     from evopose import solve
     from evopose.covariance import mutual_matches
     from evopose.fitness import PoseObjective
@@ -93,7 +95,7 @@ def one(group: str, seed: int, index: int) -> dict:
 
     from .bench_confidence import make, parameter_errors
 
-    sp = make(group, seed, index)
+    sp = make(group, seed, index) if sp is None else sp
     sol = solve(sp.problem, seed=index)
     rec = {"group": group, "index": index, "noise": float(sp.noise), "confident": bool(sol.confident)}
     if not sol.confident or not np.all(np.isfinite(sol.covariance)):
@@ -139,7 +141,7 @@ def markdown(records: list[dict], args: argparse.Namespace, seconds: float) -> s
     header = ["group", "confident", "covariance", "rotation beyond 95 %", "position beyond 95 %",
               "1-sigma coverage x / y / z / roll / pitch / yaw (%)"]
     rows = []
-    for g in GROUPS:
+    for g in dict.fromkeys(r["group"] for r in records):
         recs = [r for r in records if r["group"] == g and "errors" in r]
         if not recs:
             continue
@@ -162,9 +164,16 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seed", type=int, default=7)
     parser.add_argument("--per-group", type=int, default=60)
+    parser.add_argument("--regression", action="store_true", help="the solver regression set instead (printed only)")
     parser.add_argument("--out", type=Path, default=Path("benchmarks/results/covariance_noise.md"))
     args = parser.parse_args(argv)
     t0 = time.perf_counter()
+    if args.regression:
+        from .solver_regression import suite
+
+        records = [one(g, 0, i, sp) for g, problems in suite().items() for i, sp in enumerate(problems)]
+        print("\n".join(markdown(records, args, time.perf_counter() - t0).split("\n")[6:-2]))
+        return 0
     records = [one(g, args.seed, i) for g in GROUPS for i in range(args.per_group)]
     text = markdown(records, args, time.perf_counter() - t0)
     write_section(args.out, "Covariance: the noise it is scaled by, fitted and true (an analysis)", text)
