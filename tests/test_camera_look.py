@@ -106,3 +106,25 @@ def test_a_tracked_look_is_estimated_again_every_few_frames_once_its_window_is_f
     assert between == [0.51, 0.52, 0.52, 0.52, 0.54, 0.54, 0.54]
     assert due == [True, True, True, False, True, False, False, False, True, False, False, False]
     assert LookTracker(every=4).current() == Look()   # nothing tracked yet: the reference look
+
+
+@pytest.mark.parametrize("name, body", [("telephoto", PIONEER_BODY), ("telephoto-flat-cool", PIONEER_BODY),
+                                        ("husky-telephoto", None)])
+def test_a_large_bodys_patch_found_on_a_quarter_of_the_pixels_reads_as_the_whole_image_does(name, body):
+    """Where the target is large (vision.camera_look.LOOK_STRIDE_FROM_EXTENT_PX) its paint patch is found on every
+    other pixel of every other row and measured on the image's own pixels: the same gain, turn and pixel count as
+    the patch found on every pixel."""
+    from scenarios.target import load_model
+    from vision.camera_look import LOOK_STRIDE, body_chroma
+    body = load_model("husky").body_colour if body is None else body
+    _, paint_q = chroma_of(np.array(body, np.uint8))
+    for frame in _frames(name):
+        y, q = chroma_of(frame)
+        usable = (y >= 24) & (y <= 245)
+        neutral, spread = neutral_chroma(q, usable)
+        whole, n_whole = body_chroma(q, usable, neutral, spread, paint_q, 500.0)
+        sampled, n_sampled = body_chroma(q, usable, neutral, spread, paint_q, 500.0, stride=LOOK_STRIDE)
+        assert whole is not None and sampled is not None
+        assert abs(np.hypot(*sampled) / np.hypot(*whole) - 1) < 0.02
+        assert abs(np.degrees(np.arctan2(sampled[1], sampled[0]) - np.arctan2(whole[1], whole[0]))) < 1.0
+        assert abs(n_sampled / n_whole - 1) < 0.1   # counted in the image's pixels, not the sample's
