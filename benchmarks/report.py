@@ -26,7 +26,7 @@ ORDER = ("solvers", "solver_regression", "softposit", "solver_phases", "confiden
          "photoreal_looks_halved", "photoreal_looks_lightness", "photoreal_looks_clipped", "photoreal_looks_random_side", "photoreal_looks_edge",
          "photoreal_looks_train_telephoto",
          "photoreal_fleet_looks",
-         "photoreal_fleet_looks_paper", "photoreal_fleet_husky", "photoreal_fleet_husky_looks", "photoreal_fleet_realtime", "photoreal_fleet_looks_long",
+         "photoreal_fleet_looks_paper", "photoreal_fleet_husky", "photoreal_fleet_husky_looks", "photoreal_fleet_realtime", "photoreal_fleet_looks_long", "photoreal_fleet_clock",
          "frontend_speed", "frame_cost")
 
 #: Titles that several section files share, told apart by what each measures (by file stem).
@@ -46,6 +46,7 @@ TITLES = {
     "photoreal_fleet_looks_paper": "The fleet on rendered datasets: nine paper-scale worlds through three camera looks",
     "photoreal_fleet_realtime": "The fleet on rendered datasets: 20-frame sequences at 10 fps, the clock's ticks kept",
     "photoreal_fleet_looks_long": "The fleet on rendered datasets: 20-frame sequences at 10 fps through camera looks",
+    "photoreal_fleet_clock": "The pair at 10 fps on camera looks: the front-end's time, side by side",
     "photoreal_fleet_husky_looks": "The fleet on rendered datasets: the second robot at telephoto through three looks, "
                                    "side by side",
     "photoreal_fleet_husky": "The fleet on rendered datasets: the second robot (Husky-like UGV) at telephoto",
