@@ -24,6 +24,14 @@ def test_dilating_and_closing_by_a_disc_match_opencv_at_any_radius_and_density(s
         assert np.array_equal(~dilate_disc(~dilate_disc(mask, disc), disc), closed)
 
 
+def test_dilating_a_mask_too_wide_for_16_bit_coordinates_matches_opencv():
+    rng = np.random.default_rng(11)
+    mask = rng.random((5, 16500)) < 0.01   # 2 w + r + 4 past 16 bits: the coordinates are taken in 32
+    mask[[0, 4]] = False                   # a row without a pixel: its distance to one is past 16 bits
+    disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (9, 9))
+    assert np.array_equal(dilate_disc(mask, disc), cv2.dilate(mask.astype(np.uint8), disc) > 0)
+
+
 def test_a_mask_box_is_the_box_of_its_pixels_and_none_for_an_empty_mask():
     rng = np.random.default_rng(7)
     for _ in range(50):

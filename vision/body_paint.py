@@ -260,15 +260,18 @@ def dilate_disc(mask: np.ndarray, disc: np.ndarray) -> np.ndarray:
     # reach[k]: the farthest row offset whose row's half width is k or more (none: a sentinel no row reaches
     # from); k = r + 1 stands for farther
     none = -(h + 2)
+    # the coordinates in 16 bits where they fit (every value below lies within +-(2 max(h, w) + r + 4)): the running
+    # extremes take three quarters of the time
+    index = np.int16 if 2 * max(h, w) + r + 4 < np.iinfo(np.int16).max else np.int32
     rows_at_least = np.count_nonzero(half[None, :] >= np.arange(r + 2)[:, None], axis=1)   # (r + 2,): 2 dy + 1
-    reach = np.where(rows_at_least > 0, (rows_at_least - 1) // 2, none).astype(np.int32)
-    far = np.int32(w + r + 2)
-    cols = np.arange(w, dtype=np.int32)
+    reach = np.where(rows_at_least > 0, (rows_at_least - 1) // 2, none).astype(index)
+    far = index(w + r + 2)
+    cols = np.arange(w, dtype=index)
     left = np.maximum.accumulate(np.where(mask, cols, -far), axis=1)
     right = np.minimum.accumulate(np.where(mask, cols, far)[:, ::-1], axis=1)[:, ::-1]
     along = np.minimum(np.minimum(cols - left, right - cols), r + 1)                 # (H, W) to the nearest set pixel
     rows_reached = np.take(reach, along)                                             # (H, W)
-    rows = np.arange(h, dtype=np.int32)[:, None]
+    rows = np.arange(h, dtype=index)[:, None]
     below = np.maximum.accumulate(rows + rows_reached, axis=0) >= rows
     above = np.minimum.accumulate((rows - rows_reached)[::-1], axis=0)[::-1] <= rows
     return below | above
