@@ -4,6 +4,8 @@ of its coverage (the share of each pixel the spot's colour covers, on the line f
 
 from __future__ import annotations
 
+from functools import lru_cache
+
 import numpy as np
 
 from .features import mark_coverage
@@ -93,11 +95,14 @@ def _recentred(lin: np.ndarray, peaks: np.ndarray, radius: np.ndarray, spot: np.
         # of the peak; a window of `span` from floor(u - reach) ends by u + reach + 2): a pixel's coverage is its own
         margin = int(np.ceil(2 * r + 1.5)) + 3
         origin = np.floor(peaks[at]).astype(int) - margin                                  # (N, 2)
-        gx = origin[:, 0, None] + np.arange(2 * margin + 2)                                 # (N, G) columns
-        gy = origin[:, 1, None] + np.arange(2 * margin + 2)                                 # (N, G) rows
-        window = lin[np.clip(gy, 0, h - 1)[:, :, None], np.clip(gx, 0, w - 1)[:, None, :]] - ring[at, None, None, :]
-        coverage = mark_coverage(window, (spot[at] - ring[at])[:, None, None, :])
-        coverage *= ((gy >= 0) & (gy < h))[:, :, None] & ((gx >= 0) & (gx < w))[:, None, :]
+        # only the pixels a window can reach (within 2 r + 1.5 of the peak): the rest of the square counts zero
+        rows, cols = _reachable(margin, 2 * r + 1.5)                                        # (M,) each
+        gy, gx = origin[:, 1, None] + rows, origin[:, 0, None] + cols                       # (N, M)
+        window = lin[np.clip(gy, 0, h - 1), np.clip(gx, 0, w - 1)] - ring[at, None, :]
+        reached = mark_coverage(window, (spot[at] - ring[at])[:, None, :])
+        reached *= (gy >= 0) & (gy < h) & (gx >= 0) & (gx < w)
+        coverage = np.zeros((len(at), 2 * margin + 2, 2 * margin + 2))
+        coverage[:, rows, cols] = reached
         span = int(np.ceil(2 * reach)) + 2
         offsets = np.arange(span)
         moving = np.arange(len(at))
@@ -122,6 +127,16 @@ def _recentred(lin: np.ndarray, peaks: np.ndarray, radius: np.ndarray, spot: np.
             centre[i[found]] = moved[found]
             moving = moving[found & (step >= 0.05)]
     return centre
+
+
+@lru_cache(maxsize=64)
+def _reachable(margin: int, distance: float) -> tuple[np.ndarray, np.ndarray]:
+    """The rows and columns (M,) each of a window of ``2 margin + 2`` pixels from ``floor(peak) - margin`` that lie
+    within ``distance`` of some peak within the window's pixel ``margin`` (the peak's fraction in [0, 1) each way)."""
+    a = np.arange(2 * margin + 2) - margin            # the pixel's offset from the peak lies in (a - 1, a]
+    near = np.where((a > 0) & (a < 1), 0.0, np.minimum(np.abs(a - 1), np.abs(a)))
+    rows, cols = np.nonzero(np.hypot(near[:, None], near[None, :]) <= distance + 1e-6)
+    return rows, cols
 
 
 __all__ = ["CENTROID_STEPS", "SMALL_SPOT_PX", "coverage_centroids", "round_peaks"]
