@@ -58,11 +58,11 @@ BODY_TURN_DEG, BODY_NOISE_SPREADS, BODY_MIN_CHROMA = 35.0, 5.0, 0.05
 #: ~450-600 paint pixels), and the least chroma of its 90th percentile, absolute and in noise spreads: a target's
 #: paint stands out; the ground's faint tint in the paint's hue (frames without the target: 0.06-0.15) does not.
 MIN_BODY_PIXELS, MIN_BODY_CHROMA, MIN_BODY_SPREADS = 40, 0.16, 20.0
-#: Where the target is LOOK_STRIDE_FROM_EXTENT_PX or more across (the prior's extent), the look is measured on every
-#: LOOK_STRIDE-th pixel of every LOOK_STRIDE-th row (a quarter of the pixels) of an image at least
-#: LOOK_STRIDE_FROM_PX on its shorter side, each pixel unmixed (no averaging), where the body's patch is; its chroma
-#: is then read from the image's own pixels (:func:`body_chroma`). An estimate took a quarter of the front-end's
-#: time, finding the patch over the whole image half of it. Not where the target is smaller: at the paper's scale (the Pioneer ~28 px
+#: Where the target is LOOK_STRIDE_FROM_EXTENT_PX or more across (the prior's extent), the body's patch is found on
+#: every LOOK_STRIDE-th pixel of every LOOK_STRIDE-th row (a quarter of the pixels) of an image at least
+#: LOOK_STRIDE_FROM_PX on its shorter side, each pixel unmixed (no averaging); its chroma is then read from the
+#: image's own pixels (:func:`body_chroma`). An estimate took a quarter of the front-end's time, finding the patch
+#: over the whole image half of it. Not where the target is smaller: at the paper's scale (the Pioneer ~28 px
 #: across, its body a few hundred pixels) a first version that also measured the body on the sample moved recall
 #: through `hable-faded` by -2.3 points and through `flat-cool` by +1.9, so the bar was set there after that run,
 #: from the body's pixel count, not fitted.
