@@ -84,3 +84,24 @@ def test_a_median_by_one_sort_is_numpys_median_to_the_bit(dtype):
             got, want = median(a, axis=axis), np.median(a, axis=axis)
             assert got.dtype == want.dtype and np.array_equal(got, want)
         assert median(a.reshape(-1)) == np.median(a)
+
+
+def test_the_pixels_a_ring_can_reach_hold_every_rings_pixels_and_none_far_from_it():
+    from vision.ring_pixels import ring_pixels
+    rng = np.random.default_rng(12)
+    for _ in range(300):
+        first, size = int(rng.integers(-30, 1)), int(rng.integers(3, 60))
+        lo = float(rng.choice([0.0, -0.5]))
+        hi = lo + 1.0
+        inner = float(rng.uniform(0, 10))
+        outer = inner + float(rng.uniform(0.5, 8))
+        rows, cols = ring_pixels(first, size, lo, hi, inner, outer)
+        kept = np.zeros((size, size), bool)
+        kept[rows, cols] = True
+        k = first + np.arange(size)
+        for cy, cx in rng.uniform(lo, hi, (20, 2)):   # a centre anywhere in its range: its ring is kept
+            d = np.hypot(k[None, :] - cx, k[:, None] - cy)
+            assert kept[(d >= inner) & (d <= outer)].all()
+        centre = (lo + hi) / 2                          # a pixel no centre can bring within the ring: left out
+        d = np.hypot(k[None, :] - centre, k[:, None] - centre)
+        assert not kept[(d > outer + 1.5) | (d < inner - 1.5)].any()

@@ -9,10 +9,10 @@ face whose paint carries less of its light is paint where it touches the surely 
 
 from __future__ import annotations
 
-from functools import lru_cache
-
 import cv2
 import numpy as np
+
+from .ring_pixels import ring_pixels
 
 #: Body context (:func:`paint_pixels`): the largest residual of a paint pixel's fit, relative to the pixel, and the
 #: least share of its light the paint carries (a low sun's gloss on a red body's top face leaves it ~0.45; grey
@@ -183,7 +183,9 @@ def paint_around(paint: np.ndarray, points: np.ndarray, radius: np.ndarray, gap:
     for n in np.unique(reach):   # the points whose window has one size together
         at = np.flatnonzero(reach == n)
         inner = radius[at] + gap
-        yy, xx = _ring_offsets(int(n), float(inner.min()), float(inner.max()) + 1)     # (M,) each
+        # the window -n..n about the point's nearest pixel: the point -0.5..0.5 from it
+        yy, xx = ring_pixels(-int(n), 2 * int(n) + 1, -0.5, 0.5, float(inner.min()), float(inner.max()) + 1)
+        yy, xx = yy - n, xx - n                                                          # (M,) offsets each
         u, v = points[at, 0, None], points[at, 1, None]
         cu, cv = np.rint(u).astype(int), np.rint(v).astype(int)
         d = np.hypot(xx + cu - u, yy + cv - v)                                           # (N, M)
@@ -193,19 +195,6 @@ def paint_around(paint: np.ndarray, points: np.ndarray, radius: np.ndarray, gap:
         painted = inside & (paint[np.clip(ys, 0, h - 1), np.clip(xs, 0, w - 1)] != 0)
         share[at] = np.count_nonzero(painted, axis=1) / np.maximum(np.count_nonzero(ring, axis=1), 1)
     return share
-
-
-@lru_cache(maxsize=256)
-def _ring_offsets(n: int, inner: float, outer: float) -> tuple[np.ndarray, np.ndarray]:
-    """The offsets (rows, columns (M,) each) within ``-n..n`` of a point's nearest pixel that can lie ``inner`` to
-    ``outer`` px from the point (within half a pixel of that pixel along each axis): any ring
-    :func:`paint_around` counts lies among them."""
-    a = np.arange(-n, n + 1, dtype=float)
-    near = np.maximum(np.abs(a) - 0.5, 0.0)
-    far = np.abs(a) + 0.5
-    least, most = np.hypot(near[:, None], near[None, :]), np.hypot(far[:, None], far[None, :])
-    rows, cols = np.nonzero((least <= outer + 1e-6) & (most >= inner - 1e-6))
-    return rows - n, cols - n
 
 
 def pixel_box(mask: np.ndarray) -> tuple[int, int, int, int] | None:

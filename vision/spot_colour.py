@@ -28,10 +28,10 @@ shadow's edge) is a change no paint colour at the body's light accounts for, and
 
 from __future__ import annotations
 
-from functools import lru_cache
-
 import cv2
 import numpy as np
+
+from .ring_pixels import ring_pixels
 
 #: Half size of the window the 4:2:0 operator is applied on, and of the window the misfit is taken over (pixels).
 PATCH_HALF, FIT_HALF = 5, 3
@@ -74,14 +74,15 @@ def ring_colours(image: np.ndarray, points: np.ndarray, radius: np.ndarray) -> n
     """The median colour (K, C) of each spot's ring in ``image`` (H, W, C), ``radius + 1.5`` to ``radius + 3`` px
     from ``points`` (K, 2): the surroundings a spot is blended with (here in Y Cr Cb; :mod:`vision.blobs` in
     linear light). Spots of one radius are taken together (the pixels of a window around each that a ring can
-    reach, :func:`ring_band`; outside the ring or the image left out of the median)."""
+    reach, :func:`vision.ring_pixels.ring_pixels`; outside the ring or the image left out of the median)."""
     h, w = image.shape[:2]
     points, radius = np.asarray(points, float).reshape(-1, 2), np.asarray(radius, float).reshape(-1)
     out = np.zeros((len(points), image.shape[2]))
     for r in np.unique(radius):
         at = np.nonzero(radius == r)[0]
         reach = r + 3.0
-        rows, cols = ring_band(r + 1.5, reach)                                             # (M,) each
+        span = int(np.ceil(2 * reach)) + 2   # from floor(centre - reach): the centre lies reach + [0, 1) into it
+        rows, cols = ring_pixels(0, span, reach, reach + 1.0, r + 1.5, reach)                   # (M,) each
         u, v = points[at, 0], points[at, 1]
         xs = np.floor(u - reach).astype(int)[:, None] + cols[None, :]                      # (N, M)
         ys = np.floor(v - reach).astype(int)[:, None] + rows[None, :]
@@ -95,22 +96,6 @@ def ring_colours(image: np.ndarray, points: np.ndarray, radius: np.ndarray) -> n
         for i in at[~some]:
             out[i] = image[int(round(points[i, 1])), int(round(points[i, 0]))]
     return out
-
-
-@lru_cache(maxsize=64)
-def ring_band(inner: float, outer: float) -> tuple[np.ndarray, np.ndarray]:
-    """The rows and columns (M,) each, of a window starting at ``floor(centre - outer)``, of the pixels that lie
-    ``inner`` to ``outer`` px from some centre within the window's own pixel: the centre lies ``outer`` plus a
-    fraction in [0, 1) from the window's first row and column, each offset thus within a unit interval. Any pixel
-    of the ring of a spot is among these (the ring's median over them is the median over the whole window's)."""
-    span = int(np.ceil(2 * outer)) + 2
-    a = np.arange(span) - outer                       # the offset from the centre lies in (a - 1, a]
-    near = np.where((a > 0) & (a < 1), 0.0, np.minimum(np.abs(a - 1), np.abs(a)))
-    far = np.maximum(np.abs(a - 1), np.abs(a))
-    least = np.hypot(near[:, None], near[None, :])
-    most = np.hypot(far[:, None], far[None, :])
-    rows, cols = np.nonzero((least <= outer + 1e-6) & (most >= inner - 1e-6))
-    return rows, cols
 
 
 def _median_of_numbers(values: np.ndarray) -> np.ndarray:

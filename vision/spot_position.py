@@ -4,11 +4,10 @@ of its coverage (the share of each pixel the spot's colour covers, on the line f
 
 from __future__ import annotations
 
-from functools import lru_cache
-
 import numpy as np
 
 from .features import mark_coverage
+from .ring_pixels import ring_pixels
 
 #: Spots under this radius (px) are the paper's scale: one centroid step, spots of one radius together.
 SMALL_SPOT_PX = 3.0
@@ -96,7 +95,7 @@ def _recentred(lin: np.ndarray, peaks: np.ndarray, radius: np.ndarray, spot: np.
         margin = int(np.ceil(2 * r + 1.5)) + 3
         origin = np.floor(peaks[at]).astype(int) - margin                                  # (N, 2)
         # only the pixels a window can reach (within 2 r + 1.5 of the peak): the rest of the square counts zero
-        rows, cols = _reachable(margin, 2 * r + 1.5)                                        # (M,) each
+        rows, cols = ring_pixels(-margin, 2 * margin + 2, 0.0, 1.0, 0.0, 2 * r + 1.5)      # (M,) each
         gy, gx = origin[:, 1, None] + rows, origin[:, 0, None] + cols                       # (N, M)
         window = lin[np.clip(gy, 0, h - 1), np.clip(gx, 0, w - 1)] - ring[at, None, :]
         reached = mark_coverage(window, (spot[at] - ring[at])[:, None, :])
@@ -127,16 +126,6 @@ def _recentred(lin: np.ndarray, peaks: np.ndarray, radius: np.ndarray, spot: np.
             centre[i[found]] = moved[found]
             moving = moving[found & (step >= 0.05)]
     return centre
-
-
-@lru_cache(maxsize=64)
-def _reachable(margin: int, distance: float) -> tuple[np.ndarray, np.ndarray]:
-    """The rows and columns (M,) each of a window of ``2 margin + 2`` pixels from ``floor(peak) - margin`` that lie
-    within ``distance`` of some peak within the window's pixel ``margin`` (the peak's fraction in [0, 1) each way)."""
-    a = np.arange(2 * margin + 2) - margin            # the pixel's offset from the peak lies in (a - 1, a]
-    near = np.where((a > 0) & (a < 1), 0.0, np.minimum(np.abs(a - 1), np.abs(a)))
-    rows, cols = np.nonzero(np.hypot(near[:, None], near[None, :]) <= distance + 1e-6)
-    return rows, cols
 
 
 __all__ = ["CENTROID_STEPS", "SMALL_SPOT_PX", "coverage_centroids", "round_peaks"]
