@@ -66,7 +66,7 @@ MIN_BODY_PIXELS, MIN_BODY_CHROMA, MIN_BODY_SPREADS = 40, 0.16, 20.0
 #: across, its body a few hundred pixels) a first version that also measured the body on the sample moved recall
 #: through `hable-faded` by -2.3 points and through `flat-cool` by +1.9, so the bar was set there after that run,
 #: from the body's pixel count, not fitted; this version was judged on the sets the first had seen (BENCHMARKS.md,
-#: "What the camera front-end costs a vehicle per frame": no named-look figure moved by more than 0.8 points).
+#: "a large body's look patch on a quarter of the pixels": no named-look figure moved by more than 0.8 points).
 LOOK_STRIDE, LOOK_STRIDE_FROM_PX, LOOK_STRIDE_FROM_EXTENT_PX = 2, 64, 100.0
 #: A paint colour whose chroma (relative to the neutral) is under this carries no hue: only the neutral is measured.
 MIN_PAINT_CHROMA = 0.12
