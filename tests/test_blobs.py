@@ -332,9 +332,9 @@ def test_a_mark_is_surrounded_by_one_paint_and_a_peak_on_an_edge_is_not():
     assert share[0] == 1.0 and share[1] < 0.5, share   # MIN_SURROUND is 0.5
 
 
-def _through_random_looks(name: str, seeds: tuple[int, ...]) -> tuple[int, int, int]:
+def _through_random_looks(name: str, seeds: tuple[int, ...], scorer: str = "shipped") -> tuple[int, int, int]:
     """Marks found, visible and detections on a committed dataset's frames developed again (their sRGB as light)
-    through :func:`scenarios.looks.random_look` of each seed."""
+    through :func:`scenarios.looks.random_look` of each seed, by the front-end with ``scorer``."""
     from scenarios.camera_model import capture
     from scenarios.dataset import open_dataset
     from scenarios.looks import apply_look, random_look
@@ -352,7 +352,8 @@ def _through_random_looks(name: str, seeds: tuple[int, ...]) -> tuple[int, int, 
             image = cv2.imdecode(np.frombuffer(captured.encoded, np.uint8), cv2.IMREAD_COLOR)
             prior = mark_prior(data.camera(cam, 0), world.model.mark_radius, world.model.size, area.lo[:3],
                                area.hi[:3])
-            det = detect_contrast_marks(image, world.model.palette, prior, body=world.model.body_colour)
+            det = detect_contrast_marks(image, world.model.palette, prior, body=world.model.body_colour,
+                                        scorer=scorer)
             whole = np.array([m.uv for m in data.truth(0).cameras[cam].marks if m.fully_visible])
             found += len(match_to_truth(det.points, whole, 3.0)[0])
             visible, detections = visible + len(whole), detections + len(det.points)
@@ -367,12 +368,12 @@ def test_a_blurred_mark_ringed_by_its_blend_with_the_paint_is_found_and_a_sunlit
     import vision.blobs as blobs
     import vision.spot_label as spot_label
 
-    found, visible, detections = _through_random_looks("telephoto", (7, 9))
+    found, visible, detections = _through_random_looks("telephoto", (7, 9), "bars")
     assert found >= 44 and found / detections >= 0.9, (found, visible, detections)
     monkeypatch.setattr(blobs, "RING_GAPS_PX", (1.0,))
     monkeypatch.setattr(spot_label, "bleached_misfit",
                         lambda spot, ring, palette, *_: np.full((len(spot), len(palette)), np.inf))
-    assert _through_random_looks("telephoto", (7, 9))[0] <= found - 2
+    assert _through_random_looks("telephoto", (7, 9), "bars")[0] <= found - 2
 
 
 def test_a_bright_mark_bleached_toward_white_fits_its_paint_and_a_glint_on_the_body_fits_none():
@@ -498,6 +499,8 @@ def test_a_mark_on_an_over_exposed_face_is_found_through_the_front_end():
     cv2.rectangle(big, (40 * s, 60 * s), (120 * s, 90 * s), (8, 150, 190), -1)    # its side face in the sun
     cv2.circle(big, (80 * s, 45 * s), 6 * s, (20, 25, 150), -1)                  # a red mark on the top face
     image = cv2.resize(big, (160, 120), interpolation=cv2.INTER_AREA).astype(np.uint8)
-    found = detect_contrast_marks(image, husky, MarkPrior((4.0, 8.0)), body=(20, 195, 240), look=None)
-    pairs = match_to_truth(found.points, np.array([[79.5, 44.5]]), 3.0)[0]
-    assert len(pairs) == 1 and found.colours()[pairs[0][0]] == "red"
+    for scorer in ("bars", "shipped"):   # the hand-set bars and the context model (noise-free: vision.mark_scorer.Z_LIMIT)
+        found = detect_contrast_marks(image, husky, MarkPrior((4.0, 8.0)), body=(20, 195, 240), look=None,
+                                      scorer=scorer)
+        pairs = match_to_truth(found.points, np.array([[79.5, 44.5]]), 3.0)[0]
+        assert len(pairs) == 1 and found.colours()[pairs[0][0]] == "red", scorer

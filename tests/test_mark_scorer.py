@@ -34,6 +34,23 @@ def test_the_quadratic_model_separates_what_no_single_measure_does():
     assert right > 0.9 and single < 0.6, (right, single)
 
 
+def test_a_feature_far_past_the_fitted_data_scores_as_at_the_limit():
+    # a quadratic model extrapolated turns over: a spot far brighter than any fitted one must not read as no mark
+    scorer = shipped()
+    row = scorer.mean.copy()
+    far, limit = row.copy(), row.copy()
+    far[0] += 50 * scorer.scale[0]
+    limit[0] += mark_scorer.Z_LIMIT * scorer.scale[0]
+    p_far, p_limit = scorer.probability(np.stack([far, limit]))
+    assert p_far == p_limit
+    mark_scorer_z = mark_scorer.Z_LIMIT
+    try:  # and without the limit the far row is scored otherwise (the limit is what the test measures)
+        mark_scorer.Z_LIMIT = np.inf
+        assert scorer.probability(far[None])[0] != p_limit
+    finally:
+        mark_scorer.Z_LIMIT = mark_scorer_z
+
+
 def test_a_saved_scorer_reads_back_the_same(tmp_path):
     x, y = _xor(200, 2)
     scorer = fit(x, y, ("a", "b", "c"), fitted_on="xor")
@@ -119,14 +136,17 @@ def test_train_scorer_on_a_missing_dataset_is_one_line_and_exit_2(tmp_path):
 
 
 def test_the_scorer_only_acts_on_spots_under_three_pixels():
-    # at telephoto (marks of 3 px and more) the front-end with and without the scorer is the same front-end (a
-    # context model, vision.mark_context, acts there only when given)
+    # at telephoto (marks of 3 px and more) a small-spot scorer that would refuse every candidate changes nothing:
+    # the context model decides there (vision.mark_context)
+    from dataclasses import replace
+
     from vision.blobs import detect_contrast_marks
 
     image, world, prior = _first_frame(ROOT / "tests" / "data" / "photoreal" / "telephoto")
+    refuses_all = replace(shipped(), bias=-1e6)
     a = detect_contrast_marks(image, world.model.palette, prior, body=world.model.body_colour)
-    b = detect_contrast_marks(image, world.model.palette, prior, body=world.model.body_colour, scorer=None)
-    assert len(a) > 5 and a.features is None
+    b = detect_contrast_marks(image, world.model.palette, prior, body=world.model.body_colour, scorer=refuses_all)
+    assert len(a) > 5
     np.testing.assert_array_equal(a.points, b.points)
 
 

@@ -53,7 +53,7 @@ from .body_paint import (LINEAR_OF_BYTE, body_paint, body_region, body_silhouett
 from .camera_look import Look, estimate_look, to_reference_look
 from .features import MarkDetections, to_bgr
 from .mark_prior import MarkPrior, mark_prior
-from .mark_context import context_features, is_context_model
+from .mark_context import context_features, is_context_model, shipped_context
 from .mark_scorer import MarkScorer, candidate_features, feature_names, shipped
 from .order_stats import median
 from .mark_selection import (densest_cluster, merge_oblique_marks, one_mark_between, one_per_disc, one_scale,
@@ -164,6 +164,28 @@ class ContrastMarks(MarkDetections):
     features: np.ndarray | None = None
 
 
+#: The names ``scorer`` takes beside a :class:`MarkScorer` (see :func:`detect_contrast_marks`).
+SCORER_NAMES = ("shipped", "bars", "all")
+
+
+def _scorers(scorer: MarkScorer | str | None, names: tuple[str, ...]
+             ) -> tuple[MarkScorer | str | None, MarkScorer | str | None]:
+    """The small-spot scorer and the context model that ``scorer`` names (None: the hand-set bars there). A model
+    given replaces the shipped one of its kind and keeps the other; the shipped small-spot scorer serves any
+    palette whose features it was fitted on (else the bars)."""
+    if isinstance(scorer, str) and scorer not in SCORER_NAMES:
+        raise ValueError(f"scorer must be a MarkScorer, {', '.join(map(repr, SCORER_NAMES))} or None, got {scorer!r}")
+    if scorer is None or scorer == "bars":
+        return None, None
+    if scorer == "all":
+        return "all", "all"
+    context = scorer if is_context_model(scorer) else shipped_context()
+    if scorer == "shipped" or is_context_model(scorer):
+        fitted = shipped()
+        return (fitted if fitted is not None and fitted.names == feature_names(names) else None), context
+    return scorer, context
+
+
 def detect_contrast_marks(image_bgr: np.ndarray, palette: Mapping[str, tuple[int, int, int]],
                           prior: MarkPrior = MarkPrior(), *, body: tuple[int, int, int] | None = None,
                           k_sigma: float = K_SIGMA, max_edge_ratio: float = MAX_EDGE_RATIO,
@@ -177,14 +199,13 @@ def detect_contrast_marks(image_bgr: np.ndarray, palette: Mapping[str, tuple[int
     body context). ``max_misfit``: default :data:`MAX_LABEL_MISFIT`, with a body :data:`MAX_LABEL_MISFIT_ON_BODY`
     when every mark is under :data:`SMALL_SPOT_PX`. Returns the marks sorted by label then row.
 
-    ``scorer``, for marks under :data:`SMALL_SPOT_PX` on a body: which candidates are marks
-    (:mod:`vision.mark_scorer`): ``"shipped"`` the shipped model (palette-relative: any palette), or a
-    :class:`MarkScorer`; where marks are 3 px and more a context model given here (a :class:`MarkScorer` of
-    :mod:`vision.mark_context`'s features, e.g. its shipped file) decides instead of the hand-set context bars
-    (paint ring, surround, common scale), the default; the small-spot candidates are
-    then taken with the lenient :data:`CANDIDATE_K_SIGMA` bars (``k_sigma`` is not used). ``"all"``: every
-    such candidate, with its features (to fit a scorer; where marks are 3 px and more every spot before the context
-    bars, with its context features); None: the hand-set bars alone.
+    ``scorer``: which spots on a body are marks. ``"shipped"`` (the default): under :data:`SMALL_SPOT_PX` the
+    shipped small-spot scorer (:mod:`vision.mark_scorer`, palette-relative: any palette), its candidates taken with
+    the lenient :data:`CANDIDATE_K_SIGMA` bars (``k_sigma`` is not used); where marks are 3 px and more the shipped
+    context model (:mod:`vision.mark_context`) instead of the hand-set context bars (paint ring, surround, common
+    scale). A :class:`MarkScorer` of either kind (a file of ``evopose train-scorer``) replaces the shipped one of
+    its kind. ``"bars"`` or None: the hand-set bars at every scale. ``"all"``: every candidate, with its features
+    (to fit a scorer; where marks are 3 px and more every spot before the context bars, with its context features).
 
     ``look``: what the camera's look did to the colours (:mod:`vision.camera_look`), undone before anything is
     compared with the paint colours: ``"auto"`` estimated from this image and the body's paint, a :class:`Look`
@@ -205,12 +226,7 @@ def detect_contrast_marks(image_bgr: np.ndarray, palette: Mapping[str, tuple[int
     clipped = clipped_channels(bgr) if body is not None else None
     if isinstance(look, Look):
         bgr = to_reference_look(bgr, look)
-    if isinstance(scorer, str) and scorer not in ("shipped", "all"):
-        raise ValueError(f"scorer must be a MarkScorer, 'shipped', 'all' or None, got {scorer!r}")
-    context = scorer if is_context_model(scorer) or scorer == "all" else None   # opt-in (vision.mark_context)
-    if scorer == "shipped" or is_context_model(scorer):  # palette-relative features: any palette (a scorer file of
-        fitted = shipped()                                  # other features: the bars)
-        scorer = fitted if fitted is not None and fitted.names == feature_names(names) else None
+    scorer, context = _scorers(scorer, names)
     if isinstance(scorer, MarkScorer) and scorer.names != feature_names(names):
         raise ValueError(f"the mark scorer was fitted on the features {', '.join(scorer.names)}; the front-end "
                          f"computes {', '.join(feature_names(names))}")

@@ -24,7 +24,7 @@ from typing import Protocol
 import numpy as np
 
 from evopose import Bounds, Camera
-from vision.blobs import MarkPrior, crop_margin, detect_contrast_marks, mark_prior
+from vision.blobs import SCORER_NAMES, MarkPrior, crop_margin, detect_contrast_marks, mark_prior
 from vision.camera_look import LookTracker, estimate_look
 from vision.mark_context import is_context_model
 from vision.label_chroma import LabelChromaGate, spot_chroma
@@ -80,14 +80,15 @@ MIN_WINDOW_MARKS = 4
 
 
 def feature_extractor(kind: str, target: TargetModel, area: Bounds | None = None,
-                      scorer: MarkScorer | None = None) -> FeatureExtractor:
+                      scorer: MarkScorer | str | None = None) -> FeatureExtractor:
     """The :class:`FeatureExtractor` of ``kind`` (one of :data:`FEATURE_KINDS`) for ``target``: ``marks`` and
     ``contrast`` label each mark with its colour's index in the model's palette (the order of
     :meth:`scenarios.target.TargetModel.colour_labels`), except where a camera's 2-4 px marks keep too little of
     their colour for a label (``contrast``: :class:`vision.label_chroma.LabelChromaGate`, labels None); ``area`` is the operating area (world x, y, z bounds of
-    the target) from which ``contrast`` derives the marks' size in each camera's image. ``scorer``: the mark scorer
-    ``contrast`` takes for 2-4 px marks (default: the shipped one, :mod:`vision.mark_scorer`, for any palette);
-    ValueError when it was fitted on other features than the front-end computes."""
+    the target) from which ``contrast`` derives the marks' size in each camera's image. ``scorer``: which spots
+    ``contrast`` keeps as marks (:func:`vision.blobs.detect_contrast_marks`: None or ``"shipped"`` the shipped
+    scorers, ``"bars"`` the hand-set bars, or a small-spot scorer or context model replacing the shipped one of its
+    kind); ValueError when a scorer was fitted on other features than the front-end computes."""
     if kind == "auto":
         raise ValueError("resolve 'auto' first (resolve_features): whether the images come from a camera")
     if kind == "corners":
@@ -104,7 +105,9 @@ def feature_extractor(kind: str, target: TargetModel, area: Bounds | None = None
     if kind != "contrast":
         raise ValueError(f"features must be one of {', '.join(FEATURE_KINDS)}, got {kind!r}")
     palette, size, body = dict(target.palette), target.size, target.body_colour
-    if scorer is not None and not is_context_model(scorer) and scorer.names != feature_names(tuple(palette)):
+    if isinstance(scorer, str) and scorer not in SCORER_NAMES:
+        raise ValueError(f"scorer must be a MarkScorer, {', '.join(map(repr, SCORER_NAMES))} or None, got {scorer!r}")
+    if isinstance(scorer, MarkScorer) and not is_context_model(scorer) and scorer.names != feature_names(tuple(palette)):
         raise ValueError(f"the mark scorer was fitted on the features {', '.join(scorer.names)}; this model's are "
                          f"{', '.join(feature_names(tuple(palette)))}")
 

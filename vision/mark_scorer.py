@@ -72,6 +72,10 @@ MAX_EDGE_RATIO = 100.0
 NEIGHBOUR_PX, FAR_PX = 3.5, 20.0
 #: Where the model file lies.
 SHIPPED = Path(__file__).with_name("mark_scorer.json")
+#: A standardised feature is held within this many standard deviations before it is scored: the quadratic model
+#: knows nothing past the data it was fitted on, and extrapolated it can turn over (a clean, noise-free image's
+#: contrast 14 sd over the fitted mean scored a plain mark 6e-6). The committed camera frames reach 6.6 sd.
+Z_LIMIT = 6.0
 
 
 def candidate_features(bgr: np.ndarray, lab: np.ndarray, points: np.ndarray, radius: np.ndarray,
@@ -187,7 +191,7 @@ class MarkScorer:
         features = np.asarray(features, float)
         if features.ndim != 2 or features.shape[1] != len(self.names):
             raise ValueError(f"mark scorer: expected (K, {len(self.names)}) features, got {features.shape}")
-        z = (features - self.mean) / self.scale
+        z = np.clip((features - self.mean) / self.scale, -Z_LIMIT, Z_LIMIT)
         return 1.0 / (1.0 + np.exp(-np.clip(quadratic(z) @ self.weights + self.bias, -50.0, 50.0)))
 
     def marks(self, features: np.ndarray) -> np.ndarray:

@@ -111,10 +111,11 @@ def register(app: typer.Typer) -> None:
                                                    "(--source, worlds with a camera model) and marks (preset hue "
                                                    "bands) on drawn worlds; corners: a chessboard's inner corners.")]
         = "auto",
-        mark_scorer: Annotated[Path | None, typer.Option(
-            help="With --features contrast: the mark scorer for 2-4 px marks, a JSON file of `evopose train-scorer` "
-                 "(default: the shipped one, fitted on rendered worlds), or the context model for marks of 3 px and "
-                 "more (`evopose train-scorer --scale telephoto`).")] = None,
+        mark_scorer: Annotated[str | None, typer.Option(
+            help="With --features contrast: which spots are marks. shipped (the default): the shipped scorers, fitted "
+                 "on rendered worlds through random looks; bars: the hand-set bars; or a JSON file of `evopose "
+                 "train-scorer`, replacing the shipped one of its kind (the scorer of 2-4 px marks, or with --scale "
+                 "telephoto the context model of marks of 3 px and more).")] = None,
         as_json: Annotated[bool, typer.Option("--json", help="One JSON object per event on stdout.")] = False,
         connect: Connect = None, listen: Listen = None, mode: Mode = None, config: ConfigFile = None,
         multicast: Multicast = False,

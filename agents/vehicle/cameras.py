@@ -21,9 +21,12 @@ from agents.vehicle.sources import SourceCamera, is_ros, open_reader
 
 
 def _mark_scorer(config: AgentConfig):
-    """``--mark-scorer``'s scorer, read now (None: the shipped one); a bad file is one :class:`FleetError`."""
-    if config.mark_scorer is None:
+    """``--mark-scorer``'s scorer, read now: None (the shipped ones), ``"bars"`` or a file's; a bad file is one
+    :class:`FleetError`."""
+    if config.mark_scorer is None or str(config.mark_scorer) == "shipped":
         return None
+    if str(config.mark_scorer) == "bars":
+        return "bars"
     from vision.mark_scorer import load
 
     try:

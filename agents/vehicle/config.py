@@ -63,7 +63,9 @@ class AgentConfig:
     #: with ``camera_pose`` a ros2: TFMessage topic (``/tf``): the camera's optical frame, composed from ``map``
     camera_frame: str | None = None
     features: str = "auto"
-    #: with ``features`` contrast (or auto on camera images): a mark scorer's JSON (``evopose train-scorer``) instead of the shipped one
+    #: with ``features`` contrast (or auto on camera images): which spots are marks: ``shipped`` (None: the shipped
+    #: scorers), ``bars`` (the hand-set bars), or a scorer's JSON (``evopose train-scorer``) replacing the shipped one
+    #: of its kind
     mark_scorer: str | Path | None = None
     view_weights: str = "step"
 
