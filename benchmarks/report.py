@@ -26,7 +26,7 @@ ORDER = ("solvers", "solver_regression", "softposit", "solver_phases", "confiden
          "photoreal_looks_halved", "photoreal_looks_lightness", "photoreal_looks_clipped", "photoreal_looks_random_side", "photoreal_looks_edge", "photoreal_looks_stride",
          "photoreal_looks_train_telephoto",
          "photoreal_fleet_looks",
-         "photoreal_fleet_looks_paper", "photoreal_fleet_husky", "photoreal_fleet_husky_looks", "photoreal_fleet_realtime", "photoreal_fleet_looks_long", "photoreal_fleet_clock",
+         "photoreal_fleet_looks_paper", "photoreal_fleet_husky", "photoreal_fleet_husky_looks", "photoreal_fleet_context", "photoreal_fleet_realtime", "photoreal_fleet_looks_long", "photoreal_fleet_clock",
          "frontend_speed", "frame_cost")
 
 #: Titles that several section files share, told apart by what each measures (by file stem).
@@ -50,6 +50,8 @@ TITLES = {
     "photoreal_fleet_husky_looks": "The fleet on rendered datasets: the second robot at telephoto through three looks, "
                                    "side by side",
     "photoreal_fleet_husky": "The fleet on rendered datasets: the second robot (Husky-like UGV) at telephoto",
+    "photoreal_fleet_context": "The fleet on rendered datasets: the telephoto context model as the default, side by "
+                               "side",
     "frontend_speed": "Contrast front-end: time per camera image",
     "frame_cost": "What the camera front-end costs a vehicle per frame",
     "photoreal_looks": "Mark front-ends through camera looks: the Pioneer",
@@ -57,7 +59,7 @@ TITLES = {
     "photoreal_looks_bodies_telephoto": "Mark front-ends through camera looks: random robots at telephoto (no rule "
                                         "chosen on them)",
     "photoreal_looks_context": "Mark front-ends through camera looks: the telephoto context model beside the hand-set "
-                               "bars (opt-in)",
+                               "bars",
     "photoreal_looks_halved": "Mark front-ends through camera looks: the scale space halved for large targets, side "
                               "by side",
     "photoreal_looks_clipped": "Mark front-ends through camera looks: a clipped channel as a bound, side by side",

@@ -1,18 +1,20 @@
-"""Which telephoto spots are marks, from their context: a fitted model over what surrounds each spot (opt-in).
+"""Which telephoto spots are marks, from their context: a fitted model over what surrounds each spot (the default).
 
 Where marks are 3 px and more (:data:`vision.spot_position.SMALL_SPOT_PX`) the contrast front-end
-(:mod:`vision.blobs`) keeps a spot by a cascade of hand-set bars, each chosen on the Pioneer: a ring of the body's
-paint around it, one paint it stands out from all round, the marks' common scale and contrast
+(:mod:`vision.blobs`) first kept a spot by a cascade of hand-set bars, each chosen on the Pioneer: a ring of the
+body's paint around it, one paint it stands out from all round, the marks' common scale and contrast
 (:mod:`vision.mark_selection`). On robots it never met those bars cost precision: 12 random robots at telephoto
 (``benchmarks/random_bodies.py``) through the named looks, recall 0.74-0.84 / precision 0.75-0.91; the second
 robot 0.62-0.90 / 0.27-0.74. The same measures weighed together by a logistic model on their quadratic expansion
 (:class:`vision.mark_scorer.MarkScorer`, ``evopose train-scorer --scale telephoto``), fitted on the Pioneer's
 telephoto training worlds and the random robots through random looks, its threshold keeping 98 % of their marks
 (the issue's recall bar) with each geometry held out, raises precision on worlds it never saw (BENCHMARKS.md, "The
-telephoto context model beside the hand-set bars") at about the bars' recall. It is not the default: real agents on
-the second robot's telephoto worlds were good on 34 of 48 frames with it against 36 with the bars (every published
-pose within 10 cm either way), so it is given explicitly: ``detect_contrast_marks(..., scorer=load(SHIPPED_CONTEXT))``, ``evopose agent --mark-scorer
-vision/mark_context.json``.
+telephoto context model beside the hand-set bars"): the second robot +4.7 to +20 points in every named look, at a
+recall 5.6 points lower through AgX and ``hable-faded``. Real agents weighed that trade (BENCHMARKS.md, "the
+telephoto context model as the default, side by side"): on the second robot through ``flat-cool`` good on 36 of 48
+frames against the bars' 29-31, one frame fewer through ``vivid-warm``, the rest a frame either way. So it is the
+default (``detect_contrast_marks(..., scorer="shipped")``); ``scorer="bars"``, ``evopose agent --mark-scorer bars``,
+asks for the bars.
 
 Every measure is relative to the spot itself, to the others of its image or to the target's extent, never a
 colour: one model serves any robot and palette. Shapes: points (K, 2) pixels ``(u, v)``, per-spot arrays (K,).
@@ -42,7 +44,7 @@ CONTEXT_FEATURES = (
     "log_radius_extent",   # log of its radius over the target's extent in pixels
     "nearest_radii",       # the nearest other spot, in its radii (capped at 10)
 )
-#: The shipped context model (``evopose train-scorer --scale telephoto``; opt-in, see the module's docstring).
+#: The shipped context model (``evopose train-scorer --scale telephoto``; the default, see the module's docstring).
 SHIPPED_CONTEXT = Path(__file__).with_name("mark_context.json")
 
 
