@@ -25,10 +25,11 @@ the skipping.
 
 Zenoh dispatches a sample to matching subscribers one after the other, and the marker too, from another thread: a
 sample dispatched while the marker is (this thread may be descheduled between the two rings for milliseconds) can
-sit before the marker in one ring and after it in the other. The join is made exact by the payloads handed on from
-the shared ring since the team-mate's ring was declared (their hashes, :attr:`_MateRing.handed`): samples before
-the marker in the team-mate's ring that were not handed on (skipped in the shared ring) are handed on from it, and
-its first samples after the marker that were handed on already are skipped. At a leave, a sample arriving in the
+sit before the marker in one ring and after it in the other. The join is made exact by the samples pulled from the shared
+ring since the team-mate's ring was declared, handed on or refused (their hashes, :attr:`_MateRing.handed`):
+samples before the marker in the team-mate's ring that were not pulled (skipped in the shared ring) are handed on
+from it, and its first samples after the marker that were pulled already are skipped (a refused one is counted
+once). At a leave, a sample arriving in the
 same instant may still be lost.
 
 Counting: a sample pulled and refused is counted at once (``oversized``, ``rate-limited``, ``overflow``). Samples
@@ -86,6 +87,13 @@ def ring_capacity(topic: Topic, image_ring: int) -> int:
     return int(min(MAX_RING, max(8, RING_BYTES // SIZE_LIMITS[topic])))
 
 
+def _digest(sample: zenoh.Sample, limit: int) -> int:
+    """A sample's identity in a join (:attr:`_MateRing.handed`): its payload's hash; a payload over ``limit`` bytes
+    is never copied, only its size is."""
+    size = len(sample.payload)
+    return hash(("oversized", size)) if size > limit else hash(sample.payload.to_bytes())
+
+
 class _Pace:
     """A token bucket for the shared ring's pulls."""
 
@@ -109,7 +117,8 @@ class _MateRing:
     past_marker: bool = False  #: its ring was read up to the hand-over marker (what came before is in the shared one)
     throttled: bool = False  #: it was over its budget since its last sample pulled: samples may be overwritten
     owed: int = 0  #: shared copies seen whose sample was not yet pulled from this ring
-    #: hashes of its payloads handed on from the shared ring since this ring was declared; None once the join is over
+    #: digests (_digest) of its samples pulled from the shared ring since this ring was declared, handed on or refused
+    #: (a refused one counted once); None once the join is over
     handed: set[int] | None = field(default_factory=set)
 
 
@@ -292,12 +301,11 @@ class TopicReceiver:
                     self._owed_at, self._owed_until = time.monotonic(), now + OWED_S
                 return
             del self._routed[vehicle]  # the unrouting marker was overwritten (a flood): end the skipping now
-        payload = self._admit(sample, key, key if self._alive(vehicle) else UNKNOWN_SENDER, self._shared_dropped)
-        if payload is not None:
+        mate = self._mates.get(vehicle)
+        if mate is not None and mate.handed is not None:  # its ring is declared: the join is under way, and what is
+            mate.handed.add(_digest(sample, self._limit))  # pulled here, handed on or refused, is not pulled again
+        if self._admit(sample, key, key if self._alive(vehicle) else UNKNOWN_SENDER, self._shared_dropped) is not None:
             self._shared_dropped = False
-            mate = self._mates.get(vehicle)
-            if mate is not None and mate.handed is not None:  # its ring is declared: the join is under way
-                mate.handed.add(hash(payload))
 
     def _ready(self, mate: _MateRing, now: float) -> bool:
         """Whether the team-mate's own ring is read now: once the shared ring passed its marker (or that marker was
@@ -311,7 +319,7 @@ class TopicReceiver:
                 sample = mate.subscriber.try_recv()
                 if sample is None or self._marker(sample) == _ROUTED:
                     break  # (an empty ring without the marker: it was overwritten, and what followed is skipped)
-                if sample.kind == _PUT and hash(sample.payload.to_bytes()) not in mate.handed:
+                if sample.kind == _PUT and _digest(sample, self._limit) not in mate.handed:
                     self._on_mate(mate, sample, now)
             mate.past_marker = True
         return True
@@ -337,7 +345,7 @@ class TopicReceiver:
         if sample.kind != _PUT:  # its marker, or a DELETE
             return
         if mate.handed is not None and mate.past_marker:  # its first samples after the marker: handed on already?
-            if hash(sample.payload.to_bytes()) in mate.handed:
+            if _digest(sample, self._limit) in mate.handed:
                 return
             mate.handed = None  # the first one that was not: the join is over
         if self._admit(sample, mate.key, mate.key, mate.throttled) is not None:
