@@ -267,27 +267,28 @@ def to_reference_look(bgr: np.ndarray, look: Look) -> np.ndarray:
     """The image (BGR uint8 (H, W, 3)) as the reference look would show it: each pixel's chroma over luma ``q``
     mapped by ``R(-turn) (q - neutral) / gain + neutral - shift``, its luma kept, with the turn, gain and shift
     that lie beyond the reference look's own spread (:func:`beyond_band`). The image itself when ``look`` is
-    within it (:attr:`Look.is_reference`)."""
+    within it (:attr:`Look.is_reference`).
+
+    With ``q = (c - 128) / Y`` for a pixel's chroma ``c`` (Cr, Cb) and luma ``Y``, the map is affine in
+    ``(Y, Cr, Cb)``: ``c' = 128 + M (c - 128) + Y (n - M n - shift)``, ``M = R(-turn) / gain``, one
+    ``cv2.transform`` in float (a black pixel, ``Y = 0``, keeps no chroma: 128)."""
     if look.is_reference:
         return bgr
     shift, gain, turn = beyond_band(look)
-    ycc = cv2.cvtColor(bgr, cv2.COLOR_BGR2YCrCb).astype(np.float32)
-    y = ycc[..., 0]
     c, s = np.cos(-turn), np.sin(-turn)
-    m = np.array([[c, -s], [s, c]], np.float32) / np.float32(gain)
-    neutral = np.asarray(look.neutral, np.float32)
-    q = np.subtract(ycc[..., 1:], np.float32(128.0))   # the same operations as q = (c - 128) / y - neutral, ...
-    q /= np.maximum(y, 1.0)[..., None]                   # in place
-    q -= neutral
-    q = q @ m.T
-    q += neutral
-    q -= shift.astype(np.float32)
-    q *= y[..., None]
-    q += np.float32(128.0)
-    ycc[..., 1:] = q
-    ycc += np.float32(0.5)
-    return cv2.cvtColor(np.clip(ycc, 0, 255, out=ycc).astype(np.uint8), cv2.COLOR_YCrCb2BGR)
-
+    m = np.array([[c, -s], [s, c]]) / gain
+    neutral = np.asarray(look.neutral, float)
+    affine = np.zeros((3, 4))
+    affine[0, 0] = 1.0                                   # Y kept
+    affine[1:, 0] = neutral - m @ neutral - shift        # Y (n - M n - shift)
+    affine[1:, 1:3] = m                                  # M c
+    affine[1:, 3] = 128.0 - m @ (128.0, 128.0)           # 128 - M 128
+    affine[:, 3] += 0.5                                  # rounded, then truncated as uint8
+    ycc = cv2.cvtColor(bgr, cv2.COLOR_BGR2YCrCb)
+    out = cv2.transform(ycc.astype(np.float32), affine.astype(np.float32))
+    out = np.clip(out, 0, 255, out=out).astype(np.uint8)
+    out[ycc[..., 0] == 0, 1:] = 128
+    return cv2.cvtColor(out, cv2.COLOR_YCrCb2BGR)
 
 
 class LookTracker:
