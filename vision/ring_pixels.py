@@ -16,12 +16,23 @@ from functools import lru_cache
 import numpy as np
 
 
-@lru_cache(maxsize=256)
+#: The bounds are widened to multiples of this (px) before the look-up: spots' radii are continuous, and a cache
+#: keyed by them never hit (0 of 858 calls on the second robot's frames).
+GRID_PX = 0.125
+
+
 def ring_pixels(first: int, size: int, lo: float, hi: float, inner: float, outer: float
                 ) -> tuple[np.ndarray, np.ndarray]:
     """The rows and columns (M,) each (window indices ``0 .. size - 1``) that a centre ``lo`` to ``hi`` from the
-    reference can have ``inner`` to ``outer`` px away (the module's docstring). Cached: the arrays are shared, not
-    to be written."""
+    reference can have ``inner`` to ``outer`` px away (the module's docstring), the bounds widened to
+    :data:`GRID_PX` (a superset still). Cached: the arrays are shared, not to be written."""
+    down, up = (lambda x: np.floor(x / GRID_PX) * GRID_PX), (lambda x: np.ceil(x / GRID_PX) * GRID_PX)
+    return _ring_pixels(int(first), int(size), float(down(lo)), float(up(hi)), float(down(inner)), float(up(outer)))
+
+
+@lru_cache(maxsize=1024)
+def _ring_pixels(first: int, size: int, lo: float, hi: float, inner: float, outer: float
+                 ) -> tuple[np.ndarray, np.ndarray]:
     k = first + np.arange(size, dtype=float)
     ends = np.stack([k - hi, k - lo])                                        # (2, size): the offset's range
     near = np.where((ends[0] <= 0) & (ends[1] >= 0), 0.0, np.abs(ends).min(axis=0))
