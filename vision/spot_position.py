@@ -113,7 +113,8 @@ def _recentred(lin: np.ndarray, peaks: np.ndarray, radius: np.ndarray, spot: np.
             u, v = centre[i, 0], centre[i, 1]
             x0, y0 = np.floor(u - reach).astype(int), np.floor(v - reach).astype(int)
             xg, yg = (x0[:, None] + offsets)[:, None, :], (y0[:, None] + offsets)[:, :, None]   # (N, 1, S), (N, S, 1)
-            inside = np.hypot(xg - u[:, None, None], yg - v[:, None, None]) <= reach
+            # within reach: squared distances per axis, summed (not hypot over the whole window)
+            inside = np.square(xg - u[:, None, None]) + np.square(yg - v[:, None, None]) <= reach * reach
             a = coverage[moving[:, None, None], yg - origin[moving, 1, None, None],
                          xg - origin[moving, 0, None, None]] * inside
             total = a.sum(axis=(1, 2))
