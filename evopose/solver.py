@@ -25,8 +25,9 @@ from .problem import PoseProblem, View
 from .refine import TRACK_HARD_SCHEDULE, TRACK_SCHEDULE, annealing, refine
 from .robust_fit import robust_fit
 from .search import EvoPose
-from .trust import Confidence, assess, checked_in_time, converged, imprecise, track_confidence
-from .uncertainty import TrackReference, covariance
+from .trust import (MAX_CONFIDENT_ROTATION_SIGMA, Confidence, assess, checked_in_time, converged, imprecise,
+                    track_confidence)
+from .uncertainty import TrackReference, covariance, rotation_sigma
 from .weights import rule_weights
 
 #: Final polish of the best pose: hard nearest-neighbour steps (accepted only when the fitness drops).
@@ -169,6 +170,8 @@ def published(objective: PoseObjective, basin: np.ndarray, verdict: Confidence) 
     cov = mixture_covariance(objective, pose, matches)
     if not cov.ok and verdict.confident:   # no finite covariance for what goes out: not sure of it
         return pose, replace(verdict, covariance=cov, confident=False, reason="no covariance")
+    if verdict.confident and not rotation_sigma(cov.matrix) <= MAX_CONFIDENT_ROTATION_SIGMA:  # a rotation it leaves
+        return pose, replace(verdict, covariance=cov, confident=False, reason="unbounded rotation")   # open: nor
     return pose, replace(verdict, covariance=cov)
 
 

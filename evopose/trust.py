@@ -33,14 +33,21 @@ from .covariance import CovarianceEstimate, covariance, deviation, mutual_matche
 from .fitness import POINT_NOISE_PX, PoseObjective
 from .uncertainty import TrackReference, mahalanobis, rotation_sigma, same_image, shared_pairs, sum_of_squares
 
-__all__ = ["CONFIRM_SIGMAS", "GOOD_REASONS", "Confidence", "ConfidenceRules", "Judged", "Published", "Standing",
-           "Trust", "TrustLevel", "assess", "confirms", "converged", "imprecise", "checked_in_time", "judge", "settled",
-           "track_confidence"]
+__all__ = ["CONFIRM_SIGMAS", "GOOD_REASONS", "MAX_CONFIDENT_ROTATION_SIGMA", "Confidence", "ConfidenceRules", "Judged",
+           "Published", "Standing", "Trust", "TrustLevel", "assess", "confirms", "converged", "imprecise",
+           "checked_in_time", "judge", "settled", "track_confidence"]
 
 #: Stop reasons of a search that mean "the pose is good" (as opposed to a budget running out).
 GOOD_REASONS = ("good_fitness", "consensus", "stalled")
 #: A confirming search's confident pose within this many sigmas (its covariance) of the tracked one confirms it.
 CONFIRM_SIGMAS = 4.0
+#: No pose is confident whose published covariance (:func:`evopose.solver.published`) leaves its rotation unknown
+#: past half a turn (1 sigma, the worst axis, radians): it places the pose in no basin. bench_confidence's
+#: calibration set (seed 2026): 9 such confident answers at the paper's scale, 2 of them wrong (precision 98.7 ->
+#: 99.5 %); its judging set (seed 7): 4, 2 wrong (96.1 -> 96.9 %); a fresh set (seed 11): 3, none wrong (98.7 %
+#: either way); good answers unchanged on all three (a good pose is precise: 5 deg). A confident answer whose own
+#: covariance says its rotation is anywhere would tell a reader two things at once.
+MAX_CONFIDENT_ROTATION_SIGMA = float(np.pi)
 
 
 @dataclass(frozen=True)
@@ -135,7 +142,7 @@ class Confidence:
         That alternative.
     reason : str
         Why not confident ("" when confident): "no covariance", "few matches", "unmatched marks", "loose fit",
-        "ambiguous" (for tracking "previous not confident", "jumped"; for a search past its time "out of time").
+        "ambiguous" (the published pose: also "unbounded rotation", :data:`MAX_CONFIDENT_ROTATION_SIGMA`; for tracking "previous not confident", "jumped"; for a search past its time "out of time").
     sum_of_squares, runner_up_sum_of_squares : float
         :func:`evopose.uncertainty.sum_of_squares` of the estimate and of the runner-up (inf when there is none).
     """

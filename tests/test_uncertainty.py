@@ -261,6 +261,20 @@ def test_a_confident_basin_whose_published_covariance_cannot_be_computed_is_not_
     assert np.all(np.isfinite(pose))
 
 
+def test_a_pose_whose_covariance_leaves_its_rotation_unknown_is_not_confident():
+    # bench_confidence's calibration set (seed 2026), paper H1 51: one camera, 13 marks, untyped; eq. 1 prefers a
+    # wrong pose 30 deg off, whose covariance leaves its rotation unknown (17 rad at 1 sigma) and under which the
+    # other basins are all "the same": it was confident
+    from benchmarks.bench_confidence import make
+    from evopose.trust import MAX_CONFIDENT_ROTATION_SIGMA
+
+    sp = make("paper H1", 2026, 51)
+    sol = solve(sp.problem, seed=51)
+    assert rotation_sigma(sol.covariance) > MAX_CONFIDENT_ROTATION_SIGMA
+    assert not in_true_basin(sp, sol.pose)
+    assert not sol.confident and sol.confidence.reason == "unbounded rotation"
+
+
 def test_a_jump_within_one_frames_uncertainty_is_caught_by_the_track_of_a_slow_target():
     """At the paper's scale one frame knows its rotation to about 2 deg by the least-squares covariance of its
     pairs, the one :func:`evopose.trust.track_confidence` weighs a frame by (the published covariance, the marginal
