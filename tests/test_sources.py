@@ -313,3 +313,19 @@ def test_a_bad_mark_scorer_is_one_line_and_exit_2(capfd, h1_media, tmp_path):
     doc["names"] = [*doc["names"][:-1], "label_orange"]
     other.write_text(json.dumps(doc), encoding="utf-8")
     assert "the mark scorer was fitted on the features" in agent_error(capfd, *contrast, str(other))
+
+
+def test_mark_scorer_names_the_shipped_models_or_the_bars():
+    # --mark-scorer shipped (the default) and bars are names, not files; the agent's extractor takes either
+    from agents.vehicle.cameras import _mark_scorer
+    from agents.vehicle.config import AgentConfig
+    from scenarios.target import load_model
+    from vision.extract import feature_extractor
+
+    assert _mark_scorer(AgentConfig(fleet="f", vehicle="H1", scenario=None, mark_scorer="shipped")) is None
+    assert _mark_scorer(AgentConfig(fleet="f", vehicle="H1", scenario=None)) is None
+    assert _mark_scorer(AgentConfig(fleet="f", vehicle="H1", scenario=None, mark_scorer="bars")) == "bars"
+    model = load_model("pioneer")
+    assert callable(feature_extractor("contrast", model, None, "bars"))
+    with pytest.raises(ValueError, match="scorer must be"):
+        feature_extractor("contrast", model, None, "best")
