@@ -214,13 +214,10 @@ class _MarkerFirst:
         self._subscriber.undeclare()
 
 
-@pytest.mark.parametrize("late_in", ["team-mate's ring", "shared ring"])
-def test_a_sample_racing_the_join_marker_is_delivered_once(endpoint, monkeypatch, late_in):
-    """At a join a sample dispatched while the hand-over marker is can sit before the marker in one ring and after
-    it in the other (Zenoh fills the rings one after the other). Forced here: the sample is put into both rings just
-    before the marker, and one ring gives them out swapped. After it in the team-mate's ring it was delivered twice,
-    after it in the shared ring not at all; either way it arrives once, and what follows too."""
-    racing: dict = {}
+def _racing_receiver(racing: dict, late_in: str | None) -> type:
+    """A receiver that, when it joins a team-mate, first puts ``racing["payload"]`` on the team-mate's key: in both
+    rings just before the hand-over marker, then given out after the marker by the ring ``late_in`` names (None:
+    in order)."""
 
     class Racing(receiver_module.TopicReceiver):
         def _mark(self, key: str, what: bytes) -> None:
@@ -229,11 +226,22 @@ def test_a_sample_racing_the_join_marker_is_delivered_once(endpoint, monkeypatch
                 self._session.put(key, racing.pop("payload"))  # session-local: in both rings before the marker
                 if late_in == "shared ring":
                     self._shared = _MarkerFirst(self._shared, key)
-                else:
+                elif late_in is not None:
                     mate.subscriber = _MarkerFirst(mate.subscriber, key)
             super()._mark(key, what)
 
-    monkeypatch.setattr(bus_module, "TopicReceiver", Racing)
+    return Racing
+
+
+@pytest.mark.parametrize("late_in", ["team-mate's ring", "shared ring"])
+def test_a_sample_racing_the_join_marker_is_delivered_once(endpoint, monkeypatch, late_in):
+    """At a join a sample dispatched while the hand-over marker is can sit before the marker in one ring and after
+    it in the other (Zenoh fills the rings one after the other). Forced here: the sample is put into both rings just
+    before the marker, and one ring gives them out swapped. After it in the team-mate's ring it was delivered twice,
+    after it in the shared ring not at all; either way it arrives once, and what follows too."""
+    racing: dict = {}
+
+    monkeypatch.setattr(bus_module, "TopicReceiver", _racing_receiver(racing, late_in))
     with open_bus("tx", endpoint, listen=True) as tx, open_bus("rx", endpoint) as rx:
         racing["payload"] = encode(message(tx, Topic.ATTITUDE, seq=0))
         assert rx.wait_for_teammates({"tx"}, DEADLINE)
@@ -256,18 +264,7 @@ def test_a_refused_sample_at_the_join_is_counted_once(endpoint, monkeypatch, lat
     once in `make test`, under load). Forced as in the test above, in order and swapped either way."""
     racing: dict = {}
 
-    class Racing(receiver_module.TopicReceiver):
-        def _mark(self, key: str, what: bytes) -> None:
-            mate = next((m for m in self._mates.values() if m.key == key), None)
-            if what == receiver_module._ROUTED and mate is not None and "payload" in racing:
-                self._session.put(key, racing.pop("payload"))  # session-local: in both rings before the marker
-                if late_in == "shared ring":
-                    self._shared = _MarkerFirst(self._shared, key)
-                elif late_in is not None:
-                    mate.subscriber = _MarkerFirst(mate.subscriber, key)
-            super()._mark(key, what)
-
-    monkeypatch.setattr(bus_module, "TopicReceiver", Racing)
+    monkeypatch.setattr(bus_module, "TopicReceiver", _racing_receiver(racing, late_in))
     with open_bus("tx", endpoint, listen=True) as tx, open_bus("rx", endpoint) as rx:
         racing["payload"] = b"\x00" * (SIZE_LIMITS[Topic.ATTITUDE] + 1)
         assert rx.wait_for_teammates({"tx"}, DEADLINE)
