@@ -34,21 +34,16 @@ def test_the_quadratic_model_separates_what_no_single_measure_does():
     assert right > 0.9 and single < 0.6, (right, single)
 
 
-def test_a_feature_far_past_the_fitted_data_scores_as_at_the_limit():
+def test_a_feature_far_past_the_fitted_data_scores_as_at_the_limit(monkeypatch):
     # a quadratic model extrapolated turns over: a spot far brighter than any fitted one must not read as no mark
     scorer = shipped()
-    row = scorer.mean.copy()
-    far, limit = row.copy(), row.copy()
+    far, limit = scorer.mean.copy(), scorer.mean.copy()
     far[0] += 50 * scorer.scale[0]
     limit[0] += mark_scorer.Z_LIMIT * scorer.scale[0]
     p_far, p_limit = scorer.probability(np.stack([far, limit]))
     assert p_far == p_limit
-    mark_scorer_z = mark_scorer.Z_LIMIT
-    try:  # and without the limit the far row is scored otherwise (the limit is what the test measures)
-        mark_scorer.Z_LIMIT = np.inf
-        assert scorer.probability(far[None])[0] != p_limit
-    finally:
-        mark_scorer.Z_LIMIT = mark_scorer_z
+    monkeypatch.setattr(mark_scorer, "Z_LIMIT", np.inf)   # without the limit the far row is scored otherwise
+    assert scorer.probability(far[None])[0] != p_limit
 
 
 def test_a_saved_scorer_reads_back_the_same(tmp_path):
@@ -146,7 +141,9 @@ def test_the_scorer_only_acts_on_spots_under_three_pixels():
     refuses_all = replace(shipped(), bias=-1e6)
     a = detect_contrast_marks(image, world.model.palette, prior, body=world.model.body_colour)
     b = detect_contrast_marks(image, world.model.palette, prior, body=world.model.body_colour, scorer=refuses_all)
-    assert len(a) > 5
+    from vision.mark_context import CONTEXT_FEATURES
+
+    assert len(a) > 5 and a.features.shape == (len(a), len(CONTEXT_FEATURES))   # the context model decided
     np.testing.assert_array_equal(a.points, b.points)
 
 

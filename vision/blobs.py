@@ -168,11 +168,12 @@ class ContrastMarks(MarkDetections):
 SCORER_NAMES = ("shipped", "bars", "all")
 
 
-def _scorers(scorer: MarkScorer | str | None, names: tuple[str, ...]
-             ) -> tuple[MarkScorer | str | None, MarkScorer | str | None]:
-    """The small-spot scorer and the context model that ``scorer`` names (None: the hand-set bars there). A model
-    given replaces the shipped one of its kind and keeps the other; the shipped small-spot scorer serves any
-    palette whose features it was fitted on (else the bars)."""
+def resolve_scorers(scorer: MarkScorer | str | None, names: tuple[str, ...]
+                    ) -> tuple[MarkScorer | str | None, MarkScorer | str | None]:
+    """The small-spot scorer and the context model that ``scorer`` names for a palette of ``names`` (None: the
+    hand-set bars there; see :func:`detect_contrast_marks`). A model given replaces the shipped one of its kind and
+    keeps the other; the shipped small-spot scorer serves any palette whose features it was fitted on (else the
+    bars). ValueError for an unknown name or a small-spot scorer fitted on other features."""
     if isinstance(scorer, str) and scorer not in SCORER_NAMES:
         raise ValueError(f"scorer must be a MarkScorer, {', '.join(map(repr, SCORER_NAMES))} or None, got {scorer!r}")
     if scorer is None or scorer == "bars":
@@ -183,6 +184,9 @@ def _scorers(scorer: MarkScorer | str | None, names: tuple[str, ...]
     if scorer == "shipped" or is_context_model(scorer):
         fitted = shipped()
         return (fitted if fitted is not None and fitted.names == feature_names(names) else None), context
+    if scorer.names != feature_names(names):
+        raise ValueError(f"the mark scorer was fitted on the features {', '.join(scorer.names)}; the front-end "
+                         f"computes {', '.join(feature_names(names))}")
     return scorer, context
 
 
@@ -226,10 +230,7 @@ def detect_contrast_marks(image_bgr: np.ndarray, palette: Mapping[str, tuple[int
     clipped = clipped_channels(bgr) if body is not None else None
     if isinstance(look, Look):
         bgr = to_reference_look(bgr, look)
-    scorer, context = _scorers(scorer, names)
-    if isinstance(scorer, MarkScorer) and scorer.names != feature_names(names):
-        raise ValueError(f"the mark scorer was fitted on the features {', '.join(scorer.names)}; the front-end "
-                         f"computes {', '.join(feature_names(names))}")
+    scorer, context = resolve_scorers(scorer, names)
     settings = dict(k_sigma=k_sigma, max_edge_ratio=max_edge_ratio, max_misfit=max_misfit, max_marks=max_marks,
                     scorer=scorer, context=context)
     lin = _LINEAR_OF_BYTE[bgr]

@@ -24,12 +24,11 @@ from typing import Protocol
 import numpy as np
 
 from evopose import Bounds, Camera
-from vision.blobs import SCORER_NAMES, MarkPrior, crop_margin, detect_contrast_marks, mark_prior
+from vision.blobs import MarkPrior, crop_margin, detect_contrast_marks, mark_prior, resolve_scorers
 from vision.camera_look import LookTracker, estimate_look
-from vision.mark_context import is_context_model
 from vision.label_chroma import LabelChromaGate, spot_chroma
 from vision.features import colour_ranges, detect_colour_marks, detect_corners, x_junctions
-from vision.mark_scorer import MarkScorer, feature_names
+from vision.mark_scorer import MarkScorer
 from vision.spot_position import SMALL_SPOT_PX
 from vision.window import grown, locate_body, target_window
 from scenarios.fleet import FEATURE_KINDS
@@ -105,11 +104,7 @@ def feature_extractor(kind: str, target: TargetModel, area: Bounds | None = None
     if kind != "contrast":
         raise ValueError(f"features must be one of {', '.join(FEATURE_KINDS)}, got {kind!r}")
     palette, size, body = dict(target.palette), target.size, target.body_colour
-    if isinstance(scorer, str) and scorer not in SCORER_NAMES:
-        raise ValueError(f"scorer must be a MarkScorer, {', '.join(map(repr, SCORER_NAMES))} or None, got {scorer!r}")
-    if isinstance(scorer, MarkScorer) and not is_context_model(scorer) and scorer.names != feature_names(tuple(palette)):
-        raise ValueError(f"the mark scorer was fitted on the features {', '.join(scorer.names)}; this model's are "
-                         f"{', '.join(feature_names(tuple(palette)))}")
+    resolve_scorers(scorer, tuple(palette))   # a bad name or file is an error now, not at the first frame
 
     looks: dict[tuple, LookTracker] = {}   # per camera (its intrinsics): a camera keeps its look
     gates: dict[tuple, LabelChromaGate] = {}   # and its encoder: whether its 2-4 px marks keep their colour

@@ -1,8 +1,8 @@
 """Which telephoto spots are marks, from their context: a fitted model over what surrounds each spot (the default).
 
 Where marks are 3 px and more (:data:`vision.spot_position.SMALL_SPOT_PX`) the contrast front-end
-(:mod:`vision.blobs`) first kept a spot by a cascade of hand-set bars, each chosen on the Pioneer: a ring of the
-body's paint around it, one paint it stands out from all round, the marks' common scale and contrast
+(:mod:`vision.blobs`) can keep a spot by a cascade of hand-set bars (``scorer="bars"``), each chosen on the
+Pioneer: a ring of the body's paint around it, one paint it stands out from all round, the marks' common scale and contrast
 (:mod:`vision.mark_selection`). On robots it never met those bars cost precision: 12 random robots at telephoto
 (``benchmarks/random_bodies.py``) through the named looks, recall 0.74-0.84 / precision 0.75-0.91; the second
 robot 0.62-0.90 / 0.27-0.74. The same measures weighed together by a logistic model on their quadratic expansion

@@ -74,7 +74,8 @@ NEIGHBOUR_PX, FAR_PX = 3.5, 20.0
 SHIPPED = Path(__file__).with_name("mark_scorer.json")
 #: A standardised feature is held within this many standard deviations before it is scored: the quadratic model
 #: knows nothing past the data it was fitted on, and extrapolated it can turn over (a clean, noise-free image's
-#: contrast 14 sd over the fitted mean scored a plain mark 6e-6). The committed camera frames reach 6.6 sd.
+#: contrast 14 sd over the fitted mean scored a plain mark 6e-6). Set after reading the committed camera frames'
+#: range (6.6 sd at the paper's scale, 3.4 at telephoto), so not held out from them; no output of theirs moved.
 Z_LIMIT = 6.0
 
 

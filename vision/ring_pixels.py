@@ -11,6 +11,7 @@ then selects exactly, so its result is the one the whole window gives.
 
 from __future__ import annotations
 
+import math
 from functools import lru_cache
 
 import numpy as np
@@ -26,8 +27,15 @@ def ring_pixels(first: int, size: int, lo: float, hi: float, inner: float, outer
     """The rows and columns (M,) each (window indices ``0 .. size - 1``) that a centre ``lo`` to ``hi`` from the
     reference can have ``inner`` to ``outer`` px away (the module's docstring), the bounds widened to
     :data:`GRID_PX` (a superset still). Cached: the arrays are shared, not to be written."""
-    down, up = (lambda x: np.floor(x / GRID_PX) * GRID_PX), (lambda x: np.ceil(x / GRID_PX) * GRID_PX)
-    return _ring_pixels(int(first), int(size), float(down(lo)), float(up(hi)), float(down(inner)), float(up(outer)))
+    return _ring_pixels(int(first), int(size), _down(lo), _up(hi), _down(inner), _up(outer))
+
+
+def _down(x: float) -> float:
+    return math.floor(x / GRID_PX) * GRID_PX
+
+
+def _up(x: float) -> float:
+    return math.ceil(x / GRID_PX) * GRID_PX
 
 
 @lru_cache(maxsize=1024)
