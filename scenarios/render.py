@@ -2,12 +2,14 @@
 
 OpenCV drawing, no per-pixel Python loops:
 
-1. sky, and a seeded procedural ground texture warped onto the ground plane ``z = 0`` by its homography;
+1. sky, and a seeded procedural ground texture warped onto the ground plane ``z = 0`` by its homography
+   (:mod:`scenarios.ground`);
 2. the target's body and the occluders as flat-shaded convex faces, back faces culled, far to near
    (painter's algorithm), projected through the camera's plumb_bob distortion;
 3. the marks as discs on the body (their outline projected, so perspective shapes them), only where
    the mark's centre faces the camera and no face hides it; faces that hide part of a mark are drawn again over it;
-4. distractor blobs in the mark colours (false positives), then blur, a lighting gain and sensor noise;
+4. distractor blobs in the mark colours (false positives), then blur, a lighting gain and sensor noise
+   (:mod:`scenarios.sensor_noise`);
 5. for a degraded camera (:mod:`scenarios.degrade`): an occluding band over part of the target, more distractors,
    heavier blur.
 
@@ -26,7 +28,6 @@ Every random draw of frame N comes from a generator seeded by ``(scenario seed, 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from functools import lru_cache
 
 import cv2
 import numpy as np
@@ -38,10 +39,12 @@ from .camera_model import capture, linear_from_srgb, srgb_from_linear
 from .clutter import clutter_mesh
 from .degrade import (OCCLUDER_COLOUR, STREAM_DEGRADED, composed_blur, draw_band, inside_band, occluder_band,
                       target_box)
+from .ground import ground_and_sky
 from .mesh import Mesh, box_mesh, first_hits, hits
+from .sensor_noise import gain_and_noise
 from .sensors import stream_rng
 from .shading import SHIFT, ellipse_linear, fill_linear, lit_linear  # SHIFT: fixed-point bits of drawing (1/16 px)
-from .world import GroundSpec, LightingSpec, RenderSpec, Scenario, Vehicle
+from .world import LightingSpec, RenderSpec, Scenario, Vehicle
 
 #: Points per mark outline (its projected polygon, and the samples of the partial-visibility test).
 MARK_OUTLINE = 24
@@ -49,15 +52,11 @@ MARK_OUTLINE = 24
 MARK_LIFT = 0.003
 #: Faces with a vertex nearer than this (metres, optical axis) are not drawn.
 NEAR_CLIP = 0.05
-#: Side of the square ground texture, texels (a power of two: the FFT noise tiles seamlessly).
-TEXTURE_SIZE = 1024
-#: Largest HSV saturation (0-255) of the ground texture.
-MAX_GROUND_SATURATION = 60
 #: A mark seen more obliquely than this (cosine between its normal and the line of sight) is a sliver,
 #: not a disc: it does not count as visible in the ground truth.
 MIN_FACING_COS = 0.2
 #: Stream numbers of the scenario's random processes (see :func:`scenarios.sensors.stream_rng`).
-STREAM_GROUND, STREAM_FRAME = 101, 202
+STREAM_FRAME = 202
 #: Stream of the camera model's sensor noise (a frame's noise does not depend on how many blobs were drawn).
 STREAM_CAMERA = 404
 
@@ -125,62 +124,6 @@ class RenderedFrame:
     image: np.ndarray
     camera: Camera
     truth: FrameTruth
-
-
-@lru_cache(maxsize=8)
-def ground_texture(seed: int, colour: tuple[int, int, int], contrast: float) -> np.ndarray:
-    """Seamless procedural ground texture, shape (TEXTURE_SIZE, TEXTURE_SIZE, 3) uint8.
-
-    1/f noise made in the frequency domain (so it tiles), plus a little per-channel variation.
-    """
-    rng = stream_rng(seed, STREAM_GROUND)
-    n = TEXTURE_SIZE
-    f = np.fft.fftfreq(n)[:, None] ** 2 + np.fft.rfftfreq(n)[None, :] ** 2
-    amplitude = 1.0 / np.maximum(np.sqrt(f), 1.0 / n) ** 1.1
-    layers = []
-    for _ in range(2):
-        spectrum = amplitude * (rng.standard_normal(f.shape) + 1j * rng.standard_normal(f.shape))
-        layer = np.fft.irfft2(spectrum, s=(n, n))
-        layers.append((layer - layer.mean()) / layer.std())
-    grain = rng.standard_normal((n, n)) * 0.35
-    base = np.asarray(colour, float)
-    tex = base + contrast * (layers[0] + grain)[..., None] + 0.3 * contrast * layers[1][..., None] * [1.0, -0.5, -0.5]
-    tex = np.clip(tex, 0, 255).astype(np.uint8)
-    # earth, gravel and asphalt are dull: keep the saturation well below that of paint (the marks)
-    hsv = cv2.cvtColor(tex, cv2.COLOR_BGR2HSV)
-    hsv[..., 1] = np.minimum(hsv[..., 1], MAX_GROUND_SATURATION)
-    return cv2.cvtColor(hsv, cv2.COLOR_HSV2BGR)
-
-
-def _background(camera: Camera, ground: GroundSpec, seed: int, shade: float, linear: bool = False) -> np.ndarray:
-    """Sky and textured ground plane ``z = 0`` seen by ``camera`` (distortion ignored for the background):
-    uint8, or with ``linear`` float32 linear light (the sky's colour is its radiance)."""
-    w, h = camera.width, camera.height
-    c_from_w = camera.camera_from_world
-    K = camera.matrix
-    texel = ground.texel
-    # image ~ K [r1 r2 t] [x y 1]^T and texture pixel (col, row) = (x, y) / texel
-    H = K @ np.column_stack([c_from_w[:3, 0], c_from_w[:3, 1], c_from_w[:3, 3]]) @ np.diag([texel, texel, 1.0])
-    tex = ground_texture(seed, tuple(ground.colour), float(ground.contrast))
-    image = cv2.warpPerspective(tex, H, (w, h), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_WRAP)
-    if linear:  # texture colours are sRGB-encoded reflectances: light them in linear light
-        image = linear_from_srgb(image)
-        if shade != 1.0:
-            image *= np.float32(shade)
-    elif shade != 1.0:
-        image = cv2.convertScaleAbs(image, alpha=shade)
-    # rays that do not reach the ground in front of the camera see the sky
-    ray_z = (camera.world_from_camera[:3, :3] @ np.linalg.inv(K))[2]  # world z of the ray through (u, v, 1)
-    u = np.arange(w, dtype=np.float32)
-    v = np.arange(h, dtype=np.float32)
-    dz = ray_z[0] * u[None, :] + ray_z[1] * v[:, None] + ray_z[2]
-    height = camera.world_from_camera[2, 3]
-    sky = (dz >= -1e-6) if height > 0 else np.ones((h, w), bool)
-    if sky.any():
-        gradient = np.clip(0.75 + 0.25 * (v / h), 0, 1)[:, None, None] * np.asarray(ground.sky, np.float32)
-        sky_img = np.broadcast_to(gradient, (h, w, 3)).astype(np.uint8)
-        image[sky] = linear_from_srgb(sky_img[sky]) if linear else sky_img[sky]
-    return image
 
 
 def _face_shades(normals_cam: np.ndarray, sun_cam: np.ndarray, ambient: float) -> np.ndarray:
@@ -292,19 +235,6 @@ def _draw_distractors(image: np.ndarray, rng: np.random.Generator, render: Rende
     return np.array(uv_out).reshape(-1, 2), colours
 
 
-def _gain_and_noise(image: np.ndarray, gain: float, sigma: float, seed: int) -> np.ndarray:
-    """``image * gain`` plus Gaussian sensor noise of ``sigma`` grey levels, rounded and saturated to uint8.
-
-    OpenCV's generator (seeded per frame, so a frame renders the same every time) and arithmetic: about 4x
-    faster than numpy's here, and outside the interpreter lock, so an agent's other threads keep running.
-    """
-    noise = np.zeros(image.shape, np.float32)
-    if sigma > 0:
-        cv2.setRNGSeed(seed)
-        cv2.randn(noise.reshape(-1), 0.0, float(sigma))  # one channel: a scalar sigma would reach only blue
-    return cv2.addWeighted(image, float(gain), noise, 1.0, 0.0, dtype=cv2.CV_8U)
-
-
 def render_frame(scenario: Scenario, frame: int, vehicle: str | None = None, *, clean: bool = False) -> RenderedFrame:
     """Render what ``vehicle`` (default: the first) sees at ``frame``.
 
@@ -331,7 +261,7 @@ def render_frame(scenario: Scenario, frame: int, vehicle: str | None = None, *, 
     sun = np.asarray(light.sun, float)
     ground_shade = light.ambient + (1 - light.ambient) * max(sun[2] / np.linalg.norm(sun), 0)
     linear = render.camera_model is not None
-    image = _background(camera, render.ground, scenario.seed, ground_shade, linear)
+    image = ground_and_sky(camera, render.ground, scenario.seed, ground_shade, linear)
 
     model = scenario.model
     world_from_target = matrix_from_pose(scenario.target_pose(frame))
@@ -419,7 +349,7 @@ def render_frame(scenario: Scenario, frame: int, vehicle: str | None = None, *, 
                 image *= np.float32(gain)
             image = capture(image, render.camera_model, stream_rng(scenario.seed, STREAM_CAMERA, veh.index, frame)).image
         elif gain != 1.0 or render.noise_sigma > 0:
-            image = _gain_and_noise(image, gain, render.noise_sigma, int(rng.integers(1, 2**31)))
+            image = gain_and_noise(image, gain, render.noise_sigma, int(rng.integers(1, 2**31)))
     if linear and clean:
         image = srgb_from_linear(image)
 

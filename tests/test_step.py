@@ -207,11 +207,11 @@ def test_feature_sets_carry_the_best_and_team_mates_agree(paper_scale):
 
 def test_searches_in_generation_slices_stop_at_the_fixed_starts():
     """Team-mates' searches in slices of a fixed number of generations must end in the same frame, to begin their
-    tracks from the same weighed pose. On exp2-driving's first frame (both views) the search of seed 0 settles
-    within 4 generations and that of seed 1 does not (evopose/search.py's settled stop); in slices of 4 neither
+    tracks from the same weighed pose. On exp2's first frame (both views) the search of seed 0 settles within 4
+    generations and that of seed 1 does not (evopose/search.py's settled stop: 3 and 6); in slices of 4 neither
     ends in the first (249 starts, fewer than 256 times the start factor), as tests/test_paper_scale.py's
     team-mates (seeds 0 and 1) need."""
-    scenario = load_scenario("exp2-driving")
+    scenario = load_scenario("exp2")
     own = [SimulatedCamera(scenario, v).acquire(0, 0) for v in ("H1", "H2")]
     views, _ = build_views([own_view(v, f.stamp_ns, f.camera, f.points) for v, f in zip(("H1", "H2"), own)])
     whole = {}

@@ -27,7 +27,7 @@ from geometry import matrix_from_pose
 
 from ..errors import ScenarioError
 from ..mesh import box_mesh
-from ..render import TEXTURE_SIZE, ground_texture
+from ..ground import TEXTURE_SIZE, ground_texture
 from ..world import Scenario
 from .shapes import clutter_solid, from_mesh, join, mark_disc
 
