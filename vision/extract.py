@@ -10,10 +10,10 @@ Shi-Tomasi corners (:func:`vision.features.detect_corners`) and keeps the X-junc
 of boxes are L-corners and would let a grid shifted by one square fit as well as the true one. Either way the
 points are unordered: EvoPose needs no correspondences (eq. 1). Marks come with their colour's index in the
 model's palette (:func:`feature_extractor`), the label a point is matched by (our extension of eq. 1,
-:attr:`evopose.Model.labels`); corners are untyped. ``contrast`` looks for the marks in a window of the image
-(:mod:`vision.window`): around the projection of a pose the target is expected near (``near``: a vehicle's last
-good one), else (given the camera and the operating area) around the body's paint found at half resolution; the
-whole image when the window gives too few.
+:attr:`evopose.Model.labels`); corners are untyped. ``contrast`` and ``marks`` look for the marks in a window of
+the image (:mod:`vision.window`): around the projection of a pose the target is expected near (``near``: a vehicle's
+last good one), else (``contrast``, given the camera and the operating area) around the body's paint found at half
+resolution; the whole image when the window gives too few.
 """
 
 from __future__ import annotations
@@ -43,8 +43,8 @@ class FeatureExtractor(Protocol):
     """``extract(image (H, W, 3) uint8, camera or None, near=None) -> (points (N, 2), labels (N,) or None)``: every
     detector behind one call. ``camera`` (with its ``world_from_camera``) lets a detector know how large the target's
     marks can be in this image (:func:`vision.blobs.mark_prior`); without it a generic range is searched. ``near``, a
-    pose (``world_from_target`` (6,)) the target is expected near (the last good estimate): ``contrast`` then looks in
-    a window around its projection first (:mod:`vision.window`); the other detectors take the whole image."""
+    pose (``world_from_target`` (6,)) the target is expected near (the last good estimate): ``contrast`` and ``marks``
+    then look in a window around its projection first (:mod:`vision.window`); ``corners`` takes the whole image."""
 
     def __call__(self, image: np.ndarray, camera: Camera | None = None,
                  near: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray | None]:
@@ -92,11 +92,19 @@ def feature_extractor(kind: str, target: TargetModel, area: Bounds | None = None
         raise ValueError("resolve 'auto' first (resolve_features): whether the images come from a camera")
     if kind == "corners":
         return lambda image, camera=None, near=None: (chessboard_corners(image), None)
+    outline = target.body.vertices if len(target.body.vertices) else target.mark_points
     if kind == "marks":
         ranges = colour_ranges(target.palette)
 
         def hue_marks(image: np.ndarray, camera: Camera | None = None,
                       near: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+            # hue bands need no ground around the body: the window is the body's projection and the slack
+            window = None if near is None or camera is None else target_window(camera, near, outline, 0.0)
+            if window is not None:
+                y0, y1, x0, x1 = window
+                found = detect_colour_marks(image[y0:y1, x0:x1], ranges)
+                if len(found.points) >= MIN_WINDOW_MARKS:
+                    return found.points + (x0, y0), found.labels
             found = detect_colour_marks(image, ranges)
             return found.points, found.labels
 
@@ -108,7 +116,6 @@ def feature_extractor(kind: str, target: TargetModel, area: Bounds | None = None
 
     looks: dict[tuple, LookTracker] = {}   # per camera (its intrinsics): a camera keeps its look
     gates: dict[tuple, LabelChromaGate] = {}   # and its encoder: whether its 2-4 px marks keep their colour
-    outline = target.body.vertices if len(target.body.vertices) else target.mark_points
 
     def contrast_marks(image: np.ndarray, camera: Camera | None = None,
                        near: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
