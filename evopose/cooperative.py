@@ -91,7 +91,8 @@ class Cooperation:
         return PoseProblem(self.model, tuple(views), constrained_bounds(self.bounds, knowledge), hints)
 
     def estimate(self, st: EstimatorState, views: Sequence[View], *, knowledge: Sequence[Knowledge] = (),
-                 hints: np.ndarray | None = None, frame: int = 0, budget_s: float | None = None,
+                 hints: np.ndarray | None = None, frame: int = 0, instant: float | None = None,
+                 budget_s: float | None = None,
                  candidates: np.ndarray | None = None, candidate_margin: float = 0.0,
                  generations: int | None = None, clock: Callable[[], float] = time.perf_counter
                  ) -> tuple[EstimatorState, Estimate]:
@@ -107,6 +108,10 @@ class Cooperation:
             Team-mates' poses received since the last frame.
         frame : int
             Frame number, for the seed of a search from scratch.
+        instant : float, optional
+            When the views' images were taken, in frame periods (None: ``frame``): eq. (2)'s constant-velocity
+            prediction moves by the images' time, so a vehicle processing an instant a tick late predicts the pose
+            its team-mates do.
         budget_s : float, optional
             Seconds a search from scratch may run in this call (None: until it stops); tracking is not cut.
         candidates : array (K, 6), optional
@@ -131,13 +136,13 @@ class Cooperation:
             raise ValueError("estimate needs at least one view")
         problem = self.problem(views, knowledge, hints)
         deadline = None if budget_s is None else clock() + budget_s
-        st = replace(st, frame=frame)
+        st = replace(st, frame=frame, instant=float(frame if instant is None else instant))
         start = self.start(st, problem, candidates, candidate_margin)
         if start is not None:
             own_last = st.last is not None and st.search is None and np.array_equal(start, st.last.pose)
             previous = (st.last if own_last
                         else self._solution_at(start, problem, self._rivals(st, start, candidates)))
-            predicted = self._predicted(st, frame, start)
+            predicted = self._predicted(st, start)
             extra = problem.hints if predicted is None else np.concatenate([problem.hints, predicted[None]])
             solution = track(previous.with_(pose=start), list(views), problem=problem, options=self.options,
                              seed=np.random.default_rng([self.seed, frame]), lost_mismatch=self.lost_mismatch,
@@ -212,12 +217,13 @@ class Cooperation:
         return EvoPose(problem, self.options if generations is None else replace(self.options, settled_supporters=0))
 
     @staticmethod
-    def _predicted(st: EstimatorState, frame: int, start: np.ndarray) -> np.ndarray | None:
+    def _predicted(st: EstimatorState, start: np.ndarray) -> np.ndarray | None:
         """Eq. (2) with a constant-velocity guess: ``start`` moved on by the motion between the last two converged
-        estimates, for a target that moves between frames (None without two of them)."""
-        if st.motion is None or frame <= st.motion[0]:
+        estimates to the state's :attr:`~EstimatorState.instant`, for a target that moves between frames (None
+        without two of them)."""
+        if st.motion is None or st.instant <= st.motion[0]:
             return None
-        return start + st.motion[1] * (frame - st.motion[0])
+        return start + st.motion[1] * (st.instant - st.motion[0])
 
     def start(self, st: EstimatorState, problem: PoseProblem, candidates: np.ndarray | None,
               margin: float = 0.0) -> np.ndarray | None:

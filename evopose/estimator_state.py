@@ -106,8 +106,11 @@ class EstimatorState:
         Of ``last`` under ``evaluator.objective``.
     frame : int
         The frame last estimated.
+    instant : float
+        When that frame's images were taken, in frame periods (eq. 2's motion is per period of the images' time,
+        not of the frames an estimator processed: a vehicle that ran a tick late predicts as its team-mates do).
     last_converged, motion : tuple or None
-        ``(frame, pose (6,))`` of the last converged estimate; ``(frame, pose change per frame)`` at it.
+        ``(instant, pose (6,))`` of the last converged estimate; ``(instant, pose change per frame period)`` at it.
     idle : int
         Generations run between frames so far (seeds the next one's mutations).
     """
@@ -118,8 +121,9 @@ class EstimatorState:
     evaluator: Evaluator | None = None
     best_fitness: float = np.inf
     frame: int = 0
-    last_converged: tuple[int, np.ndarray] | None = None
-    motion: tuple[int, np.ndarray] | None = None
+    instant: float = 0.0
+    last_converged: tuple[float, np.ndarray] | None = None
+    motion: tuple[float, np.ndarray] | None = None
     idle: int = 0
 
     def without_anchor(self) -> "EstimatorState":
@@ -138,14 +142,14 @@ class EstimatorState:
 
     def with_motion(self, solution: Solution | None) -> "EstimatorState":
         """The state remembering ``solution`` (converged, or None) as the last converged estimate, and the velocity
-        per frame between the last two (for eq. 2's prediction)."""
-        frame, previous = self.frame, self.last_converged
-        st = replace(self, last_converged=None if solution is None else (frame, np.array(solution.pose)))
-        if solution is None or previous is None or frame <= previous[0]:
+        per frame period between the last two (for eq. 2's prediction), both at :attr:`instant`."""
+        instant, previous = self.instant, self.last_converged
+        st = replace(self, last_converged=None if solution is None else (instant, np.array(solution.pose)))
+        if solution is None or previous is None or instant <= previous[0]:
             return replace(st, motion=None)
         delta = np.array(solution.pose) - previous[1]
         delta[3:] = wrap_angle(delta[3:])
-        return replace(st, motion=(frame, delta / (frame - previous[0])))
+        return replace(st, motion=(instant, delta / (instant - previous[0])))
 
     @property
     def current_best(self) -> np.ndarray | None:

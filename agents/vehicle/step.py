@@ -232,15 +232,18 @@ def step(state: VehicleState, inputs: FrameInputs) -> tuple[VehicleState, list[M
     margin = 0.0
     if inputs.latest_hint is not None:  # hints: a team-mate's pose that fits the own views about as well wins
         candidates, margin = [*candidates, inputs.latest_hint], policy.candidate_margin
+    # the instant the own images were taken, in frame periods: the track ages by it (evopose/pose_filter.py) and
+    # eq. (2)'s prediction moves by it, so a vehicle that processed an instant a tick late publishes what its
+    # team-mates do
+    taken = inputs.index if state.frame_period_s is None else own.stamp_ns / (state.frame_period_s * 1e9)
     estimator, estimate = state.cooperation.estimate(
-        state.estimator, views, knowledge=inputs.knowledge, hints=inputs.hints, frame=inputs.index,
+        state.estimator, views, knowledge=inputs.knowledge, hints=inputs.hints, frame=inputs.index, instant=taken,
         budget_s=inputs.budget_s, candidates=np.array(candidates) if candidates else None, candidate_margin=margin,
         generations=policy.generations_per_frame(sum(len(view.points) for view in views)), clock=inputs.clock)
     seconds = inputs.clock() - t0
     sol = estimate.solution
     # what goes out is the track's fused pose (evopose/pose_filter.py): a good frame that jumped off it is set aside
     published = state.published or PoseFilter.of_rules(state.cooperation.options.confidence)
-    taken = inputs.index if state.frame_period_s is None else own.stamp_ns / (state.frame_period_s * 1e9)
     published, out = published.step(taken, sol.pose, sol.covariance, judge(sol).good)
     trust = judge(sol, searching=estimator.searching, published=out)
     pose = canonical_pose(out.pose)  # pitch within +-90 deg
