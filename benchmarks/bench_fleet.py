@@ -7,11 +7,15 @@ includes the sender's rendering and extraction), the median time of an estimate,
 pose and the mean position error. Writes ``benchmarks/results/fleet.md``.
 
     .venv/bin/python -m benchmarks.bench_fleet [--runs 3] [--seconds 10]
+
+Side by side (``--trees A B``): the configurations at ``--fps`` (default 30) run with each checkout's code in turn,
+``--runs`` rounds, the trees' order swapped every round; writes ``benchmarks/results/fleet_side_by_side.md``.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import statistics
 import threading
 from pathlib import Path
@@ -20,7 +24,8 @@ from agents.experiments.runner import run_scenario
 from agents.transport.ports import free_loopback_port as free_port
 from scenarios.fleet import load_fleet_scenario
 
-from .report import provenance
+from .report import provenance, write_section
+from .trees import label, run_in_tree
 
 
 
@@ -70,11 +75,57 @@ def bps(row: dict) -> float:
     return row["msgs_per_s"] * row["bytes_per_msg"]
 
 
+#: One configuration measured with a tree's own code (``run_in_tree``): its rows as JSON.
+_TREE_SCRIPT = """
+import json, sys
+import benchmarks.bench_fleet as bench
+rows = bench.measure(sys.argv[1], float(sys.argv[2]), 1, float(sys.argv[3]))
+print(json.dumps({"file": bench.__file__, "rows": rows}))
+"""
+SIDE_BY_SIDE = Path(__file__).resolve().parent / "results" / "fleet_side_by_side.md"
+
+
+def side_by_side(trees: list[Path], fps: float, rounds: int, seconds: float) -> None:
+    """The configurations at ``fps`` with each tree's code, ``rounds`` rounds, the trees' order swapped each round."""
+    configs = [(name, rate) for name, rate in CONFIGS if rate == fps]
+    rows: dict[tuple, list[dict]] = {}
+    for k in range(rounds):
+        for tree in (trees if k % 2 == 0 else trees[::-1]):
+            for name, rate in configs:
+                found = run_in_tree(tree, _TREE_SCRIPT, [name, str(rate), str(seconds)])
+                for row in found["rows"]:
+                    rows.setdefault((str(tree), name, row["vehicle"]), []).append(row)
+                print(f"{label(tree)} {name} at {rate:g} fps, round {k + 1}: "
+                      + json.dumps({r["vehicle"]: round(r["sustained_fps"], 1) for r in found["rows"]}), flush=True)
+    lines = [f"Command: `.venv/bin/python -m benchmarks.bench_fleet --trees {' '.join(str(t) for t in trees)} "
+             f"--fps {fps:g} --runs {rounds} --seconds {seconds:g}` ({provenance()}; trees: "
+             + ", ".join(f"{t} = {label(t)}" for t in trees) + "). Each round runs every configuration with one "
+             "tree's code, then the other's (the order swapped each round); per round and helicopter, the rate it "
+             "sustained (frames over the run's length), the ticks it skipped, the median time of a frame's estimate.",
+             "", "| scenario | vehicle | tree | sustained fps per round | skipped frames per round | estimate median, ms |",
+             "|---|---|---|---|---|---|"]
+    for name, rate in configs:
+        for vehicle in ("H1", "H2"):
+            for tree in trees:
+                got = rows.get((str(tree), name, vehicle), [])
+                lines.append(f"| {name} | {vehicle} | {label(tree)} | "
+                             + ", ".join(f"{r['sustained_fps']:.1f}" for r in got) + " | "
+                             + ", ".join(f"{r['late']:.0f}" for r in got) + " | "
+                             + ", ".join(f"{r['estimate_ms']:.1f}" for r in got) + " |")
+    write_section(SIDE_BY_SIDE, "Fleet throughput at 30 fps on drawn worlds, side by side", "\n".join(lines))
+    print("\n".join(lines))
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--runs", type=int, default=3)
     parser.add_argument("--seconds", type=float, default=10.0, help="Length of each run (camera time).")
+    parser.add_argument("--trees", type=Path, nargs=2, help="Two checkouts side by side (their own code).")
+    parser.add_argument("--fps", type=float, default=30.0, help="With --trees: the configurations at this rate.")
     args = parser.parse_args()
+    if args.trees:
+        side_by_side([t.resolve() for t in args.trees], args.fps, args.runs, args.seconds)
+        return
     rows = []
     for name, fps in CONFIGS:
         rows += measure(name, fps, args.runs, args.seconds)

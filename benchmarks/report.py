@@ -18,7 +18,7 @@ from pathlib import Path
 RESULTS = Path(__file__).resolve().parent / "results"
 ROOT = Path(__file__).resolve().parents[1]
 #: Order of the sections in BENCHMARKS.md (others follow alphabetically).
-ORDER = ("solvers", "solver_regression", "softposit", "solver_phases", "confidence", "weights", "kernels", "features", "fleet", "frame_path", "latency", "capacity",
+ORDER = ("solvers", "solver_regression", "softposit", "solver_phases", "confidence", "weights", "kernels", "features", "fleet", "fleet_side_by_side", "frame_path", "latency", "capacity",
          "footprint", "agent_memory", "photoreal_features", "photoreal_features_sweep", "photoreal_features_telephoto_sweep",
          "photoreal_features_opencv_camera", "photoreal_features_train",
          "photoreal_fleet", "photoreal_fleet_long", "photoreal_fleet_paper_long", "photoreal_tracking",
@@ -52,6 +52,7 @@ TITLES = {
     "photoreal_fleet_husky": "The fleet on rendered datasets: the second robot (Husky-like UGV) at telephoto",
     "photoreal_fleet_context": "The fleet on rendered datasets: the telephoto context model as the default, side by "
                                "side",
+    "fleet_side_by_side": "Fleet throughput at 30 fps on drawn worlds, side by side",
     "frontend_speed": "Contrast front-end: time per camera image",
     "frame_cost": "What the camera front-end costs a vehicle per frame",
     "photoreal_looks": "Mark front-ends through camera looks: the Pioneer",

@@ -31,6 +31,7 @@ nothing matches; squared for the mutual kind, a share of squared distances) and 
 from __future__ import annotations
 
 import copy
+import weakref
 from dataclasses import dataclass, field
 from functools import cached_property
 from typing import Literal
@@ -77,6 +78,19 @@ def image_spread(points: np.ndarray) -> float:
     """Robust size of a point set: median distance to its median centre (pixels, at least 1)."""
     centre = np.median(points, axis=0)
     return max(float(np.median(np.linalg.norm(points - centre, axis=1))), 1.0)
+
+
+#: :func:`auto_tau` and :func:`image_spread` of each live view's points, computed once: a frame's views make
+#: several objectives (the search's, the verdict's, the published pose's), and a view's points never change.
+_VIEW_SCALES: "weakref.WeakKeyDictionary[View, tuple[float, float]]" = weakref.WeakKeyDictionary()
+
+
+def view_scales(view: View) -> tuple[float, float]:
+    """``(auto_tau, image_spread)`` of ``view``'s points (pixels), kept while the view lives."""
+    scales = _VIEW_SCALES.get(view)
+    if scales is None:
+        scales = _VIEW_SCALES[view] = (auto_tau(view.points), image_spread(view.points))
+    return scales
 
 
 @dataclass(frozen=True, eq=False)
@@ -261,9 +275,10 @@ class PoseObjective:
         if self.kind not in KERNEL_MODES:
             raise ValueError(f"fitness kind must be one of {', '.join(KERNEL_MODES)}, got {self.kind!r}")
         views = self.problem.views
-        taus = [auto_tau(v.points) if self.tau is None else float(self.tau) for v in views]
+        scales = [view_scales(v) for v in views]
+        taus = [tau if self.tau is None else float(self.tau) for tau, _ in scales]
         object.__setattr__(self, "taus", _read_only(self.tau_scale * np.array(taus)))
-        object.__setattr__(self, "spreads", _read_only([image_spread(v.points) for v in views]))
+        object.__setattr__(self, "spreads", _read_only([spread for _, spread in scales]))
         object.__setattr__(self, "label_coordinates",
                            tuple((_read_only(pz), _read_only(mz))
                                  for pz, mz in (label_coordinates(self.problem.model, v) for v in views)))

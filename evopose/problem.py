@@ -79,13 +79,14 @@ class View:
     labels: np.ndarray | None = None
 
     def __post_init__(self) -> None:
-        pts = np.asarray(self.points, dtype=float)
+        pts = np.array(self.points, dtype=float)   # a copy of its own, read-only below
         if pts.ndim != 2 or pts.shape[1] != 2 or len(pts) == 0:
             raise ValueError(f"view points must have shape (P, 2) with P >= 1, got {pts.shape}")
         if not np.all(np.isfinite(pts)):
             raise ValueError("view points must be finite")
         if not np.isfinite(self.weight) or self.weight < 0:
             raise ValueError(f"view weight must be a finite number >= 0, got {self.weight}")
+        pts.flags.writeable = False   # a view's points never change (derived scales are kept: fitness.view_scales)
         object.__setattr__(self, "points", pts)
         if self.labels is not None:
             object.__setattr__(self, "labels", _labels("view labels", self.labels, len(pts)))
