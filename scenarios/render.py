@@ -130,7 +130,23 @@ def _face_shades(normals_cam: np.ndarray, sun_cam: np.ndarray, ambient: float) -
     return ambient + (1 - ambient) * np.clip(normals_cam @ sun_cam, 0, 1)
 
 
+#: The occluders and clutter of worlds whose occluders stand still, by their specification (a few worlds a process).
+_STILL_OCCLUDERS: dict[str, Mesh] = {}
+
+
 def _occluder_mesh(render: RenderSpec, t: float) -> Mesh:
+    """The world's occluders at time ``t`` and its clutter, one mesh; built once while no occluder moves."""
+    if any(np.any(occ.velocity) for occ in render.occluders):
+        return _occluders_at(render, t)
+    key = render.model_dump_json(include={"occluders", "clutter"})
+    if key not in _STILL_OCCLUDERS:
+        if len(_STILL_OCCLUDERS) >= 8:
+            _STILL_OCCLUDERS.clear()
+        _STILL_OCCLUDERS[key] = _occluders_at(render, 0.0)
+    return _STILL_OCCLUDERS[key]
+
+
+def _occluders_at(render: RenderSpec, t: float) -> Mesh:
     mesh = Mesh.empty()
     for occ in render.occluders:
         centre = np.asarray(occ.centre) + t * np.asarray(occ.velocity)
