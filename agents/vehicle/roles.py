@@ -239,9 +239,10 @@ class CameraVehicle(Vehicle):
         """Eq. (3) knowledge of this frame (none for a UAV)."""
         return []
 
-    def paired_views(self, stamp_ns: int) -> list:
+    def paired_views(self, stamp_ns: int, near: np.ndarray | None = None) -> list:
         """Team-mates' views of this instant: wait up to ``sync_wait_s`` (the first frame: ``max_age_s``) for each live,
-        sharing team-mate."""
+        sharing team-mate. A team-mate's raw image is searched around ``near`` first, as the own image was: team-mates
+        that published the same pose find the same points in one image."""
         topic = self.policy.shares
         if topic is None:
             return []
@@ -255,7 +256,7 @@ class CameraVehicle(Vehicle):
                           else self.plausible.camera(rx.message.camera))
                 if not self.refused(topic, rx, reason):
                     try:
-                        self.team.add(mate_view(rx.vehicle, rx.message, self.camera.extract))
+                        self.team.add(mate_view(rx.vehicle, rx.message, self.camera.extract, near))
                     except (ValueError, cv2.error) as err:  # a frame that does not decode: count it, carry on
                         self.bus.counters.count_rejected(topic.value, "undecodable")
                         self.emit({"event": "rejected", "vehicle": rx.vehicle, "reason": str(err)[:200]})
@@ -301,7 +302,8 @@ class CameraVehicle(Vehicle):
         late_s = (time.time_ns() - self.clock.stamp_ns(n)) / NS
         t_acquire, cpu0 = time.perf_counter(), time.thread_time()
         # the front-end looks around the last good pose first (vision.window): a fraction of the image's pixels
-        frame = self.camera.acquire(n, self.clock.stamp_ns(n), near=self.state.near(n))
+        near = self.state.near(n)
+        frame = self.camera.acquire(n, self.clock.stamp_ns(n), near=near)
         stamp = frame.stamp_ns  # when the image was taken: tick n's, or a recording's own instant (dataset_source)
         # the instant this vehicle is at: a recording played behind the wall clock judges team-mates' data there
         self.bus.playback.play_behind(time.time_ns() - stamp)
@@ -314,7 +316,7 @@ class CameraVehicle(Vehicle):
             self.bus.send(shared)
         takes = self.policy.takes_hints
         t_pair = time.perf_counter()
-        paired = self.paired_views(stamp)
+        paired = self.paired_views(stamp, near)
         t_step = time.perf_counter()
         inputs = FrameInputs(n, mine, paired, self.knowledge(), self.take_hints() if takes else None,
                              frame.truth, self.hints.take_latest() if takes else None,

@@ -93,13 +93,13 @@ class MateView:
 
 
 def mate_view(vehicle: str, message: FeatureSet | ImageFrame,
-              extract: Callable[..., tuple[np.ndarray, np.ndarray | None]]) -> MateView:
+              extract: Callable[..., tuple[np.ndarray, np.ndarray | None]], near: np.ndarray | None = None) -> MateView:
     """A team-mate's view from its feature set, or from its raw frame (marks and their colours extracted with
-    ``extract``)."""
+    ``extract``, looking near the pose ``near`` (6,) first: :class:`vision.extract.FeatureExtractor`)."""
     if isinstance(message, FeatureSet):
         best = None if message.best is None else np.array(message.best, float)
         return MateView(vehicle, message.stamp_ns, message.camera, message.points_uv, best, message.labels_array)
-    points, labels = extract(image_of(message), camera_from_info(message.camera))
+    points, labels = extract(image_of(message), camera_from_info(message.camera), near)
     return own_view(vehicle, message.stamp_ns, message.camera, points, labels)
 
 
