@@ -115,3 +115,32 @@ def test_without_a_pose_the_body_found_at_half_resolution_holds_every_mark(name)
 def test_without_the_target_no_paint_is_found_at_half_resolution():
     for image, _, _, world in _frames("absent"):
         assert locate_body(image, world.model.body_colour) is None
+
+
+@pytest.mark.parametrize("world_name", ["exp2", "exp2-paper-scale"])
+def test_hue_bands_near_the_true_pose_find_every_true_mark_of_the_whole_image_and_fewer_false(world_name):
+    """The hue-band front-end on drawn frames looks near the pose first, too: every mark it finds on the whole image
+    that is a true mark (within 1.5 px of the truth) it finds in the window, at the same place; of the rest (the
+    distractors the renderer scatters over the image) fewer; and a pose 3 m off gives the whole image's points."""
+    from scenarios.render import render_frame
+    from scenarios.world import load_scenario
+
+    world = load_scenario(world_name)
+    extract = feature_extractor("marks", world.model, world.bounds())
+    false_whole = false_window = 0
+    for k in range(0, 12, 3):
+        frame = render_frame(world, k, "H1")
+        pose = world.target_pose(k)
+        whole, whole_labels = extract(frame.image, frame.camera)
+        near, near_labels = extract(frame.image, frame.camera, pose)
+        true_whole = np.linalg.norm(whole[:, None] - frame.truth.mark_uv[None], axis=2).min(axis=1) < 1.5
+        true_near = np.linalg.norm(near[:, None] - frame.truth.mark_uv[None], axis=2).min(axis=1) < 1.5
+        assert true_whole.sum() >= 8
+        # the same place: a centroid taken in the window's coordinates differs in the last bits
+        kept = {(tuple(np.round(p, 6)), int(c)) for p, c in zip(near[true_near], near_labels[true_near])}
+        assert kept == {(tuple(np.round(p, 6)), int(c)) for p, c in zip(whole[true_whole], whole_labels[true_whole])}
+        false_whole, false_window = false_whole + int((~true_whole).sum()), false_window + int((~true_near).sum())
+        off = pose.copy()
+        off[1] += 3.0   # a window of ground, no robot: the whole image
+        assert np.array_equal(extract(frame.image, frame.camera, off)[0], whole)
+    assert false_window < false_whole
