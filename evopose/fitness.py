@@ -31,9 +31,8 @@ nothing matches; squared for the mutual kind, a share of squared distances) and 
 from __future__ import annotations
 
 import copy
-import weakref
 from dataclasses import dataclass, field
-from functools import cached_property
+from functools import cached_property, lru_cache
 from typing import Literal
 
 import numpy as np
@@ -80,17 +79,21 @@ def image_spread(points: np.ndarray) -> float:
     return max(float(np.median(np.linalg.norm(points - centre, axis=1))), 1.0)
 
 
-#: :func:`auto_tau` and :func:`image_spread` of each live view's points, computed once: a frame's views make
-#: several objectives (the search's, the verdict's, the published pose's), and a view's points never change.
-_VIEW_SCALES: "weakref.WeakKeyDictionary[View, tuple[float, float]]" = weakref.WeakKeyDictionary()
-
-
 def view_scales(view: View) -> tuple[float, float]:
-    """``(auto_tau, image_spread)`` of ``view``'s points (pixels), kept while the view lives."""
-    scales = _VIEW_SCALES.get(view)
-    if scales is None:
-        scales = _VIEW_SCALES[view] = (auto_tau(view.points), image_spread(view.points))
-    return scales
+    """``(auto_tau, image_spread)`` of ``view``'s points (pixels). Kept for the last :data:`KEPT_VIEW_SCALES` point
+    sets: a frame's views make several objectives (the search's, the verdict's, the published pose's), often from
+    views built anew of the same points."""
+    return _scales_of(view.points.tobytes())
+
+
+#: How many point sets' :func:`view_scales` are kept.
+KEPT_VIEW_SCALES = 64
+
+
+@lru_cache(maxsize=KEPT_VIEW_SCALES)
+def _scales_of(points: bytes) -> tuple[float, float]:
+    xy = np.frombuffer(points, float).reshape(-1, 2)
+    return auto_tau(xy), image_spread(xy)
 
 
 @dataclass(frozen=True, eq=False)
