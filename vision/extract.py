@@ -27,10 +27,10 @@ from evopose import Bounds, Camera
 from vision.blobs import MarkPrior, crop_margin, detect_contrast_marks, mark_prior, resolve_scorers
 from vision.camera_look import LookTracker, estimate_look
 from vision.label_chroma import LabelChromaGate, spot_chroma
-from vision.features import colour_ranges, detect_colour_marks, detect_corners, x_junctions
+from vision.features import MarkDetections, colour_ranges, detect_colour_marks, detect_corners, x_junctions
 from vision.mark_scorer import MarkScorer
 from vision.spot_position import SMALL_SPOT_PX
-from vision.window import grown, locate_body, target_window
+from vision.window import Window, grown, locate_body, target_window
 from scenarios.fleet import FEATURE_KINDS
 from scenarios.target import TargetModel
 
@@ -100,13 +100,8 @@ def feature_extractor(kind: str, target: TargetModel, area: Bounds | None = None
                       near: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
             # hue bands need no ground around the body: the window is the body's projection and the slack
             window = None if near is None or camera is None else target_window(camera, near, outline, 0.0)
-            if window is not None:
-                y0, y1, x0, x1 = window
-                found = detect_colour_marks(image[y0:y1, x0:x1], ranges)
-                if len(found.points) >= MIN_WINDOW_MARKS:
-                    return found.points + (x0, y0), found.labels
-            found = detect_colour_marks(image, ranges)
-            return found.points, found.labels
+            found, points = window_first(lambda part: detect_colour_marks(part, ranges), image, window)
+            return points, found.labels
 
         return hue_marks
     if kind != "contrast":
@@ -137,11 +132,9 @@ def feature_extractor(kind: str, target: TargetModel, area: Bounds | None = None
         # let the pair find the robot (looks-long paper-g2-low-flat-cool: 0 good frames of 40 instead of 12)
         seen = image if followed is None else part
         look = tracker.update(estimate_look(seen, body, prior.extent_px)) if tracker.due() else tracker.current()
-        found = detect_contrast_marks(part, palette, prior, body=body, scorer=scorer or "shipped", look=look)
-        points = found.points + (x0, y0)
-        if window is not None and len(points) < MIN_WINDOW_MARKS:  # lost in the window: the whole image, this frame
-            found = detect_contrast_marks(image, palette, prior, body=body, scorer=scorer or "shipped", look=look)
-            points = found.points
+        found, points = window_first(lambda part: detect_contrast_marks(part, palette, prior, body=body,
+                                                                        scorer=scorer or "shipped", look=look),
+                                     image, window)
         if prior.radius_px[1] >= SMALL_SPOT_PX:
             return points, found.labels
         gate = gates.setdefault(key, LabelChromaGate())
@@ -151,6 +144,20 @@ def feature_extractor(kind: str, target: TargetModel, area: Bounds | None = None
     return contrast_marks
 
 
+def window_first(detect: Callable[[np.ndarray], MarkDetections], image: np.ndarray, window: Window | None
+                 ) -> tuple[MarkDetections, np.ndarray]:
+    """What ``detect`` finds in ``window`` of ``image`` (H, W, 3), and its points (N, 2) in the whole image's pixels;
+    the whole image's when there is no window or it gives fewer than :data:`MIN_WINDOW_MARKS` (the target left it,
+    or the pose it was drawn around was wrong)."""
+    if window is not None:
+        y0, y1, x0, x1 = window
+        found = detect(image[y0:y1, x0:x1])
+        if len(found.points) >= MIN_WINDOW_MARKS:
+            return found, found.points + (x0, y0)
+    found = detect(image)
+    return found, found.points
+
+
 def point_extractor(kind: str, target: TargetModel, area: Bounds | None = None) -> Extractor:
     """``image (H, W, 3) uint8 -> points (N, 2)``: :func:`feature_extractor` without the labels or a camera."""
     extract = feature_extractor(kind, target, area)
@@ -158,4 +165,4 @@ def point_extractor(kind: str, target: TargetModel, area: Bounds | None = None) 
 
 
 __all__ = ["FEATURE_KINDS", "FeatureExtractor", "MIN_WINDOW_MARKS", "chessboard_corners", "feature_extractor",
-           "point_extractor", "resolve_features"]
+           "point_extractor", "resolve_features", "window_first"]
