@@ -170,8 +170,9 @@ def published(objective: PoseObjective, basin: np.ndarray, verdict: Confidence) 
     cov = mixture_covariance(objective, pose, matches)
     if not cov.ok and verdict.confident:   # no finite covariance for what goes out: not sure of it
         return pose, replace(verdict, covariance=cov, confident=False, reason="no covariance")
-    if verdict.confident and not rotation_sigma(cov.matrix) <= MAX_CONFIDENT_ROTATION_SIGMA:  # a rotation it leaves
-        return pose, replace(verdict, covariance=cov, confident=False, reason="unbounded rotation")   # open: nor
+    # nor for a pose whose covariance leaves its rotation open (past half a turn): it places the pose in no basin
+    if verdict.confident and not rotation_sigma(cov.matrix) <= MAX_CONFIDENT_ROTATION_SIGMA:
+        return pose, replace(verdict, covariance=cov, confident=False, reason="unbounded rotation")
     return pose, replace(verdict, covariance=cov)
 
 

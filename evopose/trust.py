@@ -142,7 +142,8 @@ class Confidence:
         That alternative.
     reason : str
         Why not confident ("" when confident): "no covariance", "few matches", "unmatched marks", "loose fit",
-        "ambiguous" (the published pose: also "unbounded rotation", :data:`MAX_CONFIDENT_ROTATION_SIGMA`; for tracking "previous not confident", "jumped"; for a search past its time "out of time").
+        "ambiguous" (the published pose: also "unbounded rotation", :data:`MAX_CONFIDENT_ROTATION_SIGMA`; for
+        tracking "previous not confident", "jumped"; for a search past its time "out of time").
     sum_of_squares, runner_up_sum_of_squares : float
         :func:`evopose.uncertainty.sum_of_squares` of the estimate and of the runner-up (inf when there is none).
     """

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from vision import mark_scorer
+from vision.mark_context import CONTEXT_FEATURES
 from vision.mark_scorer import FEATURES, MarkScorer, fit, load, shipped
 from scenarios.target import load_model
 
@@ -141,8 +142,6 @@ def test_the_scorer_only_acts_on_spots_under_three_pixels():
     refuses_all = replace(shipped(), bias=-1e6)
     a = detect_contrast_marks(image, world.model.palette, prior, body=world.model.body_colour)
     b = detect_contrast_marks(image, world.model.palette, prior, body=world.model.body_colour, scorer=refuses_all)
-    from vision.mark_context import CONTEXT_FEATURES
-
     assert len(a) > 5 and a.features.shape == (len(a), len(CONTEXT_FEATURES))   # the context model decided
     np.testing.assert_array_equal(a.points, b.points)
 
