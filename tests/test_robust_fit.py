@@ -129,3 +129,33 @@ def test_a_handful_of_clean_pairs_keeps_the_least_squares_precision():
         rb_err.append(errors_deg_m(robust, sp))
     ls_mean, rb_mean = np.mean(ls_err, axis=0), np.mean(rb_err, axis=0)
     assert np.all(rb_mean <= 1.15 * ls_mean), (ls_mean, rb_mean)
+
+
+def test_a_whole_step_under_the_settled_bar_ends_a_stage_and_leaves_the_pose_where_more_steps_would(monkeypatch):
+    """SETTLED_WHOLE_STEP: Gauss-Newton's whole steps shrink quadratically, so a stage ends after a whole step under
+    1e-4; the steps it saves (each a re-match of every mark) would move the pose by less than 1e-6 on every problem."""
+    import evopose.robust_fit as rf
+
+    calls = {"n": 0}
+    matched = rf.mutual_matches
+
+    def counted(objective, pose):
+        calls["n"] += 1
+        return matched(objective, pose)
+
+    monkeypatch.setattr(rf, "mutual_matches", counted)
+    quick, full, quick_calls, full_calls = [], [], 0, 0
+    for seed in SEEDS:
+        sp, problem = biased_problem(seed)
+        objective = PoseObjective(problem, "mutual", 4.0)
+        start = refine(objective, sp.true_pose[None], None, POLISH_SCHEDULE)[0][0]
+        calls["n"] = 0
+        quick.append(robust_pose(objective, start))
+        quick_calls += calls["n"]
+        with monkeypatch.context() as m:
+            m.setattr(rf, "SETTLED_WHOLE_STEP", 0.0)   # only the 1e-6 bar
+            calls["n"] = 0
+            full.append(robust_pose(objective, start))
+            full_calls += calls["n"]
+    assert np.max(np.abs(np.array(quick) - np.array(full))) < 1e-6
+    assert quick_calls < full_calls   # and it saved work
