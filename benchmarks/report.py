@@ -52,7 +52,6 @@ TITLES = {
     "photoreal_fleet_husky": "The fleet on rendered datasets: the second robot (Husky-like UGV) at telephoto",
     "photoreal_fleet_context": "The fleet on rendered datasets: the telephoto context model as the default, side by "
                                "side",
-    "fleet_side_by_side": "Fleet throughput at 30 fps on drawn worlds, side by side",
     "frontend_speed": "Contrast front-end: time per camera image",
     "frame_cost": "What the camera front-end costs a vehicle per frame",
     "photoreal_looks": "Mark front-ends through camera looks: the Pioneer",
