@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from collections import Counter
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
@@ -33,7 +34,7 @@ MATCH_PX = 1.5
 
 def camera_rows(directory: Path) -> list[dict]:
     """One row per camera of the dataset at ``directory``: frames, frames whose labels were sent, points matched on
-    those frames and how many of their labels are right."""
+    those frames, how many of their labels are right, and the wrong ones by (true colour, sent label)."""
     import cv2
 
     from scenarios.dataset import open_dataset
@@ -48,6 +49,7 @@ def camera_rows(directory: Path) -> list[dict]:
     for cam in dataset.cameras:
         extract = feature_extractor("contrast", world.model, world.bounds())   # one camera's own trackers
         sent = matched = right = 0
+        wrong: Counter[tuple[str, str]] = Counter()
         for k in range(dataset.frames):
             image = cv2.imread(str(dataset.image_path(cam, k)), cv2.IMREAD_COLOR)
             truth = dataset.truth(k)
@@ -59,21 +61,28 @@ def camera_rows(directory: Path) -> list[dict]:
             uv = np.array([m.uv for m in marks], float).reshape(-1, 2)
             pairs, _ = match_to_truth(points, uv, MATCH_PX)
             matched += len(pairs)
-            right += sum(names[labels[i]] == marks[j].colour for i, j in pairs)
+            for i, j in pairs:
+                if names[labels[i]] == marks[j].colour:
+                    right += 1
+                else:
+                    wrong[(marks[j].colour, names[labels[i]])] += 1
         rows.append({"dataset": directory.name, "look": dataset.manifest.look or "camera", "camera": cam,
-                     "frames": dataset.frames, "sent": sent, "matched": matched, "right": int(right)})
+                     "frames": dataset.frames, "sent": sent, "matched": matched, "right": right, "wrong": dict(wrong)})
     return rows
 
 
 def markdown(rows: list[dict], command: str) -> str:
     table = [[r["dataset"], r["look"], r["camera"], f"{r['sent']}/{r['frames']}",
-              f"{r['right'] / r['matched']:.2f} ({r['right']}/{r['matched']})" if r["matched"] else "-"]
+              f"{r['right'] / r['matched']:.2f} ({r['right']}/{r['matched']})" if r["matched"] else "-",
+              ", ".join(f"{true} as {label} {n}" for (true, label), n in
+                        sorted(r["wrong"].items(), key=lambda kv: -kv[1])[:2]) or "-"]
              for r in rows]
     sent = [r for r in rows if r["sent"]]
     pooled = sum(r["right"] for r in sent) / max(sum(r["matched"] for r in sent), 1)
     worst = min(sent, key=lambda r: r["right"] / max(r["matched"], 1), default=None)
     lines = [f"Produced by `{command}`; {provenance()}.", "", __doc__.split("\n\n")[3].replace("\n", " "), "",
-             *md_table(["dataset", "look", "camera", "frames with labels sent", "sent labels right"], table), "",
+             *md_table(["dataset", "look", "camera", "frames with labels sent", "sent labels right",
+                        "most frequent wrong labels"], table), "",
              f"Sent labels right, pooled: {pooled:.2f}."]
     if worst is not None:
         lines.append(f"Worst camera: {worst['dataset']} {worst['camera']}, "
