@@ -8,11 +8,13 @@ Run from the repository root on paper-scale Cycles datasets (their images as the
 Each camera's frames go in order through the agents' contrast extractor (:func:`vision.extract.feature_extractor`:
 the look tracked, the window near a pose, the label gate of :mod:`vision.label_chroma` deciding per frame whether
 the camera's labels are sent), each frame near the true pose (a track that is right). The sent points are matched to
-the visible true marks (1.5 px, one to one) and their labels compared with the marks' colours. A label is worth
-sending only when it is right: a wrong label is wrong the same way on every frame and pulls the pose toward the
-twin it agrees with (:mod:`vision.label_chroma`). The gate's bar was chosen on the training worlds through random
-looks, where the frames it keeps label 0.74 of their marks right (BENCHMARKS.md, "The label gate"); here it is
-judged on the benchmark's sequences, which it never saw. Writes ``benchmarks/results/label_gate.md``.
+the visible true marks (1.5 px, one to one) and their labels compared with the marks' colours; the label distance is
+that of the sent labels' proportions from the colours of the marks the camera faces, its frames pooled
+(:func:`benchmarks.bench_label_chroma.label_distance`). A label is worth sending only when it is right: a wrong label
+is wrong the same way on every frame and pulls the pose toward the twin it agrees with (:mod:`vision.label_chroma`).
+The gate's bar was chosen on the training worlds through random looks, where the frames it keeps label 0.74 of their
+marks right (BENCHMARKS.md, "The label gate"); here it is judged on the benchmark's sequences, which it never saw.
+Writes ``benchmarks/results/label_gate.md``.
 """
 
 from __future__ import annotations
@@ -41,6 +43,8 @@ def camera_rows(directory: Path) -> list[dict]:
     from vision.extract import feature_extractor
     from vision.features import match_to_truth
 
+    from .bench_label_chroma import facing_colours, label_distance
+
     cv2.setNumThreads(1)
     dataset = open_dataset(directory)
     world = dataset.world()
@@ -50,6 +54,7 @@ def camera_rows(directory: Path) -> list[dict]:
         extract = feature_extractor("contrast", world.model, world.bounds())   # one camera's own trackers
         sent = matched = right = 0
         wrong: Counter[tuple[str, str]] = Counter()
+        label_counts, facing_counts = np.zeros(len(names)), np.zeros(len(names))
         for k in range(dataset.frames):
             image = cv2.imread(str(dataset.image_path(cam, k)), cv2.IMREAD_COLOR)
             truth = dataset.truth(k)
@@ -57,6 +62,8 @@ def camera_rows(directory: Path) -> list[dict]:
             if labels is None:
                 continue
             sent += 1
+            label_counts += np.bincount(labels, minlength=len(names))
+            facing_counts += facing_colours(dataset.camera(cam, k), np.asarray(truth.target_pose, float), world.model)
             marks = truth.cameras[cam].marks
             uv = np.array([m.uv for m in marks], float).reshape(-1, 2)
             pairs, _ = match_to_truth(points, uv, MATCH_PX)
@@ -67,7 +74,8 @@ def camera_rows(directory: Path) -> list[dict]:
                 else:
                     wrong[(marks[j].colour, names[labels[i]])] += 1
         rows.append({"dataset": directory.name, "look": dataset.manifest.look or "camera", "camera": cam,
-                     "frames": dataset.frames, "sent": sent, "matched": matched, "right": right, "wrong": dict(wrong)})
+                     "frames": dataset.frames, "sent": sent, "matched": matched, "right": right, "wrong": dict(wrong),
+                     "distance": label_distance(label_counts, facing_counts) if sent else None})
     return rows
 
 
@@ -75,14 +83,15 @@ def markdown(rows: list[dict], command: str) -> str:
     table = [[r["dataset"], r["look"], r["camera"], f"{r['sent']}/{r['frames']}",
               f"{r['right'] / r['matched']:.2f} ({r['right']}/{r['matched']})" if r["matched"] else "-",
               ", ".join(f"{true} as {label} {n}" for (true, label), n in
-                        sorted(r["wrong"].items(), key=lambda kv: -kv[1])[:2]) or "-"]
+                        sorted(r["wrong"].items(), key=lambda kv: -kv[1])[:2]) or "-",
+              "-" if r["distance"] is None else f"{r['distance']:.2f}"]
              for r in rows]
     sent = [r for r in rows if r["sent"]]
     pooled = sum(r["right"] for r in sent) / max(sum(r["matched"] for r in sent), 1)
     worst = min(sent, key=lambda r: r["right"] / max(r["matched"], 1), default=None)
     lines = [f"Produced by `{command}`; {provenance()}.", "", __doc__.split("\n\n")[3].replace("\n", " "), "",
              *md_table(["dataset", "look", "camera", "frames with labels sent", "sent labels right",
-                        "most frequent wrong labels"], table), "",
+                        "most frequent wrong labels", "label distance"], table), "",
              f"Sent labels right, pooled: {pooled:.2f}."]
     if worst is not None:
         lines.append(f"Worst camera: {worst['dataset']} {worst['camera']}, "

@@ -53,6 +53,8 @@ TITLES = {
     "photoreal_fleet_context": "The fleet on rendered datasets: the telephoto context model as the default, side by "
                                "side",
     "frontend_speed": "Contrast front-end: time per camera image",
+    "label_chroma_heldout": "The label gate: 2-4 px marks' chroma against their labels (the benchmark's worlds, random "
+                            "looks no bar was chosen on)",
     "frame_cost": "What the camera front-end costs a vehicle per frame",
     "photoreal_looks": "Mark front-ends through camera looks: the Pioneer",
     "photoreal_looks_husky": "Mark front-ends through camera looks: the second robot (Husky-like UGV)",
