@@ -30,12 +30,13 @@ def test_the_noise_is_not_understated_where_the_nearest_mark_is_often_not_the_po
 
 def test_marks_far_apart_give_the_gauss_newton_covariance():
     """Marks 20+ px apart at 1 px noise, no false points: each point is its nearest mark's, the responsibilities
-    are 0 or 1, and the mixture's covariance is the least-squares one on the pairs (the same noise)."""
+    are 0 or 1, and the mixture's covariance is the least-squares one on the pairs (the same noise). Both taken with
+    the noise as known: the published one's Student's t factor is the next test's."""
     sp = make_problem("random", np.random.default_rng(41), noise=1.0, clutter=0.0, missing=0.0, size_px=200)
     pose = solve(sp.problem, seed=0).pose
     objective = PoseObjective(sp.problem)
     matches = mutual_matches(objective, pose)
-    mixed = mixture_covariance(objective, pose, matches)
+    mixed = mixture_covariance(objective, pose, matches, noise_estimated=False)
     least_squares = covariance(objective, pose, matches)
     assert mixed.ok and least_squares.ok
     ratio = least_squares.residual_variance / mixed.residual_variance
@@ -43,6 +44,23 @@ def test_marks_far_apart_give_the_gauss_newton_covariance():
     np.testing.assert_allclose(mixed.matrix * ratio, least_squares.matrix, rtol=0.02,
                                atol=0.02 * np.sqrt(np.outer(np.diag(least_squares.matrix),
                                                             np.diag(least_squares.matrix))).max())
+
+
+def test_the_published_covariance_widens_by_students_t_for_the_noise_it_fitted():
+    """With the noise fitted from ``dof`` residual coordinates the pose's error is Student's t: the published
+    covariance is the known-noise one times ``dof / (dof - 2)``; with few pairs that is a visible widening."""
+    for size_px, missing in ((200, 0.0), (60, 0.5)):   # many pairs, then few
+        sp = make_problem("random", np.random.default_rng(41), noise=1.0, clutter=0.0, missing=missing,
+                          size_px=size_px)
+        pose = solve(sp.problem, seed=0).pose
+        objective = PoseObjective(sp.problem)
+        matches = mutual_matches(objective, pose)
+        published, known = mixture_covariance(objective, pose, matches), mixture_covariance(
+            objective, pose, matches, noise_estimated=False)
+        assert published.ok and known.ok and published.dof == known.dof > 2
+        factor = published.dof / (published.dof - 2)
+        np.testing.assert_allclose(published.matrix, known.matrix * factor, rtol=1e-4)   # factors 1.07 and 1.11 here
+        assert np.all(np.diag(published.matrix)[3:] > np.diag(known.matrix)[3:])
 
 
 def test_unknown_correspondences_lose_information():
