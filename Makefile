@@ -6,12 +6,10 @@ STAMP  := $(VENV)/.installed
 
 .PHONY: demo test fuzz bench bench-solver bench-looks bench-footprint examples install kernels clean lock compose photoreal
 
-# --no-compile: the packages' modules are byte-compiled when first imported, not all of them at install (16 s less
-# here: 37 -> 21 s from the package cache)
 $(STAMP): pyproject.toml constraints.txt
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade "pip>=24"
-	$(PY) -m pip install --quiet --no-compile -c constraints.txt -e ".[dev]"
+	$(PY) -m pip install --quiet -c constraints.txt -e ".[dev]"
 	touch $(STAMP)
 
 # The search's kernels compiled ahead of time (docs/design.md §2, "Compiled kernels"; ~15 s, instant when current):
