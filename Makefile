@@ -4,7 +4,7 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test fuzz bench bench-solver bench-looks bench-footprint examples install kernels clean lock compose photoreal
+.PHONY: demo test fuzz bench bench-solver bench-looks bench-footprint examples install kernels bytecode clean lock compose photoreal
 
 $(STAMP): pyproject.toml constraints.txt
 	$(PYTHON) -m venv $(VENV)
@@ -18,7 +18,12 @@ $(STAMP): pyproject.toml constraints.txt
 kernels: $(STAMP)
 	@$(PY) -m evopose.kernel_build
 
-install: $(STAMP) kernels
+# The project's own modules byte-compiled once (~2 s): where PYTHONDONTWRITEBYTECODE=1 is set (this machine), no
+# process keeps what it compiles, and every agent or CLI process started compiled them again (0.3 s of its start).
+bytecode: $(STAMP)
+	@$(PY) -m compileall -q -j 0 agents evopose evopose_errors vision protocol scenarios geometry benchmarks examples
+
+install: $(STAMP) kernels bytecode
 
 # Blender's bpy (Cycles, the photoreal renderer: docs/datasets.md) in its own interpreter: bpy 4.5 needs Python 3.11
 # and numpy < 2, the project pins numpy 2. EVOPOSE_BPY_PYTHON may name another Python that has bpy 4.5.
@@ -32,13 +37,13 @@ $(PHOTOREAL)/.installed: constraints-photoreal.txt
 
 # The demo's fleet listens on tcp/127.0.0.1:$(PORT): `make demo PORT=7448` when another fleet has 7447.
 PORT ?= 7447
-demo: $(STAMP) kernels
+demo: $(STAMP) kernels bytecode
 	@if $(PY) -c "import sys; from agents.transport.ports import listening; sys.exit(listening('tcp/127.0.0.1:$(PORT)'))"; \
 	then :; else echo "port $(PORT) is in use (another fleet or router?): run make demo PORT=$$(($(PORT) + 1))" >&2; exit 2; fi
 	$(VENV)/bin/evopose scenario run exp2a-features --listen tcp/127.0.0.1:$(PORT)
 
 # Two passes (tests/conftest.py): everything but the real-time tests on two workers, then those one at a time.
-test: $(STAMP) kernels
+test: $(STAMP) kernels bytecode
 	EVOPOSE_REQUIRE_AOT=1 $(PY) -m pytest -q -n 2 -m "not realtime"
 	EVOPOSE_REQUIRE_AOT=1 $(PY) -m pytest -q -m realtime
 
