@@ -20,6 +20,7 @@ from protocol import SIZE_LIMITS, Topic, decode, encode
 from agents.tools.runners import PublishSpec, sample_message
 from agents.transport import bus as bus_module, receiver as receiver_module
 from agents.transport.bus import FleetBus
+from agents.transport.playback import PlaybackClock
 from agents.transport.session import MAX_MESSAGE_BYTES, SessionOptions
 from tests.fleet_procs import free_port
 
@@ -167,6 +168,19 @@ def test_a_vehicle_playing_a_recording_behind_the_wall_clock_judges_staleness_at
         assert got is not None and got.message.seq == 1 and rx.recv(Topic.ATTITUDE, timeout=0) is None
         assert rx.counters.snapshot()["rejected"] == {"stale": 1}
         assert rx.latest(Topic.ATTITUDE)["tx"].message.seq == 1  # latest() ages on the same clock
+
+
+def test_the_instant_played_runs_with_the_wall_clock_but_not_past_the_next_frames_instant():
+    # a vehicle 20 s behind a recording at 1000 frames/s, 0.3 s into one frame (a loaded machine): it plays that
+    # frame's successor next, so a team-mate's view of this frame is 1 ms old for it, not 0.3 s (with --max-age 0.1
+    # it was refused as stale); before the next frame's instant the wall clock still runs
+    clock = PlaybackClock()
+    frame_ns, wall0 = 1_000 * 10**9, 1_020 * 10**9
+    clock.play_behind(wall0 - frame_ns, until_ns=frame_ns + 10**6)
+    assert clock.now_ns(wall0 + 3 * 10**8) == frame_ns + 10**6
+    assert clock.now_ns(wall0 + 5 * 10**5) == frame_ns + 5 * 10**5
+    clock.play_behind(wall0 - frame_ns)  # no bound: the wall clock less the lag
+    assert clock.now_ns(wall0 + 3 * 10**8) == frame_ns + 3 * 10**8
 
 
 def test_sequence_gaps_are_counted_and_a_restart_is_not_a_gap(endpoint):

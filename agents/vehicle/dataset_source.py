@@ -97,6 +97,11 @@ class DatasetCamera(SourceCamera):
         taken = min(self.first_tick + frame.scene_frame, index)  # never after it is processed
         return replace(frame, stamp_ns=self.clock.stamp_ns(taken), truth=self.truth(frame.scene_frame))
 
+    def first_stamp_ns(self) -> int | None:
+        """The instant of the first frame it plays, when the fleet has a common clock (``first_tick`` known), else
+        None: a team-mate's view of it arriving before this vehicle plays it is judged there, not on the wall clock."""
+        return None if self.first_tick is None else self.clock.stamp_ns(self.first_tick)
+
     def truth(self, k: int) -> np.ndarray | None:
         """The target's true pose at frame ``k``; None without truth.jsonl or when the target is not in the images."""
         truth = self.dataset.truth(k)

@@ -203,6 +203,9 @@ class CameraVehicle(Vehicle):
         reuse_frame_memory()  # then the frames' arrays from the heap, not one mapping each (agents/vehicle/memory.py)
 
     def run(self, stop: threading.Event) -> dict:
+        first = getattr(self.camera, "first_stamp_ns", lambda: None)()  # a recording on the fleet's common clock
+        if first is not None:  # plays its first frame's instant first, however late it starts (PlaybackClock)
+            self.bus.playback.play_behind(time.time_ns() - first, until_ns=first + int(self.period_s * NS))
         try:
             summary = super().run(stop)
             source = getattr(self.camera, "summary_fields", None)  # a dataset: which, and whether the target is in it
@@ -305,8 +308,9 @@ class CameraVehicle(Vehicle):
         near = self.state.near(n)
         frame = self.camera.acquire(n, self.clock.stamp_ns(n), near=near)
         stamp = frame.stamp_ns  # when the image was taken: tick n's, or a recording's own instant (dataset_source)
-        # the instant this vehicle is at: a recording played behind the wall clock judges team-mates' data there
-        self.bus.playback.play_behind(time.time_ns() - stamp)
+        # the instant this vehicle is at: a recording played behind the wall clock judges team-mates' data there, and
+        # that instant does not pass the next frame's while this one is worked on (agents/transport/playback.py)
+        self.bus.playback.play_behind(time.time_ns() - stamp, until_ns=stamp + int(self.period_s * NS))
         self.record.render_cpu_s += frame.render_cpu_s
         if self._image_ready is None:
             self._image_ready = t_acquire + frame.render_s
