@@ -1,23 +1,25 @@
-"""`make test` runs the suite in two passes: tests that run vehicles on a frame clock or measure rates and delays
-between real processes ("realtime") one at a time, as before, and everything else on two workers
-(pytest-xdist) first. A real-time test shares the machine with nothing but its own processes, so a late frame is
-the code's, not a neighbouring test's."""
+"""`make test` runs the suite in two passes: tests that assert when something happens between real processes (no
+late frame, a rate, a delay, a reconnection time: "realtime") one at a time, and everything else on two workers
+(pytest-xdist) first, each test module on one worker (``--dist loadfile``: a module's processes and fixtures start
+once). A real-time test shares the machine with nothing but its own processes, so a late frame is the code's, not a
+neighbouring test's. The other modules that start processes (agents on recordings, a secure team, recordings, the
+ROS 2 mirror) assert what arrives and what is estimated over a fixed count of processed frames, never when: a
+neighbouring test slows them and changes nothing they check."""
 
 from __future__ import annotations
 
 import pytest
 
-#: Test modules whose tests start agents on a frame clock, time a budget, or measure rates between processes.
+#: Test modules with a test that asserts no late frame, a rate, a delay or a time between real processes.
 REALTIME_MODULES = frozenset({
-    "test_agents", "test_bus", "test_dataset_agents", "test_dataset_scenario", "test_faults", "test_fleet",
-    "test_flood", "test_meter_ros2", "test_netns", "test_paper_scale", "test_plausibility", "test_record", "test_ros2",
-    "test_ros_hints", "test_ros_sources", "test_scenarios", "test_security", "test_sources", "test_time_budget",
-    "test_vehicle_realtime", "test_view",
+    "test_agents", "test_bus", "test_dataset_agents", "test_faults", "test_fleet", "test_flood", "test_netns",
+    "test_ros_sources", "test_scenarios", "test_sources", "test_time_budget", "test_vehicle_realtime", "test_view",
 })
 
 
 def pytest_configure(config: pytest.Config) -> None:
-    config.addinivalue_line("markers", "realtime: runs processes in real time; `make test` runs these one at a time")
+    config.addinivalue_line("markers", "realtime: asserts timing between processes; `make test` runs these one at "
+                                       "a time")
 
 
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
