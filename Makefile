@@ -48,7 +48,7 @@ demo: $(STAMP) kernels bytecode
 
 # Two passes (tests/conftest.py): everything but the real-time tests on two workers, then those one at a time.
 test: $(STAMP) kernels bytecode
-	EVOPOSE_REQUIRE_AOT=1 $(PY) -m pytest -q -n 2 --dist loadfile -m "not realtime"
+	EVOPOSE_REQUIRE_AOT=1 $(PY) -m pytest -q -n 2 -m "not realtime"
 	EVOPOSE_REQUIRE_AOT=1 $(PY) -m pytest -q -m realtime
 
 # The fuzz tests with many more (and random) examples than `make test` runs (a few minutes).
