@@ -6,13 +6,14 @@ STAMP  := $(VENV)/.installed
 
 .PHONY: demo test fuzz bench bench-solver bench-looks bench-footprint examples install kernels bytecode clean lock compose photoreal
 
-# The pinned packages installed by uv (~12 s here against pip's ~55 s: parallel downloads and installs), pip where uv
-# cannot be had or fails; either installs exactly constraints.txt.
+# The pinned packages installed by uv (~21 s here against pip's ~55 s: parallel downloads and installs), pip where uv
+# cannot be had or fails; either installs exactly constraints.txt, byte-compiled (where PYTHONDONTWRITEBYTECODE=1 is
+# set, a package installed without its bytecode is compiled again by every process that imports it).
 UV_VERSION := 0.9.7
 $(STAMP): pyproject.toml constraints.txt
 	$(PYTHON) -m venv $(VENV)
 	($(PY) -m pip install --quiet "uv==$(UV_VERSION)" && \
-	 $(PY) -m uv pip install --quiet --python $(PY) -c constraints.txt -e ".[dev]") || \
+	 $(PY) -m uv pip install --quiet --compile-bytecode --python $(PY) -c constraints.txt -e ".[dev]") || \
 	($(PY) -m pip install --quiet --upgrade "pip>=24" && $(PY) -m pip install --quiet -c constraints.txt -e ".[dev]")
 	touch $(STAMP)
 
