@@ -24,6 +24,7 @@ ORDER = ("solvers", "solver_regression", "softposit", "solver_phases", "confiden
          "photoreal_fleet", "photoreal_fleet_long", "photoreal_fleet_paper_long", "photoreal_tracking",
          "photoreal_encoding", "photoreal_looks", "photoreal_looks_husky", "photoreal_looks_bodies_telephoto", "photoreal_looks_context",
          "photoreal_looks_halved", "photoreal_looks_lightness", "photoreal_looks_clipped", "photoreal_looks_random_side", "photoreal_looks_edge", "photoreal_looks_stride",
+         "photoreal_looks_weighed_misfit",
          "photoreal_looks_train_telephoto",
          "photoreal_fleet_looks",
          "photoreal_fleet_looks_paper", "photoreal_fleet_husky", "photoreal_fleet_husky_looks", "photoreal_fleet_context", "photoreal_fleet_realtime", "photoreal_fleet_looks_long", "photoreal_fleet_clock",
@@ -69,6 +70,8 @@ TITLES = {
                                    "5b0a10d",
     "photoreal_looks_edge": "Mark front-ends through camera looks: the edge ratio 100 against 40, side by side",
     "photoreal_looks_stride": "Mark front-ends through camera looks: a large body's look patch on a quarter of the pixels, side by side",
+    "photoreal_looks_weighed_misfit": "Mark front-ends through camera looks: a label's misfit weighed by the context "
+                                      "model, side by side",
     "photoreal_looks_lightness": "Mark front-ends through camera looks: a spot's lightness against its ring, side by "
                                  "side",
     "photoreal_looks_train_telephoto": "Mark front-ends through camera looks: the telephoto training worlds, random "

@@ -236,7 +236,7 @@ def _contrast_counts(name: str, look) -> dict:
 
 @pytest.mark.parametrize("name, recall, precision", [
     ("paper-agx", 0.8, 0.75), ("telephoto-agx", 0.98, 0.95),          # measured 0.86 / 0.80, 1.00 / 1.00
-    ("paper-flat-cool", 0.6, 0.75), ("telephoto-flat-cool", 0.85, 0.75),   # 0.66 / 0.82, 0.95 / 0.80
+    ("paper-flat-cool", 0.6, 0.75), ("telephoto-flat-cool", 0.85, 0.75),   # 0.66 / 0.82, 1.00 / 0.97
 ])
 def test_through_looks_it_was_never_tuned_on_the_marks_are_found(name, recall, precision):
     # the Pioneer's g2 worlds (a geometry the committed reference-look frames do not have) developed through Blender's
@@ -251,6 +251,22 @@ def test_through_looks_it_was_never_tuned_on_the_marks_are_found(name, recall, p
     if "flat-cool" in name:
         blind = _contrast_counts(name, None)
         assert found["recall"] > min(2 * blind["recall"], blind["recall"] + 0.3), (found, blind)
+
+
+def test_where_the_context_model_weighs_the_spots_a_mark_misfitting_its_label_reaches_it(monkeypatch):
+    # through the cold, flat JPEG-50 camera a telephoto mark's colour misfits its paint 0.35-0.5: the hand-set bar of
+    # 0.35 dropped it before the context model (which weighs the misfit among its measures) saw it. Measured: the
+    # Pioneer's flat-cool frames recall 0.966 -> 1.000 (precision 0.989 -> 0.970), the second robot's 0.938 -> 0.958
+    import vision.blobs as blobs
+
+    names = ("telephoto-flat-cool", "husky-telephoto")
+    weighed = {name: _contrast_counts(name, "auto") for name in names}
+    monkeypatch.setattr(blobs, "MAX_LABEL_MISFIT_WEIGHED", blobs.MAX_LABEL_MISFIT)
+    barred = {name: _contrast_counts(name, "auto") for name in names}
+    for name in names:
+        assert weighed[name]["recall"] > barred[name]["recall"], (name, weighed[name], barred[name])
+        assert weighed[name]["precision"] >= 0.95 and weighed[name]["labels"] == 1.0, (name, weighed[name])
+    assert weighed["telephoto-flat-cool"]["recall"] == 1.0
 
 
 def test_on_a_second_robot_it_was_never_tuned_on():
