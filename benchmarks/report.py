@@ -27,7 +27,7 @@ ORDER = ("solvers", "solver_regression", "softposit", "solver_phases", "confiden
          "photoreal_looks_weighed_misfit",
          "photoreal_looks_train_telephoto",
          "photoreal_fleet_looks",
-         "photoreal_fleet_looks_paper", "photoreal_fleet_husky", "photoreal_fleet_husky_looks", "photoreal_fleet_context", "photoreal_fleet_realtime", "photoreal_fleet_looks_long", "photoreal_fleet_clock",
+         "photoreal_fleet_looks_paper", "photoreal_fleet_husky", "photoreal_fleet_husky_looks", "photoreal_fleet_husky_long", "photoreal_fleet_context", "photoreal_fleet_realtime", "photoreal_fleet_looks_long", "photoreal_fleet_clock",
          "frontend_speed", "frame_cost")
 
 #: Titles that several section files share, told apart by what each measures (by file stem).
@@ -70,6 +70,8 @@ TITLES = {
                                    "5b0a10d",
     "photoreal_looks_edge": "Mark front-ends through camera looks: the edge ratio 100 against 40, side by side",
     "photoreal_looks_stride": "Mark front-ends through camera looks: a large body's look patch on a quarter of the pixels, side by side",
+    "photoreal_fleet_husky_long": "The fleet on rendered datasets: the second robot's 20-frame telephoto sequence "
+                                  "through camera looks",
     "photoreal_looks_weighed_misfit": "Mark front-ends through camera looks: a label's misfit weighed by the context "
                                       "model, side by side",
     "photoreal_looks_lightness": "Mark front-ends through camera looks: a spot's lightness against its ring, side by "
