@@ -1,6 +1,6 @@
 """Compile the kernels ahead of time into :data:`evopose.kernel_abi.AOT_MODULE` (``make install`` runs this).
 
-Run from the repository root (about 15 s on 2 cores; nothing to do, and under a second, when the module is
+Run from the repository root (about 35 s on 2 cores; nothing to do, and under a second, when the module is
 current)::
 
     python -m evopose.kernel_build [--force]

@@ -169,6 +169,8 @@ def test_a_datasets_frame_is_stamped_with_the_tick_it_was_taken_at_however_late_
     on_time, late = (open_camera(AgentConfig(fleet="f", vehicle=v, scenario=None, source=str(exp2), fps=10.0,
                                              epoch_ns=epoch), scenario) for v in ("H1", "H2"))
     try:
+        # before it plays anything, each knows the instant it plays first: staleness is judged there (PlaybackClock)
+        assert on_time.first_stamp_ns() == late.first_stamp_ns() == clock.stamp_ns(0)
         for k, tick in enumerate((0, 3, 4, 9)):  # the late one skips nothing: frame k, at a later tick
             a, b = on_time.acquire(k, clock.stamp_ns(k)), late.acquire(tick, clock.stamp_ns(tick))
             assert a.scene_frame == b.scene_frame == k and a.stamp_ns == b.stamp_ns == clock.stamp_ns(k)
@@ -177,6 +179,7 @@ def test_a_datasets_frame_is_stamped_with_the_tick_it_was_taken_at_however_late_
     # without a common clock (no --epoch-ns) a vehicle's first tick is the recording's frame 0
     alone = open_camera(AgentConfig(fleet="f", vehicle="H1", scenario=None, source=str(exp2), fps=10.0), scenario)
     try:
+        assert alone.first_stamp_ns() is None  # not known before its first tick
         own = FrameClock(10.0)  # its ticks count from the Unix epoch
         stamps = [alone.acquire(tick, own.stamp_ns(tick)).stamp_ns for tick in (7, 8, 10)]
         assert stamps == [own.stamp_ns(t) for t in (7, 8, 9)]

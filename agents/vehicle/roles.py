@@ -205,7 +205,7 @@ class CameraVehicle(Vehicle):
     def run(self, stop: threading.Event) -> dict:
         first = getattr(self.camera, "first_stamp_ns", lambda: None)()  # a recording on the fleet's common clock
         if first is not None:  # plays its first frame's instant first, however late it starts (PlaybackClock)
-            self.bus.playback.play_behind(time.time_ns() - first, until_ns=first + int(self.period_s * NS))
+            self._play_at(first)
         try:
             summary = super().run(stop)
             source = getattr(self.camera, "summary_fields", None)  # a dataset: which, and whether the target is in it
@@ -297,6 +297,12 @@ class CameraVehicle(Vehicle):
         for mate in back:
             self.emit({"event": "fresh", "vehicle": mate, "by": self.config.vehicle})
 
+    def _play_at(self, stamp_ns: int) -> None:
+        """The instant this vehicle is at is ``stamp_ns``'s: a recording played behind the wall clock judges
+        team-mates' data there, and that instant does not pass the next frame's while this one is worked on
+        (agents/transport/playback.py)."""
+        self.bus.playback.play_behind(time.time_ns() - stamp_ns, until_ns=stamp_ns + int(self.period_s * NS))
+
     # -- the frame ------------------------------------------------------------------------------
 
     def frame(self, n: int) -> None:
@@ -308,9 +314,7 @@ class CameraVehicle(Vehicle):
         near = self.state.near(n)
         frame = self.camera.acquire(n, self.clock.stamp_ns(n), near=near)
         stamp = frame.stamp_ns  # when the image was taken: tick n's, or a recording's own instant (dataset_source)
-        # the instant this vehicle is at: a recording played behind the wall clock judges team-mates' data there, and
-        # that instant does not pass the next frame's while this one is worked on (agents/transport/playback.py)
-        self.bus.playback.play_behind(time.time_ns() - stamp, until_ns=stamp + int(self.period_s * NS))
+        self._play_at(stamp)
         self.record.render_cpu_s += frame.render_cpu_s
         if self._image_ready is None:
             self._image_ready = t_acquire + frame.render_s
