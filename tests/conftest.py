@@ -12,7 +12,8 @@ import pytest
 
 #: Test modules with a test that asserts no late frame, views paired in time (a pair publishing the same pose), a
 #: rate, a delay or a time between real processes. test_dataset_scenario's pair on a recording failed on the two
-#: workers (2 of 10 frames paired: a team-mate's view came after the frame's wait for it).
+#: workers (2 of 10 frames paired: a team-mate's view came after the frame's wait for it). A test of one of these
+#: modules that only waits for what arrives is marked ``untimed`` and runs on the workers.
 REALTIME_MODULES = frozenset({
     "test_agents", "test_bus", "test_dataset_agents", "test_dataset_scenario", "test_faults", "test_fleet",
     "test_flood", "test_netns", "test_paper_scale", "test_ros_sources", "test_scenarios", "test_sources",
@@ -23,9 +24,19 @@ REALTIME_MODULES = frozenset({
 def pytest_configure(config: pytest.Config) -> None:
     config.addinivalue_line("markers", "realtime: asserts timing between processes; `make test` runs these one at "
                                        "a time")
+    config.addinivalue_line("markers", "untimed(why): a test of a real-time module that waits for what arrives and "
+                                       "asserts no time; `make test` runs it on the two workers")
+
+
+def pytest_ignore_collect(collection_path, config: pytest.Config) -> bool | None:
+    """``-m realtime`` (the second pass) imports only the real-time modules (collecting every module costs ~5 s)."""
+    if config.option.markexpr == "realtime" and collection_path.suffix == ".py":
+        return collection_path.stem.startswith("test_") and collection_path.stem not in REALTIME_MODULES
+    return None
 
 
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
     for item in items:
-        if item.module is not None and item.module.__name__.rsplit(".", 1)[-1] in REALTIME_MODULES:
+        module = item.module.__name__.rsplit(".", 1)[-1] if item.module is not None else None
+        if module in REALTIME_MODULES and item.get_closest_marker("untimed") is None:
             item.add_marker(pytest.mark.realtime)

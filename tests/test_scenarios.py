@@ -178,6 +178,7 @@ def test_scenario_list_and_show(capsys):
                                                   "hint_rate": 200.0, "image_encoding": "raw", "features": None}
 
 
+@pytest.mark.untimed("waits for the run's end after one agent is killed")
 def test_a_crashed_agent_ends_the_run_with_one_line_and_stops_the_others():
     runner, endpoint = start_endless_run("exp2a-features")
     meter = watch(endpoint)

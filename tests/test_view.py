@@ -95,6 +95,7 @@ def fleet():
     fleet.close()
 
 
+@pytest.mark.untimed("waits for every channel's first messages")
 def test_a_websocket_client_receives_every_channel_of_a_live_fleet(fleet):
     view = fleet.start("view", "--fleet", fleet.fleet, "--port", "0", "--json")
     ready = view.next_record(60, lambda r: r.get("event") == "ready")
@@ -130,6 +131,7 @@ def check_viewer_schema(schema: dict, where: str = "") -> None:
         check_viewer_schema(schema["items"], f"{where}[]")
 
 
+@pytest.mark.untimed("waits for every channel's first messages")
 def test_every_advertised_schema_parses_in_the_viewers_and_every_message_validates(fleet):
     """Every channel `evopose view` advertises for a live fleet (pose with and without a truth, features): the JSON
     ones have schemas :func:`check_viewer_schema` accepts and every message sent on them validates against the
@@ -229,6 +231,7 @@ def ws_protocol_client() -> Path:
     return home
 
 
+@pytest.mark.untimed("waits for every channel's first messages")
 def test_the_official_ws_protocol_client_decodes_every_channel_with_its_default_subprotocol(fleet):
     """@foxglove/ws-protocol's FoxgloveClient over `ws`, offering only foxglove.websocket.v1 (as Lichtblick does):
     the relay accepts it, and it decodes a message of every channel (protobuf from the advertised descriptors,
