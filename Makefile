@@ -17,7 +17,7 @@ $(STAMP): pyproject.toml constraints.txt
 	($(PY) -m pip install --quiet --upgrade "pip>=24" && $(PY) -m pip install --quiet -c constraints.txt -e ".[dev]")
 	touch $(STAMP)
 
-# The search's kernels compiled ahead of time (docs/design.md §2, "Compiled kernels"; ~35 s on a fresh clone here,
+# The search's kernels compiled ahead of time (docs/design.md §2, "Compiled kernels"; ~27 s on a fresh clone here,
 # instant when current): an agent then runs without numba's JIT (~110 MB less resident). Without them, or after a
 # kernel's source changed and before this runs again, the same kernels run through the JIT.
 kernels: $(STAMP)

@@ -2,9 +2,9 @@
 
 docs/design.md §2, "Compiled kernels": numba's JIT costs an agent about 110 MB resident (numba itself, LLVM's code
 generator and its registries) for kernels that never change while it runs. ``make install`` compiles them ahead of
-time (:mod:`evopose.kernel_build`, numba's ``pycc``) into :data:`evopose.kernel_abi.AOT_MODULE`, an extension
-module that needs neither numba nor llvmlite. It is used when it is there and *current*: its :func:`build_key`
-(the text of :data:`evopose.kernel_abi.SOURCES` and this machine's processor, for which it was compiled) is this
+time (:mod:`evopose.kernel_build`, numba's ``pycc``) into :data:`evopose.kernel_abi.AOT_MODULES`, extension
+modules that need neither numba nor llvmlite. They are used when they are there and *current*: each one's
+:func:`build_key` (the text of :data:`evopose.kernel_abi.SOURCES` and this machine's processor, for which it was compiled) is this
 checkout's. Otherwise, or with ``EVOPOSE_KERNELS=jit`` in the environment, the same kernels run through numba's JIT
 (imported then, and only then), so an edited kernel is never run stale and a fresh checkout works before a build.
 
@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .kernel_abi import AOT_MODULE, EXPORTS, SOURCES, WRITTEN
+from .kernel_abi import AOT_MODULES, EXPORTS, SOURCES, WRITTEN
 
 ROOT = Path(__file__).resolve().parents[1]
 #: ``EVOPOSE_KERNELS=jit`` runs numba's JIT even when the compiled module is current (comparisons, debugging).
@@ -55,13 +55,18 @@ def build_key() -> int:
     return int(digest.hexdigest()[:15], 16)
 
 
-def load_aot() -> types.ModuleType | None:
-    """The compiled module when it is built and current, else None (never imports numba)."""
-    try:
-        module = importlib.import_module(AOT_MODULE)
-        return module if module.build_key() == build_key() else None
-    except (ImportError, OSError):  # not built (or for another Python), or a source not readable: the JIT
-        return None
+def load_aot() -> types.SimpleNamespace | None:
+    """The compiled modules' kernels when every module is built and current, else None (never imports numba)."""
+    key, kernels = build_key(), {}
+    for name, exported in AOT_MODULES.items():
+        try:
+            module = importlib.import_module(name)
+            if module.build_key() != key:
+                return None
+            kernels.update({kernel: getattr(module, kernel) for kernel in exported})
+        except (ImportError, OSError, AttributeError):  # not built (or for another Python, or an older layout), or a
+            return None                                  # source not readable: the JIT
+    return types.SimpleNamespace(**kernels)
 
 
 def load_jit() -> types.SimpleNamespace:
