@@ -60,6 +60,10 @@ def register(app: typer.Typer) -> None:
         fps: Annotated[float | None, typer.Option(help="Camera rate (default: the scenario's).")] = None,
         epoch_ns: Annotated[int, typer.Option(help="Fleet time of frame 0, ns since the Unix epoch; agents of a "
                                                    "fleet share it.")] = 0,
+        epoch_from_stdin: Annotated[bool, typer.Option(
+            "--epoch-from-stdin", help="Once warm (a 'warm' record), wait for the epoch on standard input: one line, "
+                                       "ns since the Unix epoch (evopose scenario run gives it when every agent of "
+                                       "a run is warm).")] = False,
         seed: Annotated[int, typer.Option(min=0, help="Seed of the searches.")] = 0,
         world_seed: Annotated[int | None, typer.Option(min=0, help="Replace the scenario's seed (image noise, "
                                                                    "IMU bias).")] = None,
@@ -125,8 +129,8 @@ def register(app: typer.Typer) -> None:
 
         agent_config = AgentConfig(
             fleet=fleet, vehicle=vehicle, scenario=scenario, role=role, share=share, frames=frames, fps=fps,
-            epoch_ns=epoch_ns, seed=seed, world_seed=world_seed, max_age_s=max_age, sync_wait_s=sync_wait,
-            hint_rate_hz=hint_rate, image_encoding=image_encoding, use_attitude=imu, attitude_sigmas=imu_sigmas,
+            epoch_ns=epoch_ns, epoch_from_stdin=epoch_from_stdin, seed=seed, world_seed=world_seed, max_age_s=max_age,
+            sync_wait_s=sync_wait, hint_rate_hz=hint_rate, image_encoding=image_encoding, use_attitude=imu, attitude_sigmas=imu_sigmas,
             wait_for=tuple(v.strip() for v in wait_for.split(",") if v.strip()), wait_timeout_s=wait_timeout,
             time_budget_s=time_budget, operating_radius_m=operating_radius, max_clock_offset_s=max_clock_offset,
             source=source, camera_info=camera_info, camera_pose=camera_pose, ros_domain=ros_domain, features=features,
@@ -152,6 +156,8 @@ def register(app: typer.Typer) -> None:
 
         with stop_on_signals() as stop:
             summary = run_agent(session_options(mode, connect, listen, config, multicast), agent_config, stop, emit)
+        if summary is None:  # stopped before frame 0 (--epoch-from-stdin): nothing ran
+            return
         if as_json:
             emit_json(summary)
         else:

@@ -1,7 +1,7 @@
 """``evopose scenario run``: every agent of a fleet scenario as its own process, for one or more runs.
 
-Per run, the agents get one fleet name, one frame clock (``--epoch-ns`` a few seconds ahead, so that all
-start at the same frame), the run's seeds (search seed ``seed + run``, world seed ``world seed + run``: each
+Per run, the agents get one fleet name, one frame clock (``--epoch-from-stdin``: once every agent is warm, each
+is given the same epoch a second ahead, so that all start at the same frame), the run's seeds (search seed ``seed + run``, world seed ``world seed + run``: each
 run sees other noise and IMU biases) and ``--frames N``; each ends with a JSON summary. Networking: the
 first agent listens on the scenario's endpoint (default ``tcp/127.0.0.1:7447``) and the others connect to
 it, peer to peer; with ``router: true`` a router listens there and every agent joins it as a client. An
@@ -46,8 +46,11 @@ from agents.errors import FleetError
 from agents.experiments import DEFAULT_ENDPOINT
 
 #: Where a scenario's fleet can be reached from outside by default.
-#: Frame 0 of a run is this far in the future when the agents are started (imports, warm-up).
-START_MARGIN_S = 6.0
+#: Frame 0 of a run is this long after its last agent is warm (``--epoch-from-stdin``): each then builds its vehicle
+#: and meets its team-mates, over sessions already connected (~10 ms here).
+RELEASE_MARGIN_S = 1.0
+#: How long a run's agents may take to be warm (imports, warm-up, the session) before the run fails.
+WARM_TIMEOUT_S = 120.0
 #: Seconds an agent gets to stop after SIGTERM before it is killed.
 GRACE_S = 10.0
 #: How long an agent waits for its team-mates before it gives up with an error (``--wait-timeout``).
@@ -94,10 +97,20 @@ class AgentProcess:
     records: list = field(default_factory=list)  #: every record but the per-frame ones (counted instead)
     frames_done: int = 0
     stderr: str = ""
+    warm: threading.Event = field(default_factory=threading.Event)  #: its "warm" record came: it waits for its epoch
 
     def __post_init__(self) -> None:
         self._reader = threading.Thread(target=self._read, daemon=True)
         self._reader.start()
+        self._errors = threading.Thread(target=self._read_errors, daemon=True)   # drained as it comes: a full pipe
+        self._errors.start()                                                      # would block the agent
+
+    def _read_errors(self) -> None:
+        chunks = []
+        if self.popen.stderr is not None:
+            for chunk in iter(lambda: self.popen.stderr.read(4096), ""):
+                chunks.append(chunk)
+        self.stderr = "".join(chunks)
 
     def _read(self) -> None:
         for line in self.popen.stdout:
@@ -105,10 +118,22 @@ class AgentProcess:
                 record = json.loads(line)
             except ValueError:
                 continue
+            if not isinstance(record, dict):   # a line that is JSON but no record
+                continue
             if record.get("event") == "frame":
                 self.frames_done += 1
             else:
                 self.records.append(record)
+                if record.get("event") == "warm":
+                    self.warm.set()
+
+    def release(self, epoch_ns: int) -> None:
+        """Give the agent its epoch (one line on its standard input; it may have exited)."""
+        try:
+            self.popen.stdin.write(f"{epoch_ns}\n")
+            self.popen.stdin.flush()
+        except (OSError, ValueError):
+            pass
 
     @property
     def summary(self) -> dict | None:
@@ -118,19 +143,26 @@ class AgentProcess:
         return None
 
     def finish(self, timeout: float) -> None:
+        """Wait for the agent to end and its output to be read to the end (stdout by the reader, not here: two
+        readers of one pipe would split its lines)."""
         try:
-            _, err = self.popen.communicate(timeout=timeout)
-            self.stderr = err or ""
+            self.popen.wait(timeout)
         except subprocess.TimeoutExpired:
             pass
+        if self.popen.stdin is not None:
+            try:
+                self.popen.stdin.close()
+            except OSError:
+                pass
         self._reader.join(1.0)
+        self._errors.join(1.0)
 
 
 def agent_command(scenario: FleetScenario, agent_args: list[str], *, fleet: str, frames: int, fps: float,
-                  epoch_ns: int, seed: int, world_seed: int, network: list[str], wait_for: list[str]) -> list[str]:
-    """The command line of one agent of a run."""
+                  seed: int, world_seed: int, network: list[str], wait_for: list[str]) -> list[str]:
+    """The command line of one agent of a run (its epoch comes on its standard input: :func:`release_when_warm`)."""
     return [sys.executable, "-m", "agents.cli", "agent", "--scenario", str(scenario.world_path), "--fleet", fleet,
-            *agent_args, "--frames", str(frames), "--fps", f"{fps:g}", "--epoch-ns", str(epoch_ns),
+            *agent_args, "--frames", str(frames), "--fps", f"{fps:g}", "--epoch-from-stdin",
             "--seed", str(seed), "--world-seed", str(world_seed), "--wait-for", ",".join(wait_for),
             "--wait-timeout", f"{WAIT_FOR_TEAM_S:g}", "--json", *network]
 
@@ -150,6 +182,29 @@ def make_credentials(directory: Path, fleet: str, vehicles: list[str], endpoint:
     done = subprocess.run(cmd, capture_output=True, text=True, env=env, timeout=120)
     if done.returncode != 0:
         raise ScenarioRunError(f"credentials for fleet {fleet!r}: {done.stderr.strip()[-300:]}")
+
+
+def release_when_warm(procs: list[AgentProcess], stop: threading.Event, timeout_s: float = WARM_TIMEOUT_S) -> bool:
+    """Once every agent of a run is warm, give each the same epoch, :data:`RELEASE_MARGIN_S` ahead (True); False when
+    ``stop`` is set or an agent exits first (the run's loop then says why).
+
+    Raises
+    ------
+    ScenarioRunError
+        An agent was not warm within ``timeout_s``.
+    """
+    deadline = time.monotonic() + timeout_s
+    while not all(p.warm.is_set() for p in procs):
+        if stop.is_set() or any(p.popen.poll() is not None for p in procs):
+            return False
+        if time.monotonic() > deadline:
+            cold = ", ".join(p.vehicle for p in procs if not p.warm.is_set())
+            raise ScenarioRunError(f"agents {cold} were not warm within {timeout_s:g} s")
+        stop.wait(0.01)
+    epoch_ns = time.time_ns() + int(RELEASE_MARGIN_S * 1e9)
+    for proc in procs:
+        proc.release(epoch_ns)
+    return True
 
 
 def _stop_all(procs: list, sig: int = signal.SIGTERM) -> None:
@@ -239,7 +294,6 @@ def run_variant(scenario: FleetScenario, variant: VariantSpec, run: int, *, fram
             children.append(start_ros2_mirror(fleet, ros2_domain, endpoint, use_router, env))
         if record_dir is not None:  # before the agents too: their first frames are in the file
             children.append(start_recorder(fleet, Path(record_dir) / fleet, endpoint, use_router, env))
-        epoch_ns = time.time_ns() + int(START_MARGIN_S * 1e9)
         for i, agent in enumerate(variant.agents):
             if secure:  # the vehicle's file: a TLS client with its certificate
                 network = ["--config", str(keys_dir / f"{agent.vehicle}.json5"), "--connect", endpoint]
@@ -252,13 +306,15 @@ def run_variant(scenario: FleetScenario, variant: VariantSpec, run: int, *, fram
             args = agent.cli_args()
             if dataset is not None and agent.vehicle != scenario.world.spec.target.name:
                 args += ["--source", str(dataset)]
-            cmd = agent_command(scenario, args, fleet=fleet, frames=frames, fps=fps, epoch_ns=epoch_ns,
-                                seed=seed + run, world_seed=scenario.world.seed + run, network=network,
+            cmd = agent_command(scenario, args, fleet=fleet, frames=frames, fps=fps, seed=seed + run,
+                                world_seed=scenario.world.seed + run, network=network,
                                 wait_for=[v for v in vehicles if v != agent.vehicle])
-            popen = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+            popen = subprocess.Popen(cmd, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                     text=True, env=env)
             children.append(popen)
             procs.append(AgentProcess(agent.vehicle, popen))
-        deadline = time.monotonic() + START_MARGIN_S + frames / fps * 3 + 60
+        release_when_warm(procs, stop)
+        deadline = time.monotonic() + RELEASE_MARGIN_S + frames / fps * 3 + 60
         while not stop.is_set():
             if all(p.popen.poll() is not None for p in procs):
                 break

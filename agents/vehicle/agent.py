@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import threading
 from collections.abc import Callable
+from dataclasses import replace
 from pathlib import Path
 
 from scenarios.world import Scenario, build_scenario, load_scenario
@@ -22,6 +23,7 @@ from agents.vehicle.config import CAMERA_ROLES, AgentConfig
 from agents.vehicle.memory import pin_mmap_threshold
 from agents.vehicle.threads import limit_blas_threads
 from agents.vehicle.roles import CameraVehicle, GroundStation, Vehicle
+from agents.vehicle.start_signal import read_epoch
 from agents.vehicle.target_roles import Airship, Target
 
 Emit = Callable[[dict], None]
@@ -68,8 +70,9 @@ def resolve_role(scenario: Scenario, vehicle: str, role: str | None) -> str:
     return found
 
 
-def run_agent(options: SessionOptions, config: AgentConfig, stop: threading.Event, emit: Emit) -> dict:
-    """Open the bus and run the vehicle of its role until ``stop`` or ``config.frames``; returns the summary."""
+def run_agent(options: SessionOptions, config: AgentConfig, stop: threading.Event, emit: Emit) -> dict | None:
+    """Open the bus and run the vehicle of its role until ``stop`` or ``config.frames``; returns the summary (None:
+    stopped while waiting for its epoch, before frame 0)."""
     config.check()
     pin_mmap_threshold()
     limit_blas_threads()
@@ -88,6 +91,12 @@ def run_agent(options: SessionOptions, config: AgentConfig, stop: threading.Even
         session.close()
         raise
     with bus:
+        if config.epoch_from_stdin:  # frame 0 once every agent of the run is warm and connected: then the team
+            emit({"event": "warm", "vehicle": config.vehicle})          # meets in milliseconds (start_signal)
+            epoch_ns = read_epoch(stop)
+            if epoch_ns is None:
+                return None
+            config = replace(config, epoch_ns=epoch_ns, epoch_from_stdin=False)
         vehicle = ROLE_CLASSES[role](config, bus, scenario, emit)
         vehicle.subscribe()
         bus.announce()  # present only once warm and listening: a team-mate may start on seeing it

@@ -39,6 +39,8 @@ class AgentConfig:
     frames: int | None = None
     fps: float | None = None
     epoch_ns: int = 0
+    #: wait, once warm, for the epoch on standard input (agents.vehicle.start_signal) instead of ``epoch_ns``
+    epoch_from_stdin: bool = False
     seed: int = 0
     world_seed: int | None = None
     max_age_s: float = 1.0
@@ -76,6 +78,8 @@ class AgentConfig:
         check_name(self.fleet, "fleet"), check_name(self.vehicle, "vehicle")
         for name in self.wait_for:
             check_name(name, "--wait-for vehicle")
+        if self.epoch_from_stdin and self.epoch_ns:
+            raise FleetError("--epoch-ns and --epoch-from-stdin both give frame 0's time: give one")
         if self.role is not None and self.role not in ROLES:
             raise FleetError(f"--role must be one of {', '.join(ROLES)}, got {self.role!r}")
         if self.share not in SHARES:
