@@ -25,7 +25,10 @@ class Proc:
 
     def __init__(self, args: list[str]) -> None:
         self.args = args
-        self.popen = subprocess.Popen(args, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        # an agent of `--epoch-from-stdin` reads its epoch from stdin (release_when_warm); the others never read it
+        stdin = subprocess.PIPE if "--epoch-from-stdin" in args else subprocess.DEVNULL
+        self.popen = subprocess.Popen(args, cwd=ROOT, stdin=stdin, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                      text=True)
         self.lines: queue.Queue[str] = queue.Queue()
         self.records: list[dict] = []
         self._reader = threading.Thread(target=self._read, daemon=True)
@@ -88,6 +91,18 @@ class Proc:
         if self.popen.poll() is None:
             self.popen.kill()
             self.popen.wait(5)
+
+
+def release_when_warm(procs: list[Proc], margin_s: float = 1.0, timeout: float = 120) -> int:
+    """Once every agent of ``procs`` (started with ``--epoch-from-stdin``) has said ``warm``, give all the same epoch,
+    ``margin_s`` ahead, as ``evopose scenario run`` does (agents.experiments.runner.release_when_warm); the epoch."""
+    for proc in procs:
+        proc.next_record(timeout, lambda r: r.get("event") == "warm")
+    epoch = time.time_ns() + int(margin_s * 1e9)
+    for proc in procs:
+        proc.popen.stdin.write(f"{epoch}\n")
+        proc.popen.stdin.flush()
+    return epoch
 
 
 class Fleet:

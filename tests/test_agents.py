@@ -6,36 +6,42 @@ from __future__ import annotations
 
 import signal
 import sys
-import time
 
 import numpy as np
 import pytest
 
 from agents.cli.main import main
-from tests.fleet_procs import Proc, free_port, good_from_first
+from tests.fleet_procs import Proc, free_port, good_from_first, release_when_warm
 
 FEATURE_SIZE = range(100, 1000)
 RAW_FRAME = 640 * 480 * 3
 
 
 class Team:
-    """Agents of one fleet sharing a frame clock; the first listens on a free port, the others connect to it."""
+    """Agents of one fleet sharing a frame clock; the first listens on a free port, the others connect to it. The
+    agents started before :meth:`release` take the clock's epoch from it once all are warm (as ``evopose scenario
+    run`` starts a run); those started after, the same epoch (``--epoch-ns``)."""
 
-    def __init__(self, name: str, scenario: str = "exp2", fps: float = 10.0, margin_s: float = 5.0) -> None:
+    def __init__(self, name: str, scenario: str = "exp2", fps: float = 10.0) -> None:
         self.fleet, self.scenario, self.fps = name, scenario, fps
         self.port = free_port()
-        self.epoch = time.time_ns() + int(margin_s * 1e9)
+        self.epoch: int | None = None
         self.procs: dict[str, Proc] = {}
 
     def start(self, vehicle: str, *args: str, frames: int | None = None, wait_for: str = "",
               listen: bool = False) -> Proc:
         net = ["--listen" if listen else "--connect", f"tcp/127.0.0.1:{self.port}", "--no-multicast"]
         run = [] if frames is None else ["--frames", str(frames)]
+        clock = ["--epoch-from-stdin"] if self.epoch is None else ["--epoch-ns", str(self.epoch)]
         proc = Proc([sys.executable, "-m", "agents.cli", "agent", "--fleet", self.fleet, "--vehicle", vehicle,
-                     "--scenario", self.scenario, "--fps", str(self.fps), "--epoch-ns", str(self.epoch), "--json",
+                     "--scenario", self.scenario, "--fps", str(self.fps), *clock, "--json",
                      "--wait-for", wait_for, *run, *args, *net])
         self.procs[vehicle] = proc
         return proc
+
+    def release(self) -> None:
+        """Frame 0 a second after every agent started so far is warm."""
+        self.epoch = release_when_warm(list(self.procs.values()))
 
     def summaries(self, timeout: float = 60) -> dict[str, dict]:
         return {v: p.next_record(timeout, lambda r: r.get("event") == "summary") for v, p in self.procs.items()}
@@ -64,6 +70,7 @@ def teams():
 def pair(team: Team, share: str, frames: int, *extra: str) -> dict[str, dict]:
     team.start("H1", "--share", share, *extra, frames=frames, wait_for="H2", listen=True)
     team.start("H2", "--share", share, *extra, frames=frames, wait_for="H1")
+    team.release()
     return team.summaries()
 
 
@@ -107,6 +114,7 @@ def test_the_first_frame_waits_for_the_camera_team_mates_not_for_the_target_they
     team.start("H1", "--share", "features", "--max-age", "5", frames=10, wait_for="H2,pioneer", listen=True)
     team.start("H2", "--share", "features", "--max-age", "5", frames=10, wait_for="H1,pioneer")
     team.start("pioneer", "--share", "none", frames=10, wait_for="H1,H2")
+    team.release()
     s = team.summaries()
     for vehicle in ("H1", "H2"):  # 5 s waited out would skip ~50 frames of the 10 fps clock
         assert s[vehicle]["late_frames"] < 20 and s[vehicle]["multi_view_frames"] >= 8, s[vehicle]
@@ -148,6 +156,7 @@ def test_ground_station_holds_the_airship_attitude_and_sends_it_its_pose(teams):
     team = teams("exp1", scenario="exp1-airship")
     team.start("ground-station", frames=15, wait_for="airship", listen=True)
     team.start("airship", frames=40, wait_for="ground-station")  # it publishes for as long as the station looks
+    team.release()
     station = team.procs["ground-station"].first_record(60, lambda r: r.get("event") == "summary")
     team.procs["airship"].stop(signal.SIGTERM, timeout=15)
     s = {v: p.first_record(30, lambda r: r.get("event") == "summary") for v, p in team.procs.items()}
@@ -163,9 +172,10 @@ def test_ground_station_holds_the_airship_attitude_and_sends_it_its_pose(teams):
 
 
 def test_a_killed_teammate_is_dropped_from_the_views_and_used_again_when_back(teams):
-    team = teams("kill", margin_s=4.0)
+    team = teams("kill")
     h1 = team.start("H1", "--share", "features", "--max-age", "0.5", wait_for="H2", listen=True)
     h2 = team.start("H2", "--share", "features", wait_for="H1")
+    team.release()
     h1.next_record(40, lambda r: r.get("event") == "frame" and r["views"] == ["H1", "H2"])
     h2.kill()  # SIGKILL: no goodbye
     h1.next_record(10, lambda r: r.get("event") == "leave" and r["vehicle"] == "H2")
@@ -183,8 +193,9 @@ def test_a_killed_teammate_is_dropped_from_the_views_and_used_again_when_back(te
 
 
 def test_garbage_and_oversized_payloads_on_every_key_do_not_stop_an_agent(teams):
-    team = teams("garbage", margin_s=3.0)
+    team = teams("garbage")
     h1 = team.start("H1", "--share", "features", listen=True)
+    team.release()
     h1.next_record(40, lambda r: r.get("event") == "frame")
     net = ["--connect", f"tcp/127.0.0.1:{team.port}", "--no-multicast", "--fleet", team.fleet]
     attackers = []

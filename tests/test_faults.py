@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.fleet_procs import free_port
+from tests.fleet_procs import free_port, release_when_warm
 from tests.netns import TimedProc, frame_time_ns
 
 CLI = [sys.executable, "-m", "agents.cli"]
@@ -53,10 +53,11 @@ def procs():
             proc.kill()
 
 
-def agent(procs, fleet: str, vehicle: str, epoch: int, *net: str, extra: tuple[str, ...] = ()) -> TimedProc:
+def agent(procs, fleet: str, vehicle: str, *net: str, extra: tuple[str, ...] = ()) -> TimedProc:
+    """An agent of a pair whose epoch comes once both are warm (:func:`tests.fleet_procs.release_when_warm`)."""
     mate = "H2" if vehicle == "H1" else "H1"
     return procs([*CLI, "agent", "--fleet", fleet, "--vehicle", vehicle, "--share", "features", "--fps", f"{FPS:g}",
-                  "--epoch-ns", str(epoch), "--json", "--wait-for", mate, "--wait-timeout", "40", *extra, *net,
+                  "--epoch-from-stdin", "--json", "--wait-for", mate, "--wait-timeout", "40", *extra, *net,
                   "--no-multicast"])
 
 
@@ -64,10 +65,10 @@ def test_agents_reconnect_to_a_router_killed_and_started_again(procs):
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     router = procs([*CLI, "router", "--listen", endpoint, "--json"])
     router.next_record(30)
-    epoch = time.time_ns() + int(6e9)
     # H1 a Zenoh client of the router, H2 a peer that connects to it: both modes must reconnect
-    h1 = agent(procs, "reconnect", "H1", epoch, "--mode", "client", "--connect", endpoint)
-    h2 = agent(procs, "reconnect", "H2", epoch, "--mode", "peer", "--connect", endpoint)
+    h1 = agent(procs, "reconnect", "H1", "--mode", "client", "--connect", endpoint)
+    h2 = agent(procs, "reconnect", "H2", "--mode", "peer", "--connect", endpoint)
+    release_when_warm([h1, h2])
     for h in (h1, h2):
         h.next_record(60, both_views)
     router.popen.kill()  # SIGKILL: no goodbye
@@ -156,10 +157,10 @@ def test_the_scenario_runner_reports_a_dead_router_and_restarts_it(tmp_path, cap
 
 def test_a_frozen_teammate_is_stale_then_back_on_the_current_frame(procs):
     port = free_port()
-    epoch = time.time_ns() + int(6e9)
     extra = ("--max-age", f"{MAX_AGE_S:g}")
-    h1 = agent(procs, "frozen", "H1", epoch, "--listen", f"tcp/127.0.0.1:{port}", extra=extra)
-    h2 = agent(procs, "frozen", "H2", epoch, "--connect", f"tcp/127.0.0.1:{port}", extra=extra)
+    h1 = agent(procs, "frozen", "H1", "--listen", f"tcp/127.0.0.1:{port}", extra=extra)
+    h2 = agent(procs, "frozen", "H2", "--connect", f"tcp/127.0.0.1:{port}", extra=extra)
+    release_when_warm([h1, h2])
     for h in (h1, h2):
         h.next_record(60, both_views)
     os.kill(h2.popen.pid, signal.SIGSTOP)

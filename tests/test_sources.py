@@ -18,7 +18,7 @@ from agents.problem.problem_file import ProblemFileError
 from agents.vehicle.sources import CaptureReader, LatestFrameReader, SourceEnded, open_reader
 from scenarios.render import render_frame
 from scenarios.world import load_scenario
-from tests.fleet_procs import Proc, free_port
+from tests.fleet_procs import Proc, free_port, release_when_warm
 
 FRAMES = 10
 #: Slow enough that a frame (read, extract, one generation or a confirming search) never runs late: the renderer's
@@ -70,12 +70,12 @@ def run_agents(runs: dict[str, tuple[str, ...]], base: tuple[str, ...] = ("--veh
     stderr. At 2 frames/s a frame's work is a small share of its period, so they take the same ticks side by
     side (each run asserts it skipped no frame). ``base``: the arguments every run shares (the vehicle and world).
     """
-    epoch = time.time_ns() + int(10e9)
     procs = {fleet: Proc([sys.executable, "-m", "agents.cli", "agent", "--fleet", fleet, *base,
-                          "--share", "features", "--fps", str(FPS), "--epoch-ns", str(epoch),
+                          "--share", "features", "--fps", str(FPS), "--epoch-from-stdin",
                           "--json", "--no-multicast", "--listen", f"tcp/127.0.0.1:{free_port()}", *args])
              for fleet, args in runs.items()}
     try:
+        release_when_warm(list(procs.values()))   # one clock: frame 0 a second after the last is warm
         return {fleet: (proc.wait(120), proc.all_records(), proc.popen.stderr.read()) for fleet, proc in procs.items()}
     finally:
         for proc in procs.values():
