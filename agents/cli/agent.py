@@ -140,7 +140,7 @@ def register(app: typer.Typer) -> None:
         def emit(record: dict) -> None:
             if as_json:
                 emit_json(record)
-            elif record["event"] in ("ready", "join", "leave"):
+            elif record["event"] in ("warm", "ready", "join", "leave"):
                 console.print(f"{record['event']}: {record.get('vehicle')}")
             elif record["event"] == "no-estimate":
                 console.print(f"frame {record['frame']}: {record['reason']} ({record['points']})")
