@@ -1,12 +1,13 @@
-"""Which compiled kernels run, once per process: the module compiled ahead of time, or numba's JIT.
+"""Which compiled kernels run, once per process: the modules compiled ahead of time, or numba's JIT.
 
 docs/design.md §2, "Compiled kernels": numba's JIT costs an agent about 110 MB resident (numba itself, LLVM's code
 generator and its registries) for kernels that never change while it runs. ``make install`` compiles them ahead of
 time (:mod:`evopose.kernel_build`, numba's ``pycc``) into :data:`evopose.kernel_abi.AOT_MODULES`, extension
 modules that need neither numba nor llvmlite. They are used when they are there and *current*: each one's
-:func:`build_key` (the text of :data:`evopose.kernel_abi.SOURCES` and this machine's processor, for which it was compiled) is this
-checkout's. Otherwise, or with ``EVOPOSE_KERNELS=jit`` in the environment, the same kernels run through numba's JIT
-(imported then, and only then), so an edited kernel is never run stale and a fresh checkout works before a build.
+:func:`build_key` (the text of :data:`evopose.kernel_abi.SOURCES` and this machine's processor, for which it was
+compiled) is this checkout's. Otherwise, or with ``EVOPOSE_KERNELS=jit`` in the environment, the same kernels run
+through numba's JIT (imported then, and only then), so an edited kernel is never run stale and a fresh checkout works
+before a build.
 
 Every kernel of :data:`evopose.kernel_abi.EXPORTS` is a function here, and callers use these, never the numba
 modules: a compiled module has no dispatcher to adapt to what it is given and would read an array of another type

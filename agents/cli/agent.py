@@ -130,7 +130,8 @@ def register(app: typer.Typer) -> None:
         agent_config = AgentConfig(
             fleet=fleet, vehicle=vehicle, scenario=scenario, role=role, share=share, frames=frames, fps=fps,
             epoch_ns=epoch_ns, epoch_from_stdin=epoch_from_stdin, seed=seed, world_seed=world_seed, max_age_s=max_age,
-            sync_wait_s=sync_wait, hint_rate_hz=hint_rate, image_encoding=image_encoding, use_attitude=imu, attitude_sigmas=imu_sigmas,
+            sync_wait_s=sync_wait, hint_rate_hz=hint_rate, image_encoding=image_encoding, use_attitude=imu,
+            attitude_sigmas=imu_sigmas,
             wait_for=tuple(v.strip() for v in wait_for.split(",") if v.strip()), wait_timeout_s=wait_timeout,
             time_budget_s=time_budget, operating_radius_m=operating_radius, max_clock_offset_s=max_clock_offset,
             source=source, camera_info=camera_info, camera_pose=camera_pose, ros_domain=ros_domain, features=features,

@@ -1,12 +1,12 @@
 """``evopose scenario run``: every agent of a fleet scenario as its own process, for one or more runs.
 
 Per run, the agents get one fleet name, one frame clock (``--epoch-from-stdin``: once every agent is warm, each
-is given the same epoch a second ahead, so that all start at the same frame), the run's seeds (search seed ``seed + run``, world seed ``world seed + run``: each
-run sees other noise and IMU biases) and ``--frames N``; each ends with a JSON summary. Networking: the
-first agent listens on the scenario's endpoint (default ``tcp/127.0.0.1:7447``) and the others connect to
-it, peer to peer; with ``router: true`` a router listens there and every agent joins it as a client. An
-outside program (``evopose meter --connect tcp/127.0.0.1:7447``) can watch the traffic there. Multicast
-scouting is off (the default): the agents meet through the endpoint only.
+is given the same epoch a second ahead, so that all start at the same frame), the run's seeds (search seed
+``seed + run``, world seed ``world seed + run``: each run sees other noise and IMU biases) and ``--frames N``;
+each ends with a JSON summary. Networking: the first agent listens on the scenario's endpoint (default
+``tcp/127.0.0.1:7447``) and the others connect to it, peer to peer; with ``router: true`` a router listens there
+and every agent joins it as a client. An outside program (``evopose meter --connect tcp/127.0.0.1:7447``) can watch
+the traffic there. Multicast scouting is off (the default): the agents meet through the endpoint only.
 
 ``dataset``: the camera vehicles play a rendered dataset's images instead of the renderer (``evopose agent --source
 DIR``: each frame's camera and truth from the dataset, docs/datasets.md); the world is the dataset's world.yaml
@@ -45,7 +45,6 @@ from scenarios.fleet import FleetScenario, VariantSpec, load_fleet_scenario
 from agents.errors import FleetError
 from agents.experiments import DEFAULT_ENDPOINT
 
-#: Where a scenario's fleet can be reached from outside by default.
 #: Frame 0 of a run is this long after its last agent is warm (``--epoch-from-stdin``): each then builds its vehicle
 #: and meets its team-mates, over sessions already connected (~10 ms here).
 RELEASE_MARGIN_S = 1.0
