@@ -16,6 +16,7 @@ from pathlib import Path
 
 from agents.runs import pose_rows
 from agents.transport.ports import free_loopback_port as free_port
+from agents.vehicle.start_signal import release_line
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -93,14 +94,14 @@ class Proc:
             self.popen.wait(5)
 
 
-def release_when_warm(procs: list[Proc], margin_s: float = 1.0, timeout: float = 120) -> int:
+def release_when_warm(procs: list[Proc], timeout: float = 120) -> int:
     """Once every agent of ``procs`` (started with ``--epoch-from-stdin``) has said ``warm``, give all the same epoch,
-    ``margin_s`` ahead, as ``evopose scenario run`` does (agents.experiments.runner.release_when_warm); the epoch."""
+    as ``evopose scenario run`` does (agents.experiments.runner.release_when_warm); the epoch."""
     for proc in procs:
         proc.next_record(timeout, lambda r: r.get("event") == "warm")
-    epoch = time.time_ns() + int(margin_s * 1e9)
+    epoch, line = release_line()
     for proc in procs:
-        proc.popen.stdin.write(f"{epoch}\n")
+        proc.popen.stdin.write(line)
         proc.popen.stdin.flush()
     return epoch
 

@@ -15,7 +15,7 @@ import pytest
 
 from agents.cli.main import main
 from agents.errors import FleetError
-from agents.experiments.runner import AgentProcess, release_when_warm
+from agents.experiments.runner import AgentProcess, ScenarioRunError, release_when_warm
 from agents.vehicle.start_signal import parse_epoch, read_epoch
 from tests.fleet_procs import ROOT, free_port
 
@@ -104,6 +104,13 @@ def test_the_runner_gives_every_agent_the_same_epoch_once_all_are_warm_and_stops
     given = [int(proc.records[-1]["epoch"]) for proc in procs]
     # the same epoch, a second after the slower one was warm (a second after it started)
     assert given[0] == given[1] and before + 2 * 10**9 <= given[0] + 10**8 and given[0] < time.time_ns() + 10**9
+    frozen = AgentProcess("frozen", subprocess.Popen([sys.executable, "-c", "import time; time.sleep(30)"],
+                                                     stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True))
+    try:   # a team-mate that never gets warm (hung in its start): the run fails naming it, it does not wait forever
+        with pytest.raises(ScenarioRunError, match="agents frozen were not warm within 0.5 s"):
+            release_when_warm([frozen], threading.Event(), timeout_s=0.5)
+    finally:
+        frozen.popen.kill()
     gone = AgentProcess("gone", subprocess.Popen([sys.executable, "-c", "pass"], stdin=subprocess.PIPE,
                                                  stdout=subprocess.PIPE, text=True))
     waiting = AgentProcess("waiting", subprocess.Popen([sys.executable, "-c", "import time; time.sleep(30)"],

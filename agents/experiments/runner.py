@@ -44,10 +44,8 @@ from scenarios.fleet import FleetScenario, VariantSpec, load_fleet_scenario
 
 from agents.errors import FleetError
 from agents.experiments import DEFAULT_ENDPOINT
+from agents.vehicle.start_signal import RELEASE_MARGIN_S, release_line
 
-#: Frame 0 of a run is this long after its last agent is warm (``--epoch-from-stdin``): each then builds its vehicle
-#: and meets its team-mates, over sessions already connected (~10 ms here).
-RELEASE_MARGIN_S = 1.0
 #: How long a run's agents may take to be warm (imports, warm-up, the session) before the run fails.
 WARM_TIMEOUT_S = 120.0
 #: Seconds an agent gets to stop after SIGTERM before it is killed.
@@ -126,10 +124,11 @@ class AgentProcess:
                 if record.get("event") == "warm":
                     self.warm.set()
 
-    def release(self, epoch_ns: int) -> None:
-        """Give the agent its epoch (one line on its standard input; it may have exited)."""
+    def release(self, line: str) -> None:
+        """Give the agent its epoch (``line``, :func:`agents.vehicle.start_signal.release_line`, on its standard input;
+        it may have exited)."""
         try:
-            self.popen.stdin.write(f"{epoch_ns}\n")
+            self.popen.stdin.write(line)
             self.popen.stdin.flush()
         except (OSError, ValueError):
             pass
@@ -184,7 +183,8 @@ def make_credentials(directory: Path, fleet: str, vehicles: list[str], endpoint:
 
 
 def release_when_warm(procs: list[AgentProcess], stop: threading.Event, timeout_s: float = WARM_TIMEOUT_S) -> bool:
-    """Once every agent of a run is warm, give each the same epoch, :data:`RELEASE_MARGIN_S` ahead (True); False when
+    """Once every agent of a run is warm, give each the same epoch, ``RELEASE_MARGIN_S`` ahead
+    (:mod:`agents.vehicle.start_signal`; True); False when
     ``stop`` is set or an agent exits first (the run's loop then says why).
 
     Raises
@@ -200,9 +200,9 @@ def release_when_warm(procs: list[AgentProcess], stop: threading.Event, timeout_
             cold = ", ".join(p.vehicle for p in procs if not p.warm.is_set())
             raise ScenarioRunError(f"agents {cold} were not warm within {timeout_s:g} s")
         stop.wait(0.01)
-    epoch_ns = time.time_ns() + int(RELEASE_MARGIN_S * 1e9)
+    _, line = release_line()
     for proc in procs:
-        proc.release(epoch_ns)
+        proc.release(line)
     return True
 
 

@@ -16,12 +16,22 @@ import time
 
 from agents.errors import FleetError
 
+#: A launcher's epoch lies this long after its last agent said ``warm`` (s): each agent then builds its vehicle and
+#: meets its team-mates over sessions already connected (~10 ms alone here).
+RELEASE_MARGIN_S = 1.0
 #: How long an agent waits for its epoch before it gives up (s): longer than any team's warm-up.
 EPOCH_WAIT_S = 300.0
 #: An epoch further than this from the agent's clock (s) is refused: a launcher's epoch is seconds ahead.
 MAX_EPOCH_OFFSET_S = 3600.0
 #: Longest line read (bytes): an int64 of nanoseconds and a newline fit many times over.
 MAX_LINE_BYTES = 64
+
+
+def release_line(margin_s: float = RELEASE_MARGIN_S) -> tuple[int, str]:
+    """The epoch a launcher gives its warm agents, ``margin_s`` from now, and the line that carries it (what
+    :func:`read_epoch` reads)."""
+    epoch_ns = time.time_ns() + int(margin_s * 1e9)
+    return epoch_ns, f"{epoch_ns}\n"
 
 
 def parse_epoch(line: bytes, now_ns: int) -> int:
@@ -72,4 +82,4 @@ def read_epoch(stop: threading.Event, fd: int = 0, timeout_s: float = EPOCH_WAIT
     return parse_epoch(line.split(b"\n", 1)[0], time.time_ns())
 
 
-__all__ = ["EPOCH_WAIT_S", "parse_epoch", "read_epoch"]
+__all__ = ["EPOCH_WAIT_S", "RELEASE_MARGIN_S", "parse_epoch", "read_epoch", "release_line"]
