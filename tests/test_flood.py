@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 from agents.transport.inbox import BURST_S, MAX_SENDERS, RATE_PER_SENDER, BoundedSenders, SenderBudget
+from agents.vehicle.start_signal import release_line
 from protocol import CameraInfo, FeatureSet, Topic, encode, topic_key
 from tests.fleet_procs import free_port, peer_session
 
@@ -45,16 +46,18 @@ def _rss_kb(pid: int) -> int:
 
 def test_a_flood_of_valid_feature_sets_is_rate_limited_and_leaves_every_frame_and_the_memory_alone():
     port, fleet, frames = free_port(), "flooded", 60
-    epoch = time.time_ns() + int(4e9)
     victim = subprocess.Popen([sys.executable, "-m", "agents.cli", "agent", "--fleet", fleet, "--vehicle", "H1",
-                               "--share", "features", "--frames", str(frames), "--epoch-ns", str(epoch), "--json",
-                               "--listen", f"tcp/127.0.0.1:{port}"], cwd=ROOT, stdout=subprocess.PIPE,
-                              stderr=subprocess.PIPE, text=True)
+                               "--share", "features", "--frames", str(frames), "--epoch-from-stdin", "--json",
+                               "--listen", f"tcp/127.0.0.1:{port}"], cwd=ROOT, stdin=subprocess.PIPE,
+                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     points = np.random.default_rng(0).uniform(300, 340, (30, 2)).astype("<f4").tobytes()
     sent, rss = 0, []
     try:
         ready = victim.stdout.readline()
         while ready and json.loads(ready).get("event") != "ready":
+            if json.loads(ready).get("event") == "warm":  # frame 0 a second later, as a scenario run releases it
+                victim.stdin.write(release_line()[1])
+                victim.stdin.flush()
             ready = victim.stdout.readline()
         with peer_session(f"tcp/127.0.0.1:{port}") as session:
             token = session.liveliness().declare_token(f"evopose/{fleet}/@alive/H2")
@@ -77,6 +80,7 @@ def test_a_flood_of_valid_feature_sets_is_rate_limited_and_leaves_every_frame_an
                 message = FeatureSet(sender=name, seq=0, stamp_ns=time.time_ns(), camera=CAMERA, points=points)
                 session.put(topic_key(fleet, name, "features"), encode(message))
                 sent += 1
+            assert victim.poll() is None, "the victim ended before the flood did"  # its memory is measured flooded
             rss.append(_rss_kb(victim.pid))
             flood_s = time.monotonic() - flood_started
             publisher.undeclare()

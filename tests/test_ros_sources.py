@@ -39,15 +39,16 @@ from evopose import Camera
 from geometry import matrix_from_pose, pose_from_matrix
 from scenarios.render import render_frame
 from scenarios.world import load_scenario
-from tests.fleet_procs import client_session, fleet_with_router, free_port
+from tests.fleet_procs import client_session, fleet_with_router, free_port, release_when_warm
 
 FRAMES = 8  # the renderer's run is good (converged) from frame 6 on
 #: As tests/test_sources.py: slow enough that no frame runs late, so both agents seed the same searches per frame.
-FPS = 2.0
-#: Fleet frame 0 this far after the agent starts (its warm-up compiles before it joins: ready after ~3 s).
-LEAD_S = 6.0
-#: A frame's image, camera info and pose are published this long before its tick (after the previous tick).
-PUBLISH_AHEAD_S = 0.2
+FPS = 5.0
+#: How long the agent may take to follow its topics once released (s): frame 0 comes a second after the release.
+FOLLOW_WAIT_S = 5.0
+#: A frame's image, camera info and pose are published this share of a frame period before its tick (after the
+#: previous tick).
+PUBLISH_AHEAD = 0.5
 IMAGE_TOPIC = "/h1/camera/image_raw"
 COMPRESSED_TOPIC = "/h1/camera/image_raw/compressed"
 INFO_TOPIC = "/h1/camera/camera_info"
@@ -528,11 +529,11 @@ def test_a_subscription_token_is_a_publishers_with_ms(fleet):
 
 # -- real processes: an agent on ROS topics publishes the renderer's poses -----------------------------------------
 
-def start_agent(fleet, name: str, *args: str, lead_s: float = LEAD_S):
-    epoch = time.time_ns() + int(lead_s * 1e9)
+def start_agent(fleet, name: str, *args: str, fps: float = FPS):
+    """An agent of its own fleet; its frame 0 a second after it is warm (as a scenario run releases it)."""
     agent = fleet.start("agent", "--fleet", name, "--vehicle", "H1", "--scenario", "exp2", "--share", "features",
-                        "--fps", str(FPS), "--epoch-ns", str(epoch), "--frames", str(FRAMES), "--json", *args)
-    return agent, epoch
+                        "--fps", str(fps), "--epoch-from-stdin", "--frames", str(FRAMES), "--json", *args)
+    return agent, release_when_warm([agent])
 
 
 def finish(agent, timeout: float = 30.0) -> tuple[int, list[dict], str]:
@@ -569,10 +570,10 @@ def publish_camera(fleet, agent, epoch: int, frames, compressed: bool) -> None:
         poses = node.publisher(POSE_TOPIC, ros_msgs.POSE_STAMPED, ros_msgs.type_hash(ros_msgs.POSE_STAMPED),
                                DEFAULT_QOS)
         # the agent follows the topics once it joined its fleet, before its frame 0
-        assert wait(lambda: images.matched and infos.matched and poses.matched, LEAD_S), agent.stderr_now()
+        assert wait(lambda: images.matched and infos.matched and poses.matched, FOLLOW_WAIT_S), agent.stderr_now()
         for n, frame in enumerate(frames):
             stamp = epoch + round(n * 1e9 / FPS)
-            delay = (stamp - time.time_ns()) / 1e9 - PUBLISH_AHEAD_S
+            delay = (stamp - time.time_ns()) / 1e9 - PUBLISH_AHEAD / FPS
             assert delay > 0, f"frame {n} would be published late ({delay:.3f} s)"
             time.sleep(delay)
             camera = frame.camera
@@ -624,6 +625,8 @@ def test_an_agent_on_ros_topics_publishes_the_renderers_poses(fleet, renderer_ru
 STALE_TOPIC = "/h1s/camera/image_raw"
 STALE_INFO = "/h1s/camera/camera_info"
 STALE_FRAMES = 6
+#: An image is 0.25 s old at its own tick, within the staleness bound; 0.75 s at the next, beyond it.
+STALE_FPS = 2.0
 SOURCE_MAX_AGE_S = 0.6
 
 
@@ -644,12 +647,12 @@ def test_an_agent_on_tf_skips_stale_images_and_poses(fleet, renderer_run, h1_fra
     agent, epoch = start_agent(fleet, "ros-stale", "--frames", str(STALE_FRAMES), "--source", "ros2:" + STALE_TOPIC,
                                "--camera-info", "ros2:" + STALE_INFO, "--camera-pose", "ros2:/tf",
                                "--camera-frame", "H1/camera_optical", "--source-max-age", str(SOURCE_MAX_AGE_S),
-                               "--features", "marks")
+                               "--features", "marks", fps=STALE_FPS)
     try:
         with client_session(fleet.endpoint) as session, Ros2Node(session, Node("camera", "/h1s")) as node, \
                 Ros2Listener(session, topics=[], keep_samples=0) as graph:
             # the agent announces what it follows, as rmw_zenoh's subscriptions do (ros2 topic info lists it)
-            assert graph.wait_for(lambda g: len(agent_subscriptions(g)) == 4, LEAD_S), graph.entities()
+            assert graph.wait_for(lambda g: len(agent_subscriptions(g)) == 4, FOLLOW_WAIT_S), graph.entities()
             subscriptions = agent_subscriptions(graph)
             assert {(e.topic, e.msgtype, e.qos.depth, e.qos.reliability) for e in subscriptions} == {
                 (STALE_TOPIC, ros_msgs.IMAGE, 5, Reliability.BEST_EFFORT),
@@ -663,10 +666,10 @@ def test_an_agent_on_tf_skips_stale_images_and_poses(fleet, renderer_run, h1_fra
             images = node.publisher(STALE_TOPIC, ros_msgs.IMAGE, ros_msgs.type_hash(ros_msgs.IMAGE), SENSOR_QOS)
             infos = node.publisher(STALE_INFO, ros_msgs.CAMERA_INFO, ros_msgs.type_hash(ros_msgs.CAMERA_INFO))
             tf = node.publisher("/tf", ros_msgs.TF_MESSAGE, ros_msgs.type_hash(ros_msgs.TF_MESSAGE), TF_QOS)
-            assert wait(lambda: images.matched and infos.matched and tf.matched, LEAD_S), agent.stderr_now()
+            assert wait(lambda: images.matched and infos.matched and tf.matched, FOLLOW_WAIT_S), agent.stderr_now()
             for n, frame in enumerate(h1_frames[:STALE_FRAMES]):
-                stamp = epoch + round(n * 1e9 / FPS)
-                delay = (stamp - time.time_ns()) / 1e9 - PUBLISH_AHEAD_S
+                stamp = epoch + round(n * 1e9 / STALE_FPS)
+                delay = (stamp - time.time_ns()) / 1e9 - PUBLISH_AHEAD / STALE_FPS
                 assert delay > 0, f"frame {n} would be published late ({delay:.3f} s)"
                 time.sleep(delay)
                 infos.publish(ros_msgs.serialize(ros_msgs.camera_info(ros_camera(frame.camera), stamp, OPTICAL)))
@@ -698,8 +701,7 @@ def test_an_agent_on_tf_skips_stale_images_and_poses(fleet, renderer_run, h1_fra
 
 def test_no_frame_on_the_topic_is_one_line_and_exit_2(fleet):
     started = time.monotonic()
-    agent, _ = start_agent(fleet, "ros-silent", "--source", "ros2:/nobody/image_raw", "--ros-domain", "7",
-                           lead_s=0.0)  # the agent takes the next tick after it joined
+    agent, _ = start_agent(fleet, "ros-silent", "--source", "ros2:/nobody/image_raw", "--ros-domain", "7")
     code, _, stderr = finish(agent)
     lines = stderr.strip().splitlines()
     assert code == 2 and len(lines) == 1 and "Traceback" not in stderr, stderr
