@@ -6,6 +6,7 @@ plays itself (docs/architecture.md, "A frame's path"). Waits are on the agents' 
 from __future__ import annotations
 
 import queue
+import sys
 import threading
 
 import numpy as np
@@ -17,7 +18,7 @@ from agents.vehicle.frames import FrameClock, SimulatedCamera
 from agents.vehicle.team_views import camera_info
 from protocol import FeatureSet, alive_key, encode, topic_key
 from scenarios.world import load_scenario
-from tests.fleet_procs import free_port, peer_session
+from tests.fleet_procs import Proc, free_port, peer_session
 
 FPS = 10.0
 
@@ -44,17 +45,24 @@ def _next(events: queue.Queue, predicate, timeout: float = 60.0) -> dict:
 
 def test_two_vehicles_keep_the_camera_rate_while_hints_flow_between_frames():
     """Hint mode: both frame loops run generations until each tick and send their good bests as hints; no frame
-    is late for it (the frame has priority), and each vehicle uses the other's hints."""
+    is late for it (the frame has priority), and each vehicle uses the other's hints. H1 runs in this process, its
+    team-mate H2 as an agent process of its own: two vehicles in one interpreter would share one lock and starve each
+    other's generations between frames, which no fleet does."""
     endpoint, stop = f"tcp/127.0.0.1:{free_port()}", threading.Event()
     events: queue.Queue = queue.Queue()
     frames = 20
-    h1 = _agent("H1", "rt-hints", "hint", frames, SessionOptions(listen=(endpoint,)), events, stop, wait_for=("H2",))
-    h2 = _agent("H2", "rt-hints", "hint", frames, SessionOptions(connect=(endpoint,)), events, stop, wait_for=("H1",))
-    for thread, _ in (h1, h2):
-        thread.join(120)
-        assert not thread.is_alive()
-    for vehicle, (_, out) in zip(("H1", "H2"), (h1, h2)):
-        s = out["summary"]
+    h2 = Proc([sys.executable, "-m", "agents.cli", "agent", "--fleet", "rt-hints", "--vehicle", "H2", "--scenario",
+               "exp2", "--share", "hint", "--frames", str(frames), "--fps", f"{FPS:g}", "--wait-for", "H1",
+               "--connect", endpoint, "--no-multicast", "--json"])
+    try:
+        h1 = _agent("H1", "rt-hints", "hint", frames, SessionOptions(listen=(endpoint,)), events, stop,
+                    wait_for=("H2",))
+        h1[0].join(120)
+        assert not h1[0].is_alive()
+        summaries = {"H1": h1[1]["summary"], "H2": h2.next_record(60, lambda r: r.get("event") == "summary")}
+    finally:
+        h2.kill()
+    for vehicle, s in summaries.items():
         assert s["frames"] == s["estimates"] == frames, s
         assert s["late_frames"] <= 1, (vehicle, s["late_frames"])  # one tick of slack for the machine, no more
         assert s["hints_published"] > 10 * s["run_s"] and s["traffic"]["sent"]["hint"] == s["hints_published"]
