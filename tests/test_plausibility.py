@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from agents.vehicle.plausibility import Plausibility
+from agents.vehicle.start_signal import release_line
 from evopose import Bounds
 from protocol import Attitude, CameraInfo, FeatureSet, encode, topic_key
 from tests.fleet_procs import free_port, peer_session
@@ -45,12 +46,16 @@ def test_what_a_sane_team_mate_cannot_send_is_refused():
 def test_a_hostile_imu_reading_is_counted_and_the_station_keeps_going():
     """An Attitude with sigma = 1e308 (valid per the schema) once killed the ground station."""
     port, fleet = free_port(), "hostile-attitude"
-    epoch = time.time_ns() + int(4e9)
     station = subprocess.Popen([sys.executable, "-m", "agents.cli", "agent", "--scenario", "exp1-airship", "--fleet",
-                                fleet, "--vehicle", "ground-station", "--frames", "25", "--epoch-ns", str(epoch),
-                                "--listen", f"tcp/127.0.0.1:{port}", "--json"], cwd=ROOT, stdout=subprocess.PIPE,
-                               stderr=subprocess.PIPE, text=True)
+                                fleet, "--vehicle", "ground-station", "--frames", "25", "--epoch-from-stdin",
+                                "--listen", f"tcp/127.0.0.1:{port}", "--json"], cwd=ROOT, stdin=subprocess.PIPE,
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
+        early = [station.stdout.readline()]  # frame 0 a second after the station is warm, as a scenario run starts it
+        while early[-1] and json.loads(early[-1]).get("event") != "warm":
+            early.append(station.stdout.readline())
+        station.stdin.write(release_line()[1])
+        station.stdin.flush()
         with peer_session(f"tcp/127.0.0.1:{port}") as session:
             token = session.liveliness().declare_token(f"evopose/{fleet}/@alive/airship")
             key = topic_key(fleet, "airship", "attitude")
@@ -67,7 +72,7 @@ def test_a_hostile_imu_reading_is_counted_and_the_station_keeps_going():
     finally:
         station.kill()
     assert station.returncode == 0, err[-1500:]
-    records = [json.loads(line) for line in out.splitlines() if line.startswith("{")]
+    records = [json.loads(line) for line in [*early, *out.splitlines()] if line.startswith("{")]
     summary = [r for r in records if r.get("event") == "summary"][0]
     frames = [r for r in records if r.get("event") == "frame"]
     assert summary["frames"] == 25 and summary["traffic"]["rejected"].get("implausible-sigma", 0) > 0
