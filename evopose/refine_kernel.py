@@ -148,6 +148,41 @@ def fitness_one(s, model, normals, use_normals, intr, cfw, weights, taus, pts, p
 
 
 @nb.njit(cache=True, fastmath=_FASTMATH, nogil=True)
+def _solve_in_place(A, rhs):  # pragma: no cover - compiled
+    """x with A x = rhs for a small square A (n, n), by Gaussian elimination with partial pivoting, as LAPACK's
+    gesv; A and rhs are overwritten, rhs becomes x. A zero pivot gives 0 for its unknown. Written out, not
+    np.linalg.solve: numba's solve loads LAPACK through scipy.linalg at its first call (~130 ms and ~85 modules per
+    agent process, for a 6 x 6 system)."""
+    n = rhs.shape[0]
+    for c in range(n):
+        p = c
+        for r in range(c + 1, n):
+            if abs(A[r, c]) > abs(A[p, c]):
+                p = r
+        if p != c:
+            for j in range(n):
+                A[c, j], A[p, j] = A[p, j], A[c, j]
+            rhs[c], rhs[p] = rhs[p], rhs[c]
+        if A[c, c] == 0.0:
+            continue
+        for r in range(c + 1, n):
+            f = A[r, c] / A[c, c]
+            if f != 0.0:
+                for j in range(c, n):
+                    A[r, j] -= f * A[c, j]
+                rhs[r] -= f * rhs[c]
+    for c in range(n - 1, -1, -1):
+        if A[c, c] == 0.0:
+            rhs[c] = 0.0
+            continue
+        acc = rhs[c]
+        for j in range(c + 1, n):
+            acc -= A[c, j] * rhs[j]
+        rhs[c] = acc / A[c, c]
+    return rhs
+
+
+@nb.njit(cache=True, fastmath=_FASTMATH, nogil=True)
 def _bounded_step(H, g, s, lo, hi, periodic, step_free, lam, A, clamp):  # pragma: no cover - compiled
     """The damped Gauss–Newton step (6,) that respects the box: a parameter the step would push past its bound
     (eq. 3 makes boxes narrow) is held at that bound and the others are solved given it (an active set),
@@ -172,7 +207,7 @@ def _bounded_step(H, g, s, lo, hi, periodic, step_free, lam, A, clamp):  # pragm
                         rhs[i] -= H[i, j] * clamp[j]
             else:
                 A[i, i] = 1.0
-        solved = np.linalg.solve(A, rhs)
+        solved = _solve_in_place(A, rhs)
         again = False
         for d in range(6):
             if held[d]:
