@@ -1,4 +1,5 @@
-"""`evopose solve` as a real subprocess: the example files, the JSON contract, and malformed inputs (exit code 2)."""
+"""`evopose solve`: the example files, the JSON contract, and malformed inputs (exit code 2). Most run the CLI's
+``main`` in this process (tests/cli_run.py); the human-readable table and ``--help`` run as real subprocesses."""
 
 from __future__ import annotations
 
@@ -16,13 +17,14 @@ from benchmarks.problems import is_success, pose_errors
 from examples.make_examples import EXAMPLES, EXAMPLES_DIR, IMU_TOLERANCE, generate, render
 from geometry import PARAM_NAMES
 from geometry import angle_difference
+from tests.cli_run import run_cli as evopose
 
 ROOT = Path(__file__).resolve().parents[1]
 DESIGN_KEYS = {"pose", "fitness", "generations", "evaluations", "seconds", "converged"}
 POSE_KEYS = {"x", "y", "z", "roll", "pitch", "yaw", "quaternion"}
 
 
-def evopose(*args: str | Path, timeout: float = 120) -> subprocess.CompletedProcess:
+def evopose_process(*args: str | Path, timeout: float = 120) -> subprocess.CompletedProcess:
     """Run ``python -m agents.cli ARGS`` from the repository root."""
     return subprocess.run([sys.executable, "-m", "agents.cli", *map(str, args)], cwd=ROOT, capture_output=True,
                           text=True, timeout=timeout)
@@ -87,7 +89,7 @@ def test_fitness_and_time_budget_options(tmp_path):
 
 
 def test_table_output():
-    result = evopose("solve", EXAMPLES_DIR / "random_points.yaml")
+    result = evopose_process("solve", EXAMPLES_DIR / "random_points.yaml")
     assert result.returncode == 0, result.stderr
     for word in ("x", "roll", "°", "fitness", "generations", "time", "converged"):
         assert word in result.stdout

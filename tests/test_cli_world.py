@@ -1,10 +1,10 @@
-"""`evopose render`, `evopose features` and `evopose solve` from images, as real subprocesses."""
+"""`evopose render`, `evopose features` and `evopose solve` from images, through the CLI's ``main``
+(tests/cli_run.py)."""
 
 from __future__ import annotations
 
 import json
 import subprocess
-import sys
 from pathlib import Path
 
 import cv2
@@ -16,13 +16,11 @@ from benchmarks.problems import is_success, pose_errors
 from vision.features import match_to_truth
 from geometry import PARAM_NAMES
 from scenarios.target import load_model
+from tests.cli_run import run_cli as evopose
 
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def evopose(*args, timeout: float = 120) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "agents.cli", *map(str, args)], cwd=ROOT, capture_output=True,
-                          text=True, timeout=timeout)
 
 
 def ok(result: subprocess.CompletedProcess) -> subprocess.CompletedProcess:
@@ -147,9 +145,5 @@ def test_bad_inputs_exit_2_with_one_line(h1_frame, tmp_path):
         (("solve", absent), "views[0].image:"),
         (("solve", "--image", folder / "frame.png"), "--model and --camera"),
     ]
-    # independent commands, run side by side (each is a fresh process: its exit code and stderr are its own)
-    procs = [subprocess.Popen([sys.executable, "-m", "agents.cli", *map(str, args)], cwd=ROOT, stdout=subprocess.PIPE,
-                              stderr=subprocess.PIPE, text=True) for args, _ in cases]
-    for proc, (args, expected) in zip(procs, cases):
-        out, err = proc.communicate(timeout=120)
-        assert_usage_error(subprocess.CompletedProcess(proc.args, proc.returncode, out, err), expected)
+    for args, expected in cases:
+        assert_usage_error(evopose(*args), expected)

@@ -4,8 +4,6 @@ committed frames, and `evopose train-scorer --scale telephoto`."""
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 from pathlib import Path
 
 import cv2
@@ -13,6 +11,7 @@ import numpy as np
 
 from vision.mark_context import CONTEXT_FEATURES, context_features, is_context_model, shipped_context
 from vision.mark_scorer import load, shipped
+from tests.cli_run import run_cli
 
 ROOT = Path(__file__).resolve().parents[1]
 DATA = ROOT / "tests" / "data" / "photoreal"
@@ -76,17 +75,14 @@ def test_through_a_flat_cold_camera_the_context_model_drops_what_the_bars_kept()
 
 def test_train_scorer_fits_a_context_model_and_names_a_bad_scale(tmp_path):
     out = tmp_path / "context.json"
-    result = subprocess.run([sys.executable, "-m", "agents.cli", "train-scorer", str(DATA / "telephoto"),
-                             str(DATA / "husky-telephoto"), "--scale", "telephoto", "--out", str(out), "--json"],
-                            cwd=ROOT, capture_output=True, text=True, timeout=300)
+    result = run_cli("train-scorer", DATA / "telephoto", DATA / "husky-telephoto", "--scale", "telephoto", "--out", out,
+                     "--json")
     assert result.returncode == 0, result.stderr
     summary = json.loads(result.stdout)
     assert summary["candidates"] > summary["marks"] > 0
     model = load(out)
     assert is_context_model(model) and model.fitted_on.endswith("--scale telephoto")
-    bad = subprocess.run([sys.executable, "-m", "agents.cli", "train-scorer", str(DATA / "telephoto"), "--scale",
-                          "huge", "--out", str(tmp_path / "x.json")], cwd=ROOT, capture_output=True, text=True,
-                         timeout=120)
+    bad = run_cli("train-scorer", DATA / "telephoto", "--scale", "huge", "--out", tmp_path / "x.json")
     assert bad.returncode == 2 and "--scale" in bad.stderr and "Traceback" not in bad.stderr, bad.stderr
 
 

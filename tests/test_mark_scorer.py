@@ -3,8 +3,6 @@
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -14,6 +12,7 @@ from vision import mark_scorer
 from vision.mark_context import CONTEXT_FEATURES
 from vision.mark_scorer import FEATURES, MarkScorer, fit, load, shipped
 from scenarios.target import load_model
+from tests.cli_run import run_cli
 
 ROOT = Path(__file__).resolve().parents[1]
 PAPER = ROOT / "tests" / "data" / "photoreal" / "paper"
@@ -103,16 +102,13 @@ def _first_frame(directory: Path):
     return cv2.imread(str(data.image_path(cam, 0))), world, prior
 
 
-def _evopose(*args) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "agents.cli", *map(str, args)], cwd=ROOT, capture_output=True,
-                          text=True, timeout=300)
 
 
 def test_train_scorer_fits_a_scorer_the_front_end_takes(tmp_path):
     from benchmarks.bench_photoreal_features import evaluate, pooled
 
     out = tmp_path / "scorer.json"
-    result = _evopose("train-scorer", PAPER, "--out", out, "--json")
+    result = run_cli("train-scorer", PAPER, "--out", out, "--json")
     assert result.returncode == 0, result.stderr
     summary = json.loads(result.stdout)
     assert summary["candidates"] > summary["marks"] > 0 and summary["out"] == str(out)
@@ -125,7 +121,7 @@ def test_train_scorer_fits_a_scorer_the_front_end_takes(tmp_path):
 
 
 def test_train_scorer_on_a_missing_dataset_is_one_line_and_exit_2(tmp_path):
-    result = _evopose("train-scorer", tmp_path / "nowhere", "--out", tmp_path / "s.json")
+    result = run_cli("train-scorer", tmp_path / "nowhere", "--out", tmp_path / "s.json")
     assert result.returncode == 2 and "Traceback" not in result.stderr, result.stderr
     assert len(result.stderr.splitlines()) == 1 and result.stderr.startswith("error: "), result.stderr
     assert not (tmp_path / "s.json").exists()

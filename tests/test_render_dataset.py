@@ -17,16 +17,20 @@ from agents.tools.render_dataset import render_dataset
 from scenarios.dataset import DatasetError, open_dataset
 from scenarios.render import render_frame
 from scenarios.world import load_scenario
+from tests.cli_run import run_cli
 
 ROOT = Path(__file__).resolve().parents[1]
 DATA = ROOT / "tests" / "data" / "photoreal"
 
 
 def evopose(*args, env=None, timeout: float = 120) -> subprocess.CompletedProcess:
+    """The CLI in this process (tests/cli_run.py), or with ``env`` added to the environment, in a process of its own."""
     import os
 
+    if env is None:
+        return run_cli(*args)
     return subprocess.run([sys.executable, "-m", "agents.cli", *map(str, args)], cwd=ROOT, capture_output=True,
-                          text=True, timeout=timeout, env={**os.environ, **(env or {})})
+                          text=True, timeout=timeout, env={**os.environ, **env})
 
 
 def assert_usage_error(result: subprocess.CompletedProcess, expected: str) -> None:
