@@ -119,12 +119,18 @@ def candidate_features(bgr: np.ndarray, lab: np.ndarray, points: np.ndarray, rad
     inner = np.clip(px, 1, [w - 2, h - 2])
     for s in np.unique(sigma):
         at = np.nonzero(sigma == s)[0]
-        blurred = cv2.GaussianBlur(lab, (0, 0), float(s))
-        fine = blurred - cv2.GaussianBlur(lab, (0, 0), float(s) * 1.26)
-        dog[at, :3] = fine[px[at, 1], px[at, 0]]
-        dog[at, 3:6] = blurred[px[at, 1], px[at, 0]] - cv2.GaussianBlur(lab, (0, 0), float(s) * 3.0)[px[at, 1],
-                                                                                                      px[at, 0]]
-        x, y = inner[at, 0], inner[at, 1]
+        # blurred over the spots' box and what the widest kernel reaches from it (OpenCV's reaches 4 sigma), not
+        # over the whole crop: the same values at the spots, a fraction of the pixels (the crop holds the body)
+        reach = int(np.ceil(4 * 3.0 * s)) + 2
+        x0, y0 = np.maximum(px[at].min(axis=0) - reach, 0)
+        x1, y1 = np.minimum(px[at].max(axis=0) + reach + 1, [w, h])
+        box = lab[y0:y1, x0:x1]
+        blurred = cv2.GaussianBlur(box, (0, 0), float(s))
+        fine = blurred - cv2.GaussianBlur(box, (0, 0), float(s) * 1.26)
+        bx, by = px[at, 0] - x0, px[at, 1] - y0
+        dog[at, :3] = fine[by, bx]
+        dog[at, 3:6] = blurred[by, bx] - cv2.GaussianBlur(box, (0, 0), float(s) * 3.0)[by, bx]
+        x, y = inner[at, 0] - x0, inner[at, 1] - y0
         d = fine[y, x] / np.maximum(np.linalg.norm(fine[y, x], axis=1, keepdims=True), 1e-9)       # (N, 3)
         oy, ox = np.mgrid[-1:2, -1:2]
         patch = np.einsum("nijc,nc->nij", fine[y[:, None, None] + oy, x[:, None, None] + ox], d)   # (N, 3, 3)

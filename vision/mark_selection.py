@@ -98,9 +98,25 @@ def same_spots(pts: np.ndarray, radius: np.ndarray) -> np.ndarray:
     """Whether each two peaks ``pts`` (K, 2) of ``radius`` (K,) are one spot, bool (K, K): within the larger radius
     (two scales of one disc), or a small peak on the rim of a much larger one (an oblique disc's ends, its
     anti-aliased outline)."""
-    d = np.hypot(pts[:, None, 0] - pts[None, :, 0], pts[:, None, 1] - pts[None, :, 1])
-    big, small = np.maximum(radius[:, None], radius[None, :]), np.minimum(radius[:, None], radius[None, :])
-    return (d <= np.maximum(big, 1.0)) | ((big >= 1.8 * small) & (d < 1.3 * (big + small)))
+    pts, radius = np.asarray(pts, float).reshape(-1, 2), np.asarray(radius, float).reshape(-1)
+    k = len(pts)
+    same = np.zeros((k, k), bool)
+    if k == 0:
+        return same
+    # only pairs within the farthest reach along u can be one spot: found by sorting on u, not over all K^2 pairs
+    # (hundreds of candidate peaks at the paper's scale); each pair's test is the same arithmetic
+    reach = max(1.0, 2.6 * float(radius.max())) * (1 + 1e-9)
+    order = np.argsort(pts[:, 0], kind="stable")
+    u = pts[order, 0]
+    lo, hi = np.searchsorted(u, u - reach, "left"), np.searchsorted(u, u + reach, "right")
+    counts = hi - lo
+    a = np.repeat(np.arange(k), counts)
+    b = lo[a] + np.arange(len(a)) - np.repeat(np.cumsum(counts) - counts, counts)
+    i, j = order[a], order[b]
+    d = np.hypot(pts[i, 0] - pts[j, 0], pts[i, 1] - pts[j, 1])
+    big, small = np.maximum(radius[i], radius[j]), np.minimum(radius[i], radius[j])
+    same[i, j] = (d <= np.maximum(big, 1.0)) | ((big >= 1.8 * small) & (d < 1.3 * (big + small)))
+    return same
 
 
 def one_mark_between(lin: np.ndarray, pts: np.ndarray, radius: np.ndarray, labels: np.ndarray, spot: np.ndarray,
