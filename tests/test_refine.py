@@ -239,3 +239,27 @@ def test_refine_does_not_mutate_the_objective():
     out_fresh, fit_fresh = refine(PoseObjective(problem, "robust", weights=[1.0, 0.6]), poses)
     np.testing.assert_array_equal(out, out_fresh)
     np.testing.assert_array_equal(fit, fit_fresh)
+
+
+def test_the_refinements_own_solve_matches_lapack_and_gives_a_zero_for_a_zero_pivot():
+    """The damped Gauss-Newton step's 6 x 6 solve (written out in the kernel: numba's np.linalg.solve loads LAPACK
+    through scipy.linalg) gives LAPACK's answer on the systems a step meets: a damped normal matrix, rows of held
+    parameters set to the identity, a badly scaled one (metres against radians); a zero pivot gives 0, not NaN."""
+    from evopose.refine_kernel import _solve_in_place
+
+    solve = getattr(_solve_in_place, "py_func", _solve_in_place)   # the code the kernel compiles, run as Python
+    rng = np.random.default_rng(3)
+    for case in range(200):
+        J = rng.normal(size=(40, 6)) * np.array([1.0, 1.0, 1e-2, 50.0, 50.0, 50.0])   # position and angle scales
+        A = J.T @ J
+        A[np.diag_indices(6)] *= 1.0 + 10.0 ** rng.uniform(-6, 1)
+        held = rng.random(6) < 0.3
+        A[held], A[:, held] = 0.0, 0.0
+        A[held, held] = 1.0
+        rhs = rng.normal(size=6)
+        expected = np.linalg.solve(A, rhs)
+        got = solve(A.copy(), rhs.copy())
+        np.testing.assert_allclose(got, expected, rtol=1e-9, atol=1e-12 * np.abs(expected).max(), err_msg=str(case))
+    singular = np.diag([2.0, 0.0, 1.0, 1.0, 1.0, 1.0])
+    got = solve(singular.copy(), np.ones(6))
+    assert np.isfinite(got).all() and got[1] == 0.0 and got[0] == 0.5
