@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import json
 import shutil
-import subprocess
 import sys
 import time
 from pathlib import Path
@@ -17,6 +16,7 @@ import pytest
 import yaml
 
 from scenarios.render import render_frame
+from tests.cli_run import run_cli
 from tests.fleet_procs import ROOT, Proc, free_port
 from tests.test_dataset import edit_line, write_dataset
 from tests.test_sources import FRAMES, agent_error, frames_of
@@ -31,9 +31,7 @@ def lossless(tmp_path_factory) -> tuple[Path, Path]:
     world = folder / "lossless.yaml"
     world.write_text(yaml.safe_dump({"extends": "exp2", "name": "exp2-lossless",
                                      "render": {"camera_model": {"jpeg_quality": None}}}))
-    done = subprocess.run([sys.executable, "-m", "agents.cli", "render", str(world), "--out", str(folder / "ds"),
-                           "--engine", "opencv", "--frames", str(FRAMES), "--cameras", "H1"], cwd=ROOT,
-                          capture_output=True, text=True, timeout=300)
+    done = run_cli("render", world, "--out", folder / "ds", "--engine", "opencv", "--frames", FRAMES, "--cameras", "H1")
     assert done.returncode == 0, done.stderr
     return world, folder / "ds"
 
