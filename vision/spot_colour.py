@@ -134,19 +134,30 @@ def spot_misfits(image_bgr: np.ndarray, points: np.ndarray, radius: np.ndarray, 
     lo, hi = (np.full(len(spots), FREE_BRIGHTNESS[0]), np.full(len(spots), FREE_BRIGHTNESS[1])) if not body_y else \
         (ring_ys / body_y / BRIGHTNESS_SPAN, ring_ys / body_y * BRIGHTNESS_SPAN)
     brightness = np.geomspace(np.maximum(lo, 1e-3), np.maximum(hi, 2e-3), BRIGHTNESS_STEPS, axis=1)   # (K', G)
-    for i, gi, si, d, ks in zip(spots.tolist(), g_inner, sg_inner, d_inner, brightness):
-        ring_y, ring_c = ring[i, 0], ring[i, 1:] - 128.0
-        obs = np.concatenate([d[:, 0], d[:, 1], d[:, 2]])                              # (3N,)
-        weight = np.sqrt(np.concatenate([gi, si, si]))                                 # (3N,)
-        deviation = float(np.sum((obs * weight) ** 2))
-        # each colour's unit-coverage model at each brightness, (C, G, 3N): [g (k Y_c - Y_r), S[g] (k C_c - C_r)]
-        level = ks[None, :, None]
-        model = np.concatenate([gi * (level * pal_y[:, None, None] - ring_y),
-                                si * (level * pal_c[:, 0, None, None] - ring_c[0]),
-                                si * (level * pal_c[:, 1, None, None] - ring_c[1])], axis=2)
-        out[i] = np.sqrt(_least_residual(model, obs))
-        if deviation > 0:
-            explained[i] = 1.0 - _least_residual(model * weight, obs * weight) / deviation
+    # each colour's unit-coverage model at brightness k over the window is [g (k Y_c - Y_r), S[g] (k C_c - C_r)]
+    # (3N,): its products with itself and with the window's deviation from the ring are the model's coefficients
+    # (C, G) times a few sums over the window per spot, so every spot, colour and brightness is fitted at once
+    ring_y, ring_c = ring[spots, 0], ring[spots, 1:] - 128.0                             # (K',), (K', 2)
+    dy, dc = d_inner[:, :, 0], d_inner[:, :, 1:]                                         # (K', N), (K', N, 2)
+    coef_y = brightness[:, None, :] * pal_y[None, :, None] - ring_y[:, None, None]        # (K', C, G)
+    coef_c = brightness[:, None, :, None] * pal_c[None, :, None, :] - ring_c[:, None, None, :]   # (K', C, G, 2)
+    size = np.einsum("kn,kn->k", dy, dy) + np.einsum("knc,knc->k", dc, dc)                # |obs|^2
+    deviation = np.einsum("kn,kn,kn->k", g_inner, dy, dy) + np.einsum("kn,knc,knc->k", sg_inner, dc, dc)
+    for weighed in (False, True):   # the misfit; then each pixel weighed by the spot's profile (explained)
+        gy, gc = (g_inner * g_inner, sg_inner * sg_inner) if not weighed else (g_inner ** 3, sg_inner ** 3)
+        ty, tc = (g_inner, sg_inner) if not weighed else (g_inner ** 2, sg_inner ** 2)
+        norm = coef_y ** 2 * gy.sum(axis=1)[:, None, None] + np.sum(coef_c ** 2, axis=3) * gc.sum(axis=1)[:, None, None]
+        dot = (coef_y * np.einsum("kn,kn->k", ty, dy)[:, None, None]
+               + np.einsum("kcgj,kj->kcg", coef_c, np.einsum("kn,knj->kj", tc, dc)))
+        a = np.clip(dot / np.maximum(norm, 1e-12), 0.0, MAX_COVERAGE)
+        # |obs - a m|^2 = |obs|^2 - a (2 m . obs - a |m|^2), the least over the brightness steps
+        least = np.maximum(np.min((deviation if weighed else size)[:, None, None] - a * (2.0 * dot - a * norm),
+                                  axis=2), 0.0)                                          # (K', C)
+        if weighed:
+            with np.errstate(invalid="ignore", divide="ignore"):
+                explained[spots] = np.where(deviation[:, None] > 0, 1.0 - least / deviation[:, None], 0.0)
+        else:
+            out[spots] = np.sqrt(least)
     return out, explained
 
 
@@ -184,15 +195,6 @@ def _spot_windows(ycc: np.ndarray, points: np.ndarray, radius: np.ndarray, ring:
     xs = (x0 + PATCH_HALF - FIT_HALF)[:, None, None] + np.arange(fit)[None, None, :]
     d = ycc[ys, xs].reshape(len(spots), fit * fit, 3) - ring[spots, None, :]
     return (spots, g[:, inner, inner].reshape(len(spots), -1), sg[:, inner, inner].reshape(len(spots), -1), d)
-
-
-def _least_residual(model: np.ndarray, obs: np.ndarray) -> np.ndarray:
-    """The least squared residual (C,) of ``obs`` (N,) as ``a model[c, g]`` over the rows g of each colour's
-    ``model`` (C, G, N), the coverage ``a`` in [0, MAX_COVERAGE] (closed form per row)."""
-    norm = np.einsum("cgn,cgn->cg", model, model)
-    a = np.clip(model @ obs / np.maximum(norm, 1e-12), 0.0, MAX_COVERAGE)
-    resid = obs - a[..., None] * model
-    return np.min(np.einsum("cgn,cgn->cg", resid, resid), axis=1)
 
 
 def label_small_spots(image_bgr: np.ndarray, points: np.ndarray, radius: np.ndarray, palette_bgr: np.ndarray,
