@@ -134,31 +134,37 @@ def spot_misfits(image_bgr: np.ndarray, points: np.ndarray, radius: np.ndarray, 
     lo, hi = (np.full(len(spots), FREE_BRIGHTNESS[0]), np.full(len(spots), FREE_BRIGHTNESS[1])) if not body_y else \
         (ring_ys / body_y / BRIGHTNESS_SPAN, ring_ys / body_y * BRIGHTNESS_SPAN)
     brightness = np.geomspace(np.maximum(lo, 1e-3), np.maximum(hi, 2e-3), BRIGHTNESS_STEPS, axis=1)   # (K', G)
-    # each colour's unit-coverage model at brightness k over the window is [g (k Y_c - Y_r), S[g] (k C_c - C_r)]
-    # (3N,): its products with itself and with the window's deviation from the ring are the model's coefficients
-    # (C, G) times a few sums over the window per spot, so every spot, colour and brightness is fitted at once
+    # each colour's unit-coverage model at brightness k, [g (k Y_c - Y_r), S[g] (k C_c - C_r)] over the window, has
+    # coefficients (K', C, G) on the spot's profiles: every spot, colour and brightness is fitted at once
     ring_y, ring_c = ring[spots, 0], ring[spots, 1:] - 128.0                             # (K',), (K', 2)
-    dy, dc = d_inner[:, :, 0], d_inner[:, :, 1:]                                         # (K', N), (K', N, 2)
     coef_y = brightness[:, None, :] * pal_y[None, :, None] - ring_y[:, None, None]        # (K', C, G)
     coef_c = brightness[:, None, :, None] * pal_c[None, :, None, :] - ring_c[:, None, None, :]   # (K', C, G, 2)
-    size = np.einsum("kn,kn->k", dy, dy) + np.einsum("knc,knc->k", dc, dc)                # |obs|^2
+    dy, dc = d_inner[:, :, 0], d_inner[:, :, 1:]                                         # (K', N), (K', N, 2)
+    out[spots] = np.sqrt(_least_squares(coef_y, coef_c, g_inner, sg_inner, dy, dc))
+    # each pixel weighed by the spot's profile there: the model and the deviation times sqrt(g) and sqrt(S[g])
     deviation = np.einsum("kn,kn,kn->k", g_inner, dy, dy) + np.einsum("kn,knc,knc->k", sg_inner, dc, dc)
-    for weighed in (False, True):   # the misfit; then each pixel weighed by the spot's profile (explained)
-        gy, gc = (g_inner * g_inner, sg_inner * sg_inner) if not weighed else (g_inner ** 3, sg_inner ** 3)
-        ty, tc = (g_inner, sg_inner) if not weighed else (g_inner ** 2, sg_inner ** 2)
-        norm = coef_y ** 2 * gy.sum(axis=1)[:, None, None] + np.sum(coef_c ** 2, axis=3) * gc.sum(axis=1)[:, None, None]
-        dot = (coef_y * np.einsum("kn,kn->k", ty, dy)[:, None, None]
-               + np.einsum("kcgj,kj->kcg", coef_c, np.einsum("kn,knj->kj", tc, dc)))
-        a = np.clip(dot / np.maximum(norm, 1e-12), 0.0, MAX_COVERAGE)
-        # |obs - a m|^2 = |obs|^2 - a (2 m . obs - a |m|^2), the least over the brightness steps
-        least = np.maximum(np.min((deviation if weighed else size)[:, None, None] - a * (2.0 * dot - a * norm),
-                                  axis=2), 0.0)                                          # (K', C)
-        if weighed:
-            with np.errstate(invalid="ignore", divide="ignore"):
-                explained[spots] = np.where(deviation[:, None] > 0, 1.0 - least / deviation[:, None], 0.0)
-        else:
-            out[spots] = np.sqrt(least)
+    weighed = _least_squares(coef_y, coef_c, g_inner ** 1.5, sg_inner ** 1.5, dy * np.sqrt(g_inner),
+                             dc * np.sqrt(sg_inner)[:, :, None])
+    with np.errstate(invalid="ignore", divide="ignore"):
+        explained[spots] = np.where(deviation[:, None] > 0, 1.0 - weighed / deviation[:, None], 0.0)
     return out, explained
+
+
+def _least_squares(coef_y: np.ndarray, coef_c: np.ndarray, profile_y: np.ndarray, profile_c: np.ndarray,
+                   dy: np.ndarray, dc: np.ndarray) -> np.ndarray:
+    """The least squared residual (K, C) of each spot's deviation from its ring, ``dy`` (K, N) in luminance and ``dc``
+    (K, N, 2) in chroma, as ``a m`` with the model ``m = [profile_y coef_y, profile_c coef_c]`` over the window (the
+    profiles (K, N); the coefficients (K, C, G) and (K, C, G, 2) per colour and brightness), the coverage ``a`` in
+    [0, MAX_COVERAGE] in closed form, the least over the G brightness steps. The model's products with itself and
+    with the deviation are its coefficients times five sums over each window; ``|d - a m|^2 = |d|^2 - a (2 m . d - a
+    |m|^2)`` gives the residual's size without forming it."""
+    size = np.einsum("kn,kn->k", dy, dy) + np.einsum("knc,knc->k", dc, dc)                 # (K,)
+    norm = (coef_y ** 2 * np.einsum("kn,kn->k", profile_y, profile_y)[:, None, None]
+            + np.sum(coef_c ** 2, axis=3) * np.einsum("kn,kn->k", profile_c, profile_c)[:, None, None])
+    dot = (coef_y * np.einsum("kn,kn->k", profile_y, dy)[:, None, None]
+           + np.einsum("kcgj,kj->kcg", coef_c, np.einsum("kn,knj->kj", profile_c, dc)))
+    a = np.clip(dot / np.maximum(norm, 1e-12), 0.0, MAX_COVERAGE)
+    return np.maximum(np.min(size[:, None, None] - a * (2.0 * dot - a * norm), axis=2), 0.0)
 
 
 def _spot_windows(ycc: np.ndarray, points: np.ndarray, radius: np.ndarray, ring: np.ndarray
