@@ -260,8 +260,9 @@ def detect_contrast_marks(image_bgr: np.ndarray, palette: Mapping[str, tuple[int
     # the crop starts on even coordinates: the encoder's 2 x 2 chroma blocks stay aligned (vision.spot_colour)
     y0, y1 = max(box[0] - margin, 0) // 2 * 2, min(box[1] + margin + 1, bgr.shape[0])
     x0, x1 = max(box[2] - margin, 0) // 2 * 2, min(box[3] + margin + 1, bgr.shape[1])
-    found = _detect(bgr[y0:y1, x0:x1], lin[y0:y1, x0:x1], names, palette, prior, region[y0:y1, x0:x1], **settings,
-                    body=body, paint=paint[y0:y1, x0:x1], sure=sure[y0:y1, x0:x1],
+    # the crop of the linear image in one block: the spots' windows gather from it by flat index (vision.spot_position)
+    found = _detect(bgr[y0:y1, x0:x1], np.ascontiguousarray(lin[y0:y1, x0:x1]), names, palette, prior,
+                    region[y0:y1, x0:x1], **settings, body=body, paint=paint[y0:y1, x0:x1], sure=sure[y0:y1, x0:x1],
                     silhouette=silhouette[y0:y1, x0:x1])
     return replace(found, points=found.points + (x0, y0))
 
