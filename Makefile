@@ -4,7 +4,7 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test fuzz bench bench-solver bench-looks bench-footprint examples install kernels bytecode clean lock compose photoreal
+.PHONY: demo test suite-cost fuzz bench bench-solver bench-looks bench-footprint examples install kernels bytecode clean lock compose photoreal
 
 # The pinned packages installed by uv (~21 s here against pip's ~55 s: parallel downloads and installs), pip where uv
 # cannot be had or fails; either installs exactly constraints.txt, byte-compiled (where PYTHONDONTWRITEBYTECODE=1 is
@@ -51,6 +51,11 @@ demo: $(STAMP) kernels bytecode
 test: $(STAMP) kernels bytecode
 	EVOPOSE_REQUIRE_AOT=1 $(PY) -m pytest -q -n 2 -m "not realtime"
 	EVOPOSE_REQUIRE_AOT=1 $(PY) -m pytest -q -m realtime
+
+# Where the suite's time goes, per module and test: wall, CPU, the processes started, waiting (a few minutes: both
+# passes of `make test`, timed).
+suite-cost: $(STAMP) kernels bytecode
+	$(PY) -m benchmarks.suite_cost
 
 # The fuzz tests with many more (and random) examples than `make test` runs (a few minutes).
 fuzz: $(STAMP)

@@ -4,7 +4,7 @@ happens between real processes (no late frame, views paired in time, a rate, a d
 machine with nothing but its own processes, so a late frame is the code's, not a neighbouring test's. The other
 modules that start processes (a secure team, recordings, the ROS 2 mirror and hints, plausibility) assert what
 arrives and a team's end state over a fixed count of processed frames, never when: a neighbouring test slows them
-and changes nothing they check."""
+and changes nothing they check. `make suite-cost` (benchmarks/suite_cost.py) says where each pass's time goes."""
 
 from __future__ import annotations
 
