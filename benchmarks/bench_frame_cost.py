@@ -21,6 +21,8 @@ import statistics
 import sys
 from pathlib import Path
 
+from scenarios.dataset import DatasetError, open_dataset
+
 from .report import provenance
 from .trees import label, run_in_tree
 
@@ -126,6 +128,13 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     trees = [t.resolve() for t in args.trees]
     datasets = [d.resolve() for d in args.datasets]
+    for d in datasets:   # frames 0-1 are timed apart (no pose to look near): a shorter dataset has no later frame
+        try:
+            frames = open_dataset(d).frames
+        except DatasetError as err:
+            parser.error(str(err))
+        if frames < 3:
+            parser.error(f"{d}: {frames} frames; the benchmark needs 3 or more (frames 0-1 without a pose, then later)")
     runs: list[list[dict]] = [[] for _ in trees]
     rss: list[list[tuple[float, float]]] = [[] for _ in trees]
     for _ in range(args.rounds):

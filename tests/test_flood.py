@@ -3,8 +3,6 @@ new sender name each message, against a real agent; its camera rate holds and it
 
 from __future__ import annotations
 
-import json
-import subprocess
 import sys
 import time
 from pathlib import Path
@@ -13,11 +11,9 @@ import numpy as np
 import pytest
 
 from agents.transport.inbox import BURST_S, MAX_SENDERS, RATE_PER_SENDER, BoundedSenders, SenderBudget
-from agents.vehicle.start_signal import release_line
 from protocol import CameraInfo, FeatureSet, Topic, encode, topic_key
-from tests.fleet_procs import free_port, peer_session
+from tests.fleet_procs import Proc, free_port, peer_session, release_when_warm
 
-ROOT = Path(__file__).resolve().parents[1]
 CAMERA = CameraInfo(fx=1700, fy=1700, cx=320, cy=240, width=640, height=480, world_from_camera=(-27, 6, 12, 0, 0, 0))
 
 
@@ -45,29 +41,23 @@ def _rss_kb(pid: int) -> int:
 
 
 def test_a_flood_of_valid_feature_sets_is_rate_limited_and_leaves_every_frame_and_the_memory_alone():
-    port, fleet, frames = free_port(), "flooded", 60
-    victim = subprocess.Popen([sys.executable, "-m", "agents.cli", "agent", "--fleet", fleet, "--vehicle", "H1",
-                               "--share", "features", "--frames", str(frames), "--epoch-from-stdin", "--json",
-                               "--listen", f"tcp/127.0.0.1:{port}"], cwd=ROOT, stdin=subprocess.PIPE,
-                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    # 2 s of normal running, the 6 s flood and 2 s after it, at exp2's 10 fps: the victim runs through the whole flood
+    # (its output read as it comes: an unread pipe would stall it and the flood would meet a blocked process)
+    port, fleet, frames = free_port(), "flooded", 20 + 60 + 20
+    victim = Proc([sys.executable, "-m", "agents.cli", "agent", "--fleet", fleet, "--vehicle", "H1", "--share",
+                   "features", "--frames", str(frames), "--epoch-from-stdin", "--json", "--listen",
+                   f"tcp/127.0.0.1:{port}"])
     points = np.random.default_rng(0).uniform(300, 340, (30, 2)).astype("<f4").tobytes()
     sent, rss = 0, []
     try:
-        ready = victim.stdout.readline()
-        while ready and json.loads(ready).get("event") != "ready":
-            if json.loads(ready).get("event") == "warm":  # frame 0 a second later, as a scenario run releases it
-                victim.stdin.write(release_line()[1])
-                victim.stdin.flush()
-            ready = victim.stdout.readline()
+        release_when_warm([victim])   # frame 0 a second after it is warm, as a scenario run releases it
+        victim.next_record(30, lambda r: r.get("event") == "ready")
         with peer_session(f"tcp/127.0.0.1:{port}") as session:
             token = session.liveliness().declare_token(f"evopose/{fleet}/@alive/H2")
             publisher = session.declare_publisher(topic_key(fleet, "H2", "features"))
-            normal = 0
-            while normal < 20:  # 20 frames of normal running first: the victim's own frame events say when
-                line = victim.stdout.readline()
-                assert line, "the victim ended before its 20th frame"
-                normal += line.startswith("{") and json.loads(line).get("event") == "frame"
-            rss.append(_rss_kb(victim.pid))
+            for _ in range(20):  # 20 frames of normal running first: the victim's own frame events say when
+                victim.next_record(30, lambda r: r.get("event") == "frame")
+            rss.append(_rss_kb(victim.popen.pid))
             flood_started = time.monotonic()
             end = time.monotonic() + 4.0
             while time.monotonic() < end:  # one sender, as fast as this loop goes (~10 kHz)
@@ -80,16 +70,16 @@ def test_a_flood_of_valid_feature_sets_is_rate_limited_and_leaves_every_frame_an
                 message = FeatureSet(sender=name, seq=0, stamp_ns=time.time_ns(), camera=CAMERA, points=points)
                 session.put(topic_key(fleet, name, "features"), encode(message))
                 sent += 1
-            assert victim.poll() is None, "the victim ended before the flood did"  # its memory is measured flooded
-            rss.append(_rss_kb(victim.pid))
+            assert victim.popen.poll() is None, "the victim ended before the flood did"  # its memory is measured flooded
+            rss.append(_rss_kb(victim.popen.pid))
             flood_s = time.monotonic() - flood_started
             publisher.undeclare()
             token.undeclare()
-        out, err = victim.communicate(timeout=60)
+        code = victim.wait(60)
     finally:
         victim.kill()
-    assert victim.returncode == 0, err[-1500:]
-    summary = [json.loads(line) for line in out.splitlines() if line.startswith("{")][-1]
+    assert code == 0, victim.popen.stderr.read()[-1500:]
+    summary = [r for r in victim.all_records() if r.get("event") == "summary"][-1]
     assert sent > 5000
     # it ran every frame of its clock and stayed alive; how many frames the flood cost it (the flooder here takes
     # one of the machine's two cores) is a timing: measured by benchmarks/bench_flood.py (BENCHMARKS.md, "Flood":

@@ -3,22 +3,17 @@ unit checks of agents.vehicle.plausibility, and a ground station that survives a
 
 from __future__ import annotations
 
-import json
 import math
-import subprocess
 import sys
 import time
-from pathlib import Path
 
 import numpy as np
 
 from agents.vehicle.plausibility import Plausibility
-from agents.vehicle.start_signal import release_line
 from evopose import Bounds
 from protocol import Attitude, CameraInfo, FeatureSet, encode, topic_key
-from tests.fleet_procs import free_port, peer_session
+from tests.fleet_procs import Proc, free_port, peer_session, release_when_warm
 
-ROOT = Path(__file__).resolve().parents[1]
 BOX = Bounds.from_dict({"x": (-3, 3), "y": (-3, 3), "z": (-0.2, 0.5)})
 CAMERA = CameraInfo(fx=1700, fy=1700, cx=320, cy=240, width=640, height=480, world_from_camera=(-27, 6, 12, 0, 0, 0))
 
@@ -46,33 +41,28 @@ def test_what_a_sane_team_mate_cannot_send_is_refused():
 def test_a_hostile_imu_reading_is_counted_and_the_station_keeps_going():
     """An Attitude with sigma = 1e308 (valid per the schema) once killed the ground station."""
     port, fleet = free_port(), "hostile-attitude"
-    station = subprocess.Popen([sys.executable, "-m", "agents.cli", "agent", "--scenario", "exp1-airship", "--fleet",
-                                fleet, "--vehicle", "ground-station", "--frames", "25", "--epoch-from-stdin",
-                                "--listen", f"tcp/127.0.0.1:{port}", "--json"], cwd=ROOT, stdin=subprocess.PIPE,
-                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    station = Proc([sys.executable, "-m", "agents.cli", "agent", "--scenario", "exp1-airship", "--fleet", fleet,
+                    "--vehicle", "ground-station", "--frames", "25", "--epoch-from-stdin", "--listen",
+                    f"tcp/127.0.0.1:{port}", "--json"])
     try:
-        early = [station.stdout.readline()]  # frame 0 a second after the station is warm, as a scenario run starts it
-        while early[-1] and json.loads(early[-1]).get("event") != "warm":
-            early.append(station.stdout.readline())
-        station.stdin.write(release_line()[1])
-        station.stdin.flush()
+        release_when_warm([station])   # frame 0 a second after the station is warm, as a scenario run starts it
         with peer_session(f"tcp/127.0.0.1:{port}") as session:
             token = session.liveliness().declare_token(f"evopose/{fleet}/@alive/airship")
             key = topic_key(fleet, "airship", "attitude")
             deadline = time.monotonic() + 60
             seq = 0
-            while station.poll() is None and time.monotonic() < deadline:
+            while station.popen.poll() is None and time.monotonic() < deadline:
                 hostile = Attitude(sender="airship", seq=seq, stamp_ns=time.time_ns(), body="airship", roll=1e308,
                                    pitch=0.0, yaw=0.0, sigma=(1e308, 1e308, 1e308))
                 session.put(key, encode(hostile))
                 seq += 1
                 time.sleep(0.05)
             token.undeclare()
-        out, err = station.communicate(timeout=60)
+        code = station.wait(60)
     finally:
         station.kill()
-    assert station.returncode == 0, err[-1500:]
-    records = [json.loads(line) for line in [*early, *out.splitlines()] if line.startswith("{")]
+    assert code == 0, station.popen.stderr.read()[-1500:]
+    records = station.all_records()
     summary = [r for r in records if r.get("event") == "summary"][0]
     frames = [r for r in records if r.get("event") == "frame"]
     assert summary["frames"] == 25 and summary["traffic"]["rejected"].get("implausible-sigma", 0) > 0
