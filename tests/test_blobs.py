@@ -522,3 +522,20 @@ def test_a_mark_on_an_over_exposed_face_is_found_through_the_front_end():
                                       scorer=scorer)
         pairs = match_to_truth(found.points, np.array([[79.5, 44.5]]), 3.0)[0]
         assert len(pairs) == 1 and found.colours()[pairs[0][0]] == "red", scorer
+
+
+def test_two_peaks_are_one_spot_exactly_when_the_rule_says_so_however_many_and_wherever():
+    """vision.mark_selection.same_spots (pairs found by sorting along u) against its rule over every pair: within the
+    larger radius, or a peak at least 1.8 times the other's radius within 1.3 times their sum (hundreds of peaks,
+    ties in u, radii from 0.5 to 9 px)."""
+    from vision.mark_selection import same_spots
+
+    rng = np.random.default_rng(8)
+    for k, spread in ((0, 10.0), (1, 10.0), (2, 0.5), (60, 40.0), (700, 150.0)):
+        pts = rng.uniform(0, spread, (k, 2))
+        pts[: k // 5, 0] = np.round(pts[: k // 5, 0])
+        radius = rng.choice([0.5, 1.0, 1.6, 2.5, 4.0, 9.0], k)
+        d = np.hypot(*(pts[:, None, :] - pts[None, :, :]).transpose(2, 0, 1))
+        big, small = np.maximum.outer(radius, radius), np.minimum.outer(radius, radius)
+        rule = (d <= np.maximum(big, 1.0)) | ((big >= 1.8 * small) & (d < 1.3 * (big + small)))
+        assert np.array_equal(same_spots(pts, radius), rule), k

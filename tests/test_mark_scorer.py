@@ -200,3 +200,30 @@ def test_the_scorer_reads_the_paints_not_their_names_and_serves_a_palette_it_nev
         assert found.features is not None and found.features.shape[1] == len(FEATURES) and len(found) > 3
         np.testing.assert_array_equal(found.points, again.points)
         assert bars.features is None and not np.array_equal(found.points, bars.points)
+
+
+def test_a_blur_of_the_spots_box_is_the_whole_images_at_the_spots_and_their_neighbours():
+    """candidate_features blurs only the box around its spots (mark_scorer.blur_box): at every spot and its 3 x 3
+    neighbourhood the box's blurs, up to the widest (3 sigma), equal the whole crop's to the bit, also for spots at the
+    image's edges (a box too small would read OpenCV's reflected border instead of the image)."""
+    import cv2
+
+    from vision.mark_scorer import blur_box
+
+    rng = np.random.default_rng(11)
+    lab = rng.uniform(0, 100, (90, 120, 3)).astype(np.float32)
+    h, w = lab.shape[:2]
+    px = np.array([[1, 1], [60, 45], [118, 88], [5, 70], [100, 3], [61, 44]])
+    for sigma in (0.5, 0.9, 1.4, 2.0):
+        x0, y0, x1, y1 = blur_box(px, 3.0 * sigma, w, h)
+        assert (x1 - x0) * (y1 - y0) <= w * h
+        for scale in (1.0, 1.26, 3.0):
+            whole = cv2.GaussianBlur(lab, (0, 0), sigma * scale)
+            boxed = cv2.GaussianBlur(lab[y0:y1, x0:x1], (0, 0), sigma * scale)
+            for dy in (-1, 0, 1):
+                for dx in (-1, 0, 1):
+                    u, v = np.clip(px[:, 0] + dx, 1, w - 2), np.clip(px[:, 1] + dy, 1, h - 2)
+                    np.testing.assert_array_equal(boxed[v - y0, u - x0], whole[v, u])
+    # the box of spots in the middle of a large image is a small part of it
+    x0, y0, x1, y1 = blur_box(np.array([[500, 400], [530, 420]]), 3.0, 1000, 800)
+    assert (x0, y0, x1, y1) == (486, 386, 545, 435)

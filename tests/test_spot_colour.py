@@ -134,3 +134,32 @@ def test_a_spot_lighter_than_its_ring_is_no_paint_far_darker_than_the_body():
     assert list(PALETTE)[labels[0]] == "yellow" and np.isfinite(misfit[0])
     labels, misfit, _ = label_colours(dim_yellow, lit_ring, pioneer, body_linear=red)
     assert list(PALETTE)[labels[0]] != "yellow" or not np.isfinite(misfit[0])
+
+
+def test_the_fit_of_every_spot_colour_and_brightness_at_once_is_the_explicit_least_squares():
+    """spot_colour._least_squares, from five sums per window, against the model written out per spot, colour and
+    brightness, ``m = [g (k Y_c - Y_r), S[g] (k C_c - C_r)]``, its coverage ``a`` clipped to [0, MAX_COVERAGE] and
+    the residual formed: the same least residual, and the colour that fits best is the same."""
+    from vision.spot_colour import MAX_COVERAGE, _least_squares
+
+    rng = np.random.default_rng(4)
+    k, c, g, n = 7, 4, 16, 49
+    profile_y, profile_c = rng.uniform(0, 1, (k, n)), rng.uniform(0, 1, (k, n))
+    coef_y, coef_c = rng.normal(0, 60, (k, c, g)), rng.normal(0, 40, (k, c, g, 2))
+    dy, dc = rng.normal(0, 30, (k, n)), rng.normal(0, 20, (k, n, 2))
+    dy[0], dc[0] = 0.0, 0.0                                           # a spot that does not differ from its ring
+    coef_y[1, 2], coef_c[1, 2] = coef_y[1, 2] * 0, coef_c[1, 2] * 0   # a colour no brightness makes differ
+    dy[2], dc[2] = 0.8 * profile_y[2] * coef_y[2, 1, 5], 0.8 * profile_c[2, :, None] * coef_c[2, 1, 5]   # a clean spot
+    dy[3], dc[3] = 2.0 * profile_y[3] * coef_y[3, 0, 3], 2.0 * profile_c[3, :, None] * coef_c[3, 0, 3]   # beyond full
+    got = _least_squares(coef_y, coef_c, profile_y, profile_c, dy, dc)
+    obs = np.concatenate([dy, dc[..., 0], dc[..., 1]], axis=1)                                       # (K, 3N)
+    model = np.concatenate([profile_y[:, None, None, :] * coef_y[..., None],
+                            profile_c[:, None, None, :] * coef_c[..., 0, None],
+                            profile_c[:, None, None, :] * coef_c[..., 1, None]], axis=3)              # (K, C, G, 3N)
+    norm = np.sum(model * model, axis=3)
+    a = np.clip(np.sum(model * obs[:, None, None, :], axis=3) / np.maximum(norm, 1e-12), 0.0, MAX_COVERAGE)
+    expected = np.min(np.sum((obs[:, None, None, :] - a[..., None] * model) ** 2, axis=3), axis=2)
+    np.testing.assert_allclose(got, expected, rtol=1e-9, atol=1e-6)
+    assert np.array_equal(np.argmin(got[1:], axis=1), np.argmin(expected[1:], axis=1))
+    assert got[2, 1] < 1e-6 * np.sum(obs[2] ** 2)   # the clean spot is its colour at 0.8 coverage
+    assert got[3, 0] > 0.01 * np.sum(obs[3] ** 2)   # twice the colour is no coverage above MAX_COVERAGE

@@ -79,6 +79,16 @@ SHIPPED = Path(__file__).with_name("mark_scorer.json")
 Z_LIMIT = 6.0
 
 
+def blur_box(px: np.ndarray, sigma: float, width: int, height: int) -> tuple[int, int, int, int]:
+    """The box ``(x0, y0, x1, y1)`` (ends excluded) of an image ``width`` x ``height`` that holds pixels ``px`` (N, 2)
+    (u, v) with their 3 x 3 neighbourhoods and every pixel a Gaussian blur of ``sigma`` or less reaches from them
+    (OpenCV's kernel for float images reaches 4 sigma): a blur of the box equals the whole image's there."""
+    reach = int(np.ceil(4 * sigma)) + 2
+    x0, y0 = np.maximum(px.min(axis=0) - reach, 0)
+    x1, y1 = np.minimum(px.max(axis=0) + reach + 1, [width, height])
+    return int(x0), int(y0), int(x1), int(y1)
+
+
 def candidate_features(bgr: np.ndarray, lab: np.ndarray, points: np.ndarray, radius: np.ndarray,
                        contrast: np.ndarray, labels: np.ndarray, confidence: np.ndarray, misfit: np.ndarray,
                        explained: np.ndarray, paint: np.ndarray, sure: np.ndarray, extent_px: float,
@@ -119,11 +129,8 @@ def candidate_features(bgr: np.ndarray, lab: np.ndarray, points: np.ndarray, rad
     inner = np.clip(px, 1, [w - 2, h - 2])
     for s in np.unique(sigma):
         at = np.nonzero(sigma == s)[0]
-        # blurred over the spots' box and what the widest kernel reaches from it (OpenCV's reaches 4 sigma), not
-        # over the whole crop: the same values at the spots, a fraction of the pixels (the crop holds the body)
-        reach = int(np.ceil(4 * 3.0 * s)) + 2
-        x0, y0 = np.maximum(px[at].min(axis=0) - reach, 0)
-        x1, y1 = np.minimum(px[at].max(axis=0) + reach + 1, [w, h])
+        # blurred over the spots' box, not the whole crop: the same values at the spots, a fraction of the pixels
+        x0, y0, x1, y1 = blur_box(px[at], 3.0 * float(s), w, h)
         box = lab[y0:y1, x0:x1]
         blurred = cv2.GaussianBlur(box, (0, 0), float(s))
         fine = blurred - cv2.GaussianBlur(box, (0, 0), float(s) * 1.26)
@@ -322,5 +329,5 @@ def _fit(x: np.ndarray, y: np.ndarray, names: tuple[str, ...], l2: float, fitted
     return MarkScorer(tuple(names), mean, scale, w[:-1], float(w[-1]), 0.5, fitted_on)
 
 
-__all__ = ["FEATURES", "MarkScorer", "break_even", "candidate_features", "feature_names", "fit", "keeping", "load",
-           "quadratic", "shipped"]
+__all__ = ["FEATURES", "MarkScorer", "blur_box", "break_even", "candidate_features", "feature_names", "fit", "keeping",
+           "load", "quadratic", "shipped"]
