@@ -52,6 +52,20 @@ FRONT_ENDS = ("contrast", "contrast-fixed", "marks")
 #: A look named ``random-<seed>`` is :func:`scenarios.looks.random_look` of that seed (for the training worlds,
 #: where rules are chosen: ``--random-looks 16`` takes seeds 0-15).
 RANDOM = "random-"
+#: ... and ``corner-<seed>`` :func:`scenarios.looks.corner_look` of that seed (``--corner-looks 16``: seeds 0-15).
+CORNER = "corner-"
+
+
+def look_of(base, look: str):
+    """The camera model ``base`` (a CameraModelSpec) seen through ``look``: a named look, ``random-<seed>`` or
+    ``corner-<seed>``."""
+    from scenarios.looks import apply_look, corner_look, look_spec, random_look
+
+    if look.startswith(RANDOM):
+        return apply_look(base, random_look(np.random.default_rng(int(look.removeprefix(RANDOM)))))
+    if look.startswith(CORNER):
+        return apply_look(base, corner_look(np.random.default_rng(int(look.removeprefix(CORNER)))))
+    return look_spec(base, look)
 
 
 def _scale_of(world_name: str) -> str:
@@ -72,7 +86,6 @@ def evaluate(directory: Path, look: str, front_ends: tuple[str, ...] = FRONT_END
     from vision.blobs import SMALL_SPOT_PX, detect_contrast_marks, mark_prior
     from vision.features import colour_ranges, detect_colour_marks, match_to_truth
     from scenarios.dataset import open_dataset
-    from scenarios.looks import apply_look, look_spec, random_look
     from scenarios.photoreal.develop import camera_model_of
 
     cv2.setNumThreads(1)
@@ -80,8 +93,7 @@ def evaluate(directory: Path, look: str, front_ends: tuple[str, ...] = FRONT_END
     world = dataset.world()
     area = world.bounds()
     base = camera_model_of(world)
-    spec = (apply_look(base, random_look(np.random.default_rng(int(look.removeprefix(RANDOM)))))
-            if look.startswith(RANDOM) else look_spec(base, look))
+    spec = look_of(base, look)
     counts = {name: np.zeros(5, int) for name in front_ends}
     seconds = {name: 0.0 for name in front_ends}
     fitted = "shipped" if scorer is None else mark_scorer.load(scorer)
@@ -171,6 +183,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--looks", default=",".join(LOOKS), help="comma-separated look names (default: all)")
     parser.add_argument("--random-looks", type=int, default=0,
                         help="instead of the named looks, this many random looks (seeds 0..N-1: random-<seed>)")
+    parser.add_argument("--corner-looks", type=int, default=0,
+                        help="instead of the named looks, this many looks at the edges of the random ranges (seeds "
+                             "0..N-1: corner-<seed>); with --random-looks, both")
     parser.add_argument("--front-ends", default=",".join(FRONT_ENDS))
     parser.add_argument("--jobs", type=int, default=2)
     parser.add_argument("--frames", type=int, default=None, help="the first N frames of each dataset (default: all)")
@@ -188,9 +203,10 @@ def main(argv: list[str] | None = None) -> int:
     if args.scorer is not None and not args.scorer.is_file():
         parser.error(f"--scorer: no file {args.scorer}")
     looks = [lk.strip() for lk in args.looks.split(",") if lk.strip()]
-    if args.random_looks > 0:
-        looks = [f"{RANDOM}{seed}" for seed in range(args.random_looks)]
-    unknown = [lk for lk in looks if lk not in LOOKS and not lk.startswith(RANDOM)]
+    if args.random_looks > 0 or args.corner_looks > 0:
+        looks = ([f"{RANDOM}{seed}" for seed in range(args.random_looks)]
+                 + [f"{CORNER}{seed}" for seed in range(args.corner_looks)])
+    unknown = [lk for lk in looks if lk not in LOOKS and not lk.startswith((RANDOM, CORNER))]
     if unknown:
         parser.error(f"unknown look(s) {', '.join(unknown)}; known: {', '.join(LOOKS)}")
     front_ends = tuple(f.strip() for f in args.front_ends.split(",") if f.strip())

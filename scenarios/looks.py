@@ -2,7 +2,8 @@
 "Looks"), for measuring the image front-end on looks it was never tuned on.
 
 A look is a mapping of :class:`scenarios.camera_model.CameraModelSpec` fields put over a base camera model (the
-world's): :func:`look_spec` applies one by name, :func:`random_look` draws one for training and development.
+world's): :func:`look_spec` applies one by name, :func:`random_look` draws one for training and development, :func:`corner_look`
+one at the edges of those ranges (the hard looks, where a camera's settings add up).
 """
 
 from __future__ import annotations
@@ -77,5 +78,20 @@ def random_look(rng: np.random.Generator) -> dict[str, Any]:
         "hue_rotation_deg": round(float(rng.uniform(-10.0, 10.0)), 2),
         "jpeg_quality": int(rng.integers(50, 96)),
         "lens_blur_px": round(float(rng.uniform(0.0, 1.5)), 3),
+    })
+    return look
+
+
+def corner_look(rng: np.random.Generator) -> dict[str, Any]:
+    """A random look at the edges of :func:`random_look`'s ranges, for development: its tone, hue turn and lens
+    blur drawn as there, saturation 0.4, 0.45 or 1.5, each white-balance gain 0.7, 1.0 or 1.3, exposure bias -1.5 or
+    +1.5 EV, JPEG quality 50 or 55. The named looks ``flat-cool`` and ``vivid-warm`` lie at such corners; a front-end
+    chosen on random looks alone meets them rarely."""
+    look = random_look(rng)
+    look.update({
+        "saturation": float(rng.choice([0.4, 0.45, 1.5])),
+        "white_balance": [float(g) for g in rng.choice([0.7, 1.0, 1.3], 3)],
+        "exposure_bias_ev": float(rng.choice([-1.5, 1.5])),
+        "jpeg_quality": int(rng.choice([50, 55])),
     })
     return look

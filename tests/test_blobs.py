@@ -391,6 +391,8 @@ def test_a_blurred_mark_ringed_by_its_blend_with_the_paint_is_found_and_a_sunlit
     monkeypatch.setattr(blobs, "RING_GAPS_PX", (1.0,))
     monkeypatch.setattr(spot_label, "bleached_misfit",
                         lambda spot, ring, palette, *_: np.full((len(spot), len(palette)), np.inf))
+    # the paint hued like the body (vision.camera_look.hued_like_body) rings these two marks as well: without it
+    monkeypatch.setattr(blobs, "HUED_PAINT", False)
     assert _through_random_looks("telephoto", (7, 9), "bars")[0] <= found - 2
 
 
@@ -406,6 +408,20 @@ def test_a_bright_mark_bleached_toward_white_fits_its_paint_and_a_glint_on_the_b
     assert np.argmin(misfit[0]) == 2 and misfit[0, 2] < 0.01
     assert misfit[1, [1, 2, 3]].min() > 0.35    # only the body's own hue (yellow, a palette colour here) could fit
     assert np.isinf(misfit[2]).all()            # darker than its ring: not bleached
+
+
+def test_a_mark_bleached_nearly_white_is_lit_by_its_whole_light_and_a_dim_one_is_not():
+    from vision.spot_label import bleached_misfit
+
+    palette = np.array([[0.007, 0.72, 0.87], [0.72, 0.64, 0.007], [0.02, 0.51, 0.02], [0.58, 0.02, 0.65]])
+    ring = np.array([[0.45, 0.47, 0.6]])                                # a pale sunlit top face, linear BGR
+    pale_green = 0.25 * palette[2] + 0.55                               # over-exposed, desaturated: mostly white
+    dim_green = 0.25 * palette[2] + 0.05                                # the same paint, as little white: dim
+    bar = 0.6   # the scene's brightness bar (channel sum): the paint's share alone, 0.25 x 0.55, lies under it
+    misfit = bleached_misfit(np.stack([pale_green, dim_green]), np.repeat(ring, 2, axis=0) * [[1], [0.1]], palette,
+                             min_brightness=bar)
+    assert np.argmin(misfit[0]) == 2 and misfit[0, 2] < 0.01          # lit: its paint and white together
+    assert np.isinf(misfit[1]).all()                                    # 0.25 x 0.55 + 3 x 0.05 < 0.6: unlit
 
 
 def test_an_oblique_mark_peaking_at_both_ends_is_one_detection_at_its_centre_and_two_marks_stay_two():

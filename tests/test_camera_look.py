@@ -154,3 +154,38 @@ def test_a_large_bodys_patch_found_on_a_quarter_of_the_pixels_reads_as_the_whole
         assert abs(np.hypot(*sampled) / np.hypot(*whole) - 1) < 0.02
         assert abs(np.degrees(np.arctan2(sampled[1], sampled[0]) - np.arctan2(whole[1], whole[0]))) < 1.0
         assert abs(n_sampled / n_whole - 1) < 0.1   # counted in the image's pixels, not the sample's
+
+
+def _faces(ground: tuple[int, int, int]) -> np.ndarray:
+    """A red body's face, a pale pink face beside it (its paint bleached by a tone curve's shoulder and a low
+    saturation), a pale pink patch and a green one away from it, on a ground of colour ``ground``: BGR uint8."""
+    image = np.full((240, 320, 3), ground, np.uint8)
+    image[80:120, 80:140] = PIONEER_BODY
+    image[80:120, 140:180] = (180, 184, 214)
+    image[20:40, 250:290] = (120, 200, 120)
+    image[190:210, 250:290] = (180, 184, 214)
+    noise = np.random.default_rng(0).normal(0, 2, image.shape)
+    return np.clip(image + noise, 0, 255).astype(np.uint8)
+
+
+def test_a_face_bleached_toward_grey_is_hued_like_the_body_and_the_ground_is_not():
+    from vision.body_paint import LINEAR_OF_BYTE, body_paint, srgb_to_linear
+    from vision.camera_look import hued_like_body
+
+    paint_linear = srgb_to_linear(np.array(PIONEER_BODY, np.float32) / 255)
+    image = _faces((128, 130, 131))
+    sure, paint = body_paint(LINEAR_OF_BYTE[image], paint_linear)
+    assert sure[80:120, 80:140].all() and paint[80:120, 140:180].mean() < 0.01   # the light's model: red alone
+    hued = hued_like_body(image, estimate_look(image, PIONEER_BODY), PIONEER_BODY, sure)
+    assert hued[80:120, 140:180].mean() > 0.95 and hued[80:120, 80:140].all()
+    assert not hued[20:40, 250:290].any() and hued[:, :60].mean() < 0.001            # green, grey ground
+    assert hued[190:210, 250:290].mean() > 0.95   # hued like the body too: only the hysteresis joins it to the body
+    _, joined = body_paint(LINEAR_OF_BYTE[image], paint_linear,
+                           hued=lambda sure: hued_like_body(image, estimate_look(image, PIONEER_BODY),
+                                                            PIONEER_BODY, sure))
+    assert joined[80:120, 140:180].mean() > 0.95 and not joined[190:210, 250:290].any() and not joined[:, :60].any()
+    # a ground tinted in the body's own hue as much as the bleached face raises the bar past it
+    tinted = _faces((160, 165, 195))
+    sure, _ = body_paint(LINEAR_OF_BYTE[tinted], paint_linear)
+    hued = hued_like_body(tinted, estimate_look(tinted, PIONEER_BODY), PIONEER_BODY, sure)
+    assert hued[:, :60].mean() < 0.01 and hued[80:120, 140:180].mean() < 0.01

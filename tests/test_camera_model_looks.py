@@ -15,7 +15,7 @@ import pytest
 from scenarios.camera_model import (_YCBCR_FROM_BGR, LOOK_FIELD_DEFAULTS, CameraModelSpec, Tone, capture,
                                     colour_adjust, lens_blur, linear_from_srgb, spec_record, srgb_from_linear)
 from scenarios.errors import WorldError
-from scenarios.looks import LOOKS, RANDOM_TONES, apply_look, look_spec, random_look
+from scenarios.looks import LOOKS, RANDOM_TONES, apply_look, corner_look, look_spec, random_look
 from scenarios.view_luts import (VIEW_LUTS_FILE, VIEW_TONES, apply_view_lut, view_grid, view_lut, view_transform,
                                  view_transform_codes)
 
@@ -243,6 +243,16 @@ def test_random_looks_stay_in_their_ranges():
         assert 50 <= spec.jpeg_quality <= 95 and 0 <= spec.lens_blur_px <= 1.5
     assert tones == set(RANDOM_TONES)
     assert random_look(np.random.default_rng(5)) == random_look(np.random.default_rng(5))
+
+
+def test_corner_looks_lie_at_the_edges_of_the_random_ranges():
+    rng = np.random.default_rng(4)
+    for _ in range(100):
+        spec = apply_look(CameraModelSpec(), corner_look(rng))
+        assert spec.saturation in (0.4, 0.45, 1.5) and set(spec.white_balance) <= {0.7, 1.0, 1.3}
+        assert abs(spec.exposure_bias_ev) == 1.5 and spec.jpeg_quality in (50, 55)
+        assert -10 <= spec.hue_rotation_deg <= 10 and 0 <= spec.lens_blur_px <= 1.5
+    assert corner_look(np.random.default_rng(5)) == corner_look(np.random.default_rng(5))
 
 
 @pytest.mark.parametrize("name", sorted(LOOKS))

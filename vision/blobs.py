@@ -44,13 +44,14 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass, replace
+from functools import partial
 
 import cv2
 import numpy as np
 
 from .body_paint import (LINEAR_OF_BYTE, body_paint, body_region, body_silhouette, clipped_channels, paint_around,
                          pixel_box, srgb_to_linear)
-from .camera_look import Look, estimate_look, to_reference_look
+from .camera_look import Look, estimate_look, hued_like_body, to_reference_look
 from .features import MarkDetections, to_bgr
 from .mark_prior import MarkPrior, mark_prior
 from .mark_context import context_features, is_context_model, shipped_context
@@ -153,6 +154,7 @@ MAX_LABEL_MISFIT_WEIGHED = 0.5
 #: 0.857 (0.808 with the bars), 2629 candidates against 1479 detections.
 CANDIDATE_K_SIGMA, CANDIDATE_PAINT_AROUND, CANDIDATE_EXPLAINED = 4.0, 0.05, 0.05
 CHANNEL_PEAKS = True
+HUED_PAINT = True
 
 
 #: sRGB decoding (vision.body_paint), by the names this module's callers use
@@ -225,7 +227,7 @@ def detect_contrast_marks(image_bgr: np.ndarray, palette: Mapping[str, tuple[int
 
     With a body the scale space is built only around it: the box of :func:`body_region` grown by three of the
     largest blur sigmas, at least :data:`vision.scale_space.MIN_MARGIN_PX` (no paint in the image: no marks)."""
-    bgr = to_bgr(image_bgr)
+    bgr = raw = to_bgr(image_bgr)
     names = tuple(palette)
     if not names:
         raise ValueError("the palette names no colour")
@@ -250,7 +252,9 @@ def detect_contrast_marks(image_bgr: np.ndarray, palette: Mapping[str, tuple[int
     # the paper's scale the sure paint alone lost the marks on such faces (recall 0.772 -> 0.808, precision 0.606
     # -> 0.569: benchmarks/bench_photoreal_features.py on datasets/photoreal/photoreal-paper-g*, either region),
     # and the spots the gloss adds are the body's shading that MIN_EXPLAINED drops
-    sure, paint = body_paint(lin, body_linear, clipped)   # a channel the camera clipped: a lower bound
+    hued = (partial(hued_like_body, raw, look if isinstance(look, Look) else Look(), body)
+            if HUED_PAINT else None)
+    sure, paint = body_paint(lin, body_linear, clipped, hued)   # a channel the camera clipped: a lower bound
     silhouette = body_silhouette(paint, prior.radius_px[1], gap)
     region = body_region(silhouette, prior.radius_px[1])
     box = pixel_box(region)

@@ -12,7 +12,12 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
+from collections.abc import Callable
+
 from .ring_pixels import ring_pixels
+
+#: Which pixels (bool (H, W)) are hued like the body, given its sure paint (bool (H, W)).
+HuedLikeBody = Callable[[np.ndarray], np.ndarray]
 
 #: Body context (:func:`paint_pixels`): the largest residual of a paint pixel's fit, relative to the pixel, and the
 #: least share of its light the paint carries (a low sun's gloss on a red body's top face leaves it ~0.45; grey
@@ -156,14 +161,19 @@ def connected_share(share: np.ndarray, sure: np.ndarray) -> float:
     return float(min(max(PAINT_SHARE_CONNECTED, np.quantile(below, 0.9) + GROUND_SHARE_MARGIN), PAINT_SHARE))
 
 
-def body_paint(lin: np.ndarray, body_linear: np.ndarray,
-               clipped: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+def body_paint(lin: np.ndarray, body_linear: np.ndarray, clipped: np.ndarray | None = None,
+               hued: HuedLikeBody | None = None) -> tuple[np.ndarray, np.ndarray]:
     """The body's paint, bool (H, W) each: the sure pixels (:func:`paint_pixels`) and those with the glossy faces
     touching them (:func:`connected_paint`), from one :func:`paint_share` (``clipped``: its channels the camera
-    clipped, (H, W, 3) bool)."""
+    clipped, (H, W, 3) bool). ``hued``: pixels hued like the body (H, W) given the sure ones
+    (:func:`vision.camera_look.hued_like_body`), which join the glossy faces' hysteresis: a face whose paint a
+    camera's tone curve bleached (a desaturated, over-exposed sunlit top) fits the paint's light too little, and keeps
+    its hue."""
     share = paint_share(lin, body_linear, clipped)
     sure = share >= PAINT_SHARE
     weak = share >= connected_share(share, sure)
+    if hued is not None:
+        weak |= hued(sure)
     count, patches = cv2.connectedComponents(weak.astype(np.uint8), connectivity=8)
     touching = np.zeros(count, bool)
     touching[np.unique(patches[sure])] = True

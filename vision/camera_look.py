@@ -251,6 +251,33 @@ def estimate_look(bgr: np.ndarray, body_bgr: tuple[int, int, int] | None, extent
     return Look(neutral=look.neutral, saturation=gain, turn_rad=turn, body_pixels=n)
 
 
+def hued_like_body(bgr: np.ndarray, look: Look, body_bgr: tuple[int, int, int], sure: np.ndarray) -> np.ndarray:
+    """Which pixels of a camera image (BGR uint8 (H, W, 3)) are hued like the body painted ``body_bgr`` seen through
+    ``look``, bool (H, W): their chroma relative to the look's neutral lies within :data:`BODY_TURN_DEG` of the
+    paint's direction in that look, and reaches past what the ground beside the body shows in that direction (its
+    90th percentile, from the pixels away from the ``sure`` paint (H, W) bool) by :data:`BODY_MIN_CHROMA`, and past
+    the noise. A monotone tone curve, a saturation setting and a white balance keep a face's hue where they pull its
+    chroma toward grey (a sunlit top face through a film curve's shoulder), so this holds where the body's paint,
+    modelled in light, fits too little of it."""
+    _, paint_q = chroma_of(np.array(body_bgr, np.uint8))
+    hued = np.zeros(sure.shape, bool)
+    if float(np.hypot(*paint_q)) < MIN_PAINT_CHROMA or not sure.any():
+        return hued
+    y, q = chroma_of(bgr)
+    usable = (y >= LUMA_RANGE[0]) & (y <= LUMA_RANGE[1])
+    _, spread = neutral_chroma(q, usable)
+    angle = np.arctan2(paint_q[1], paint_q[0]) + np.radians(REFERENCE_BODY_TURN_DEG) + look.turn_rad
+    direction = np.array([np.cos(angle), np.sin(angle)], np.float32)
+    rel = q - np.asarray(look.neutral, np.float32)
+    along = rel @ direction
+    across = np.abs(rel @ np.array([-direction[1], direction[0]], np.float32))
+    away = ~cv2.dilate(sure.astype(np.uint8), np.ones((25, 25), np.uint8)).astype(bool) & usable
+    ground = along[away][::7]
+    bar = max(float(np.quantile(ground, 0.9)) if len(ground) else 0.0, 0.0) + BODY_MIN_CHROMA
+    bar = max(bar, BODY_NOISE_SPREADS * spread)
+    return usable & (along >= bar) & (across <= along * np.tan(np.radians(BODY_TURN_DEG)))
+
+
 def beyond_band(look: Look) -> tuple[np.ndarray, float, float]:
     """What :func:`to_reference_look` undoes of ``look``: the neutral's shift (2,), the saturation gain and the turn
     (rad), each by as much as it lies beyond :data:`DEAD_BAND` (soft thresholding)."""
@@ -334,5 +361,6 @@ class LookTracker:
                     body_pixels=int(np.median([lk.body_pixels for lk in self._recent])))
 
 
-__all__ = ["Look", "LookTracker", "beyond_band", "body_chroma", "chroma_of", "estimate_look", "neutral_chroma",
+__all__ = ["Look", "LookTracker", "beyond_band", "body_chroma", "chroma_of", "estimate_look", "hued_like_body",
+           "neutral_chroma",
            "to_reference_look"]
