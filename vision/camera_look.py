@@ -76,9 +76,13 @@ MIN_PAINT_CHROMA = 0.12
 #: within these is left as it is, and a look beyond them is brought back to their edge, never past the front-end's
 #: own tolerance, which these frames show.
 DEAD_BAND = (0.06, 0.3, 8.0)
-#: A neutral further than this from the reference's is no white-balance error (+-30 % per channel moves it ~0.2)
-#: but a picture without grey (a close-up of one paint): the reference neutral is kept.
+#: A neutral further than this from the reference's is no white-balance error (+-30 % per channel moves it up to ~0.2
+#: through sRGB) but a picture without grey (a close-up of one paint): the reference neutral is kept, unless...
 MAX_NEUTRAL_SHIFT = 0.3
+#: ... unless the body's paint is found relative to it (:func:`estimate_look`): up to this shift the neutral is then a
+#: cast. A white balance 30 % off per channel, a saturation of 1.5 and a stop and a half under together move it up to
+#: 0.57 (the telephoto training worlds t1, t2 through :func:`scenarios.looks.corner_look`; 0.26 through random looks).
+MAX_NEUTRAL_SHIFT_WITH_BODY = 0.7
 #: The correction is bounded: a saturation gain within this range, a turn within this many degrees. Above 1.6 the
 #: gain is a dark tone curve's (AgX Punchy on telephoto-g1-high, a one-off analysis where the cap was chosen: a dark
 #: red body's chroma over its small luma read 2.5 on one camera, 1.3 on the other), not a saturation setting:
@@ -228,18 +232,25 @@ def estimate_look(bgr: np.ndarray, body_bgr: tuple[int, int, int] | None, extent
     y, q = chroma_of(bgr)
     usable = (y >= LUMA_RANGE[0]) & (y <= LUMA_RANGE[1])
     neutral, spread = neutral_chroma(q, usable)
-    if float(np.hypot(*(neutral - np.asarray(REFERENCE_NEUTRAL)))) > MAX_NEUTRAL_SHIFT:
-        neutral = np.asarray(REFERENCE_NEUTRAL, np.float32)   # no grey in the picture: a scene of one colour
+    shift = float(np.hypot(*(neutral - np.asarray(REFERENCE_NEUTRAL))))
+    reference = np.asarray(REFERENCE_NEUTRAL, np.float32)
+    if shift > MAX_NEUTRAL_SHIFT_WITH_BODY or (shift > MAX_NEUTRAL_SHIFT and body_bgr is None):
+        neutral = reference   # no grey in the picture: a scene of one colour
     look = Look(neutral=(float(neutral[0]), float(neutral[1])))
     if body_bgr is None:
         return look
     _, paint_q = chroma_of(np.array(body_bgr, np.uint8))
     if float(np.hypot(*paint_q)) < MIN_PAINT_CHROMA:
-        return look
+        return look if shift <= MAX_NEUTRAL_SHIFT else Look()
     # where the target is large its patch is found on a quarter of the pixels (LOOK_STRIDE_FROM_EXTENT_PX)
     stride = LOOK_STRIDE if (min(bgr.shape[:2]) >= LOOK_STRIDE_FROM_PX and extent_px is not None
                              and extent_px >= LOOK_STRIDE_FROM_EXTENT_PX) else 1
     seen, n = body_chroma(q, usable, neutral, spread, paint_q, extent_px, stride)
+    if seen is None and shift > MAX_NEUTRAL_SHIFT and neutral is not reference:
+        # a neutral this far off is a cast only if the body's paint stands out from it: else the picture's grey is
+        # a paint (a close-up), and the reference neutral is kept
+        neutral, look = reference, Look()
+        seen, n = body_chroma(q, usable, neutral, spread, paint_q, extent_px, stride)
     if seen is None:
         return look
     gain = float(np.hypot(*seen)) / (REFERENCE_BODY_GAIN * float(np.hypot(*paint_q)))
