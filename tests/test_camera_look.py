@@ -189,3 +189,24 @@ def test_a_face_bleached_toward_grey_is_hued_like_the_body_and_the_ground_is_not
     sure, _ = body_paint(LINEAR_OF_BYTE[tinted], paint_linear)
     hued = hued_like_body(tinted, estimate_look(tinted, PIONEER_BODY), PIONEER_BODY, sure)
     assert hued[:, :60].mean() < 0.01 and hued[80:120, 140:180].mean() < 0.01
+
+
+def test_a_strong_cast_is_a_cast_where_the_body_stands_out_from_it_and_a_close_up_of_paint_is_none():
+    from vision.camera_look import MAX_NEUTRAL_SHIFT, MAX_NEUTRAL_SHIFT_WITH_BODY, REFERENCE_NEUTRAL
+
+    # a white balance 45 / 70 % off (blue down, red up) with a saturation of 1.5: the neutral moves past 0.3
+    graded = _grade(_frames("telephoto")[0], 1.5, 0.0, (0.55, 1.7))
+    _, q = chroma_of(graded)
+    neutral, _ = neutral_chroma(q, np.ones(q.shape[:2], bool))
+    shift = float(np.hypot(*(neutral - np.asarray(REFERENCE_NEUTRAL))))
+    assert MAX_NEUTRAL_SHIFT < shift < MAX_NEUTRAL_SHIFT_WITH_BODY
+    look = estimate_look(graded, PIONEER_BODY)
+    assert np.allclose(look.neutral, neutral, atol=0.01) and look.body_pixels > 1000   # the cast, with the body
+    assert np.allclose(estimate_look(graded, None).neutral, REFERENCE_NEUTRAL)  # no body to confirm it: none
+    # a close-up of a pale red paint: the picture's grey is the paint, from which no body stands out
+    close = np.clip(np.full((120, 160, 3), (70, 80, 160), np.float64)
+                    + np.random.default_rng(0).normal(0, 2, (120, 160, 3)), 0, 255).astype(np.uint8)
+    _, q = chroma_of(close)
+    neutral, _ = neutral_chroma(q, np.ones(q.shape[:2], bool))
+    assert MAX_NEUTRAL_SHIFT < float(np.hypot(*(neutral - np.asarray(REFERENCE_NEUTRAL)))) < MAX_NEUTRAL_SHIFT_WITH_BODY
+    assert np.allclose(estimate_look(close, PIONEER_BODY).neutral, REFERENCE_NEUTRAL)
