@@ -54,8 +54,8 @@ from .body_paint import (LINEAR_OF_BYTE, body_paint, body_region, body_silhouett
 from .camera_look import Look, estimate_look, hued_like_body, to_reference_look
 from .features import MarkDetections, to_bgr
 from .mark_prior import MarkPrior, mark_prior
-from .mark_context import context_features, is_context_model, shipped_context
-from .mark_scorer import MarkScorer, candidate_features, feature_names, shipped
+from .mark_context import context_features, resolve_scorers
+from .mark_scorer import MarkScorer, candidate_features
 from .order_stats import median
 from .mark_selection import (densest_cluster, merge_oblique_marks, one_mark_between, one_per_disc, one_scale,
                              same_spots, surrounded)
@@ -154,6 +154,14 @@ MAX_LABEL_MISFIT_WEIGHED = 0.5
 #: 0.857 (0.808 with the bars), 2629 candidates against 1479 detections.
 CANDIDATE_K_SIGMA, CANDIDATE_PAINT_AROUND, CANDIDATE_EXPLAINED = 4.0, 0.05, 0.05
 CHANNEL_PEAKS = True
+#: Where marks are 3 px and more, pixels hued like the body (:func:`vision.camera_look.hued_like_body`) join the
+#: glossy faces' hysteresis (:func:`vision.body_paint.body_paint`): through a film curve's shoulder, a low saturation
+#: and over-exposure a sunlit top face keeps the paint's hue but too little of its light for the paint's model, and
+#: its marks lay outside the body's region. Chosen on the telephoto training worlds t1, t2 through 16 random and 16
+#: corner looks (:func:`scenarios.looks.corner_look`; recall up to +5.6 points in a look, precision -1.8..+0.1);
+#: judged on the Pioneer's nine telephoto benchmark worlds through the named looks (recall +0.1..+1.9 points in
+#: every look, precision -0.3..0; BENCHMARKS.md, "a face bleached toward grey"). At the paper's scale, on one
+#: benchmark world, it moved a mark or a false point either way per look: not used there.
 HUED_PAINT = True
 
 
@@ -172,32 +180,6 @@ class ContrastMarks(MarkDetections):
     #: (K, F) the scorer's features (vision.mark_scorer.candidate_features; where marks are 3 px and more
     #: vision.mark_context.context_features), or None: no scorer ran
     features: np.ndarray | None = None
-
-
-#: The names ``scorer`` takes beside a :class:`MarkScorer` (see :func:`detect_contrast_marks`).
-SCORER_NAMES = ("shipped", "bars", "all")
-
-
-def resolve_scorers(scorer: MarkScorer | str | None, names: tuple[str, ...]
-                    ) -> tuple[MarkScorer | str | None, MarkScorer | str | None]:
-    """The small-spot scorer and the context model that ``scorer`` names for a palette of ``names`` (None: the
-    hand-set bars there; see :func:`detect_contrast_marks`). A model given replaces the shipped one of its kind and
-    keeps the other; the shipped small-spot scorer serves any palette whose features it was fitted on (else the
-    bars). ValueError for an unknown name or a small-spot scorer fitted on other features."""
-    if isinstance(scorer, str) and scorer not in SCORER_NAMES:
-        raise ValueError(f"scorer must be a MarkScorer, {', '.join(map(repr, SCORER_NAMES))} or None, got {scorer!r}")
-    if scorer is None or scorer == "bars":
-        return None, None
-    if scorer == "all":
-        return "all", "all"
-    context = scorer if is_context_model(scorer) else shipped_context()
-    if scorer == "shipped" or is_context_model(scorer):
-        fitted = shipped()
-        return (fitted if fitted is not None and fitted.names == feature_names(names) else None), context
-    if scorer.names != feature_names(names):
-        raise ValueError(f"the mark scorer was fitted on the features {', '.join(scorer.names)}; the front-end "
-                         f"computes {', '.join(feature_names(names))}")
-    return scorer, context
 
 
 def detect_contrast_marks(image_bgr: np.ndarray, palette: Mapping[str, tuple[int, int, int]],
@@ -252,8 +234,9 @@ def detect_contrast_marks(image_bgr: np.ndarray, palette: Mapping[str, tuple[int
     # the paper's scale the sure paint alone lost the marks on such faces (recall 0.772 -> 0.808, precision 0.606
     # -> 0.569: benchmarks/bench_photoreal_features.py on datasets/photoreal/photoreal-paper-g*, either region),
     # and the spots the gloss adds are the body's shading that MIN_EXPLAINED drops
+    # where marks are 3 px and more, a face a look bleached toward grey is paint by its hue (HUED_PAINT)
     hued = (partial(hued_like_body, raw, look if isinstance(look, Look) else Look(), body)
-            if HUED_PAINT else None)
+            if HUED_PAINT and prior.radius_px[1] >= SMALL_SPOT_PX else None)
     sure, paint = body_paint(lin, body_linear, clipped, hued)   # a channel the camera clipped: a lower bound
     silhouette = body_silhouette(paint, prior.radius_px[1], gap)
     region = body_region(silhouette, prior.radius_px[1])

@@ -24,7 +24,8 @@ from typing import Protocol
 import numpy as np
 
 from evopose import Bounds, Camera
-from vision.blobs import MarkPrior, crop_margin, detect_contrast_marks, mark_prior, resolve_scorers
+from vision.blobs import MarkPrior, crop_margin, detect_contrast_marks, mark_prior
+from vision.mark_context import resolve_scorers
 from vision.camera_look import LookTracker, estimate_look
 from vision.label_chroma import LabelChromaGate, spot_chroma
 from vision.features import MarkDetections, colour_ranges, detect_colour_marks, detect_corners, x_junctions

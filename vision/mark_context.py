@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from .body_paint import paint_around
-from .mark_scorer import MarkScorer, load
+from .mark_scorer import MarkScorer, feature_names, load, shipped
 from .mark_selection import surrounded
 
 #: The context model's measures of a spot (:func:`context_features`), in this order.
@@ -88,5 +88,31 @@ def shipped_context() -> MarkScorer | None:
     return load(SHIPPED_CONTEXT) if SHIPPED_CONTEXT.is_file() else None
 
 
-__all__ = ["CONTEXT_FEATURES", "SHIPPED_CONTEXT", "context_features", "is_context_model",
-           "shipped_context"]
+#: The names ``scorer`` takes beside a :class:`MarkScorer` (see :func:`vision.blobs.detect_contrast_marks`).
+SCORER_NAMES = ("shipped", "bars", "all")
+
+
+def resolve_scorers(scorer: MarkScorer | str | None, names: tuple[str, ...]
+                    ) -> tuple[MarkScorer | str | None, MarkScorer | str | None]:
+    """The small-spot scorer and the context model that ``scorer`` names for a palette of ``names`` (None: the
+    hand-set bars there; see :func:`vision.blobs.detect_contrast_marks`). A model given replaces the shipped one of its kind and
+    keeps the other; the shipped small-spot scorer serves any palette whose features it was fitted on (else the
+    bars). ValueError for an unknown name or a small-spot scorer fitted on other features."""
+    if isinstance(scorer, str) and scorer not in SCORER_NAMES:
+        raise ValueError(f"scorer must be a MarkScorer, {', '.join(map(repr, SCORER_NAMES))} or None, got {scorer!r}")
+    if scorer is None or scorer == "bars":
+        return None, None
+    if scorer == "all":
+        return "all", "all"
+    context = scorer if is_context_model(scorer) else shipped_context()
+    if scorer == "shipped" or is_context_model(scorer):
+        fitted = shipped()
+        return (fitted if fitted is not None and fitted.names == feature_names(names) else None), context
+    if scorer.names != feature_names(names):
+        raise ValueError(f"the mark scorer was fitted on the features {', '.join(scorer.names)}; the front-end "
+                         f"computes {', '.join(feature_names(names))}")
+    return scorer, context
+
+
+__all__ = ["CONTEXT_FEATURES", "SCORER_NAMES", "SHIPPED_CONTEXT", "context_features", "is_context_model",
+           "resolve_scorers", "shipped_context"]
