@@ -282,14 +282,14 @@ def test_tracking_the_right_pose_holds_on_cycles_frames_whose_clutter_leaves_hal
 
     import cv2
 
-    import vision.blobs
+    import vision.mark_context
     import vision.spot_colour
     from vision.extract import feature_extractor
     from geometry import pose_error
     from scenarios.dataset import open_dataset
 
     monkeypatch.setattr(vision.spot_colour, "MIN_EXPLAINED", 0.0)
-    monkeypatch.setattr(vision.blobs, "shipped", lambda: None)  # the hand-set bars, no mark scorer
+    monkeypatch.setattr(vision.mark_context, "shipped", lambda: None)  # the hand-set bars, no mark scorer
 
     data = open_dataset(Path(__file__).parent / "data" / "photoreal" / "paper")
     world = data.world()
