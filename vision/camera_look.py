@@ -83,6 +83,11 @@ MAX_NEUTRAL_SHIFT = 0.3
 #: cast. A white balance 30 % off per channel, a saturation of 1.5 and a stop and a half under together move it up to
 #: 0.57 (the telephoto training worlds t1, t2 through :func:`scenarios.looks.corner_look`; 0.26 through random looks).
 MAX_NEUTRAL_SHIFT_WITH_BODY = 0.7
+#: A pixel hued like the body (:func:`hued_like_body`) reaches this far (chroma over luma) past the ground's own 90th
+#: percentile along the paint's direction. Chosen on the telephoto training worlds t1, t2 through 16 random and 16
+#: corner looks: 0.05 (the body's per-pixel least chroma) -> 0.03 gave recall +1.9..+2.6 points in five corner looks,
+#: precision -0.7..+0.1; 0.015 a further +0.4..+0.8 in six at -0.3..-1.0 in five random looks.
+HUED_MARGIN = 0.03
 #: The correction is bounded: a saturation gain within this range, a turn within this many degrees. Above 1.6 the
 #: gain is a dark tone curve's (AgX Punchy on telephoto-g1-high, a one-off analysis where the cap was chosen: a dark
 #: red body's chroma over its small luma read 2.5 on one camera, 1.3 on the other), not a saturation setting:
@@ -284,7 +289,7 @@ def hued_like_body(bgr: np.ndarray, look: Look, body_bgr: tuple[int, int, int], 
     across = np.abs(rel @ np.array([-direction[1], direction[0]], np.float32))
     away = ~cv2.dilate(sure.astype(np.uint8), np.ones((25, 25), np.uint8)).astype(bool) & usable
     ground = along[away][::7]
-    bar = max(float(np.quantile(ground, 0.9)) if len(ground) else 0.0, 0.0) + BODY_MIN_CHROMA
+    bar = max(float(np.quantile(ground, 0.9)) if len(ground) else 0.0, 0.0) + HUED_MARGIN
     bar = max(bar, BODY_NOISE_SPREADS * spread)
     return usable & (along >= bar) & (across <= along * np.tan(np.radians(BODY_TURN_DEG)))
 
