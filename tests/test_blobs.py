@@ -410,6 +410,17 @@ def test_a_bright_mark_bleached_toward_white_fits_its_paint_and_a_glint_on_the_b
     assert np.isinf(misfit[2]).all()            # darker than its ring: not bleached
 
 
+def test_a_mark_on_a_face_in_the_bodys_shade_is_lit_paint_when_its_ring_is_the_bodys_paint(monkeypatch):
+    # two random looks whose tone curve takes the shaded side face under the scene's brightness bar: its green mark
+    # was "no lit paint" while its ring, the body's paint, was itself under the bar (measured: 46 of 46, 44 without)
+    import vision.blobs as blobs
+
+    found, visible, _ = _through_random_looks("telephoto", (0, 2))
+    assert found == visible == 46
+    monkeypatch.setattr(blobs, "PAINT_RING_LIT", 2.0)   # no ring is more than all paint
+    assert _through_random_looks("telephoto", (0, 2))[0] == found - 2
+
+
 def test_a_mark_bleached_nearly_white_is_lit_by_its_whole_light_and_a_dim_one_is_not():
     from vision.spot_label import bleached_misfit
 
