@@ -243,7 +243,7 @@ def detect_contrast_marks(image_bgr: np.ndarray, palette: Mapping[str, tuple[int
     # -> 0.569: benchmarks/bench_photoreal_features.py on datasets/photoreal/photoreal-paper-g*, either region),
     # and the spots the gloss adds are the body's shading that MIN_EXPLAINED drops
     # where marks are 3 px and more, a face a look bleached toward grey is paint by its hue (HUED_PAINT)
-    hued = (partial(hued_like_body, raw, look if isinstance(look, Look) else Look(), body)
+    hued = (partial(hued_like_body, raw, look if isinstance(look, Look) else Look(), body, extent_px=prior.extent_px)
             if HUED_PAINT and prior.radius_px[1] >= SMALL_SPOT_PX else None)
     sure, paint = body_paint(lin, body_linear, clipped, hued)   # a channel the camera clipped: a lower bound
     silhouette = body_silhouette(paint, prior.radius_px[1], gap)
@@ -353,9 +353,10 @@ def _detect(bgr: np.ndarray, lin: np.ndarray, names: tuple[str, ...], palette: M
     # (or the ring is the body's paint: a face in the body's shade, however dark a look's tone curve makes it)
     lit_ring = None if body_lin is None or prior.radius_px[1] < SMALL_SPOT_PX else \
         ring.sum(axis=1) >= MIN_RELATIVE_BRIGHTNESS * scene
-    if lit_ring is not None and paint is not None and len(xs):
-        lit_ring |= (paint_around(paint, np.stack([xs, ys], axis=1).astype(float), radius, RING_GAPS_PX[0])
-                     >= PAINT_RING_LIT)
+    if lit_ring is not None and paint is not None and not lit_ring.all():
+        dim = np.flatnonzero(~lit_ring)   # only the rings under the bar need their paint counted
+        lit_ring[dim] = paint_around(paint, np.stack([xs[dim], ys[dim]], axis=1).astype(float), radius[dim],
+                                     RING_GAPS_PX[0]) >= PAINT_RING_LIT
     ring_light = (None if lit_ring is None
                   else np.where(lit_ring, ring.astype(float) @ body_lin / float(body_lin @ body_lin), np.inf))
     labels, misfit, conf = label_colours(spot.astype(float), ring.astype(float), pal.astype(float),

@@ -88,6 +88,9 @@ MAX_NEUTRAL_SHIFT_WITH_BODY = 0.7
 #: corner looks: 0.05 (the body's per-pixel least chroma) -> 0.03 gave recall +1.9..+2.6 points in five corner looks,
 #: precision -0.7..+0.1; 0.015 a further +0.4..+0.8 in six at -0.3..-1.0 in five random looks.
 HUED_MARGIN = 0.03
+#: ... read on every this-many-th pixel of every this-many-th row (the ground's percentile and the chroma's noise),
+#: from the pixels this far and more from the sure paint.
+HUED_GROUND_STRIDE, HUED_GROUND_AWAY_PX = 4, 12
 #: The correction is bounded: a saturation gain within this range, a turn within this many degrees. Above 1.6 the
 #: gain is a dark tone curve's (AgX Punchy on telephoto-g1-high, a one-off analysis where the cap was chosen: a dark
 #: red body's chroma over its small luma read 2.5 on one camera, 1.3 on the other), not a saturation setting:
@@ -267,36 +270,59 @@ def estimate_look(bgr: np.ndarray, body_bgr: tuple[int, int, int] | None, extent
     return Look(neutral=look.neutral, saturation=gain, turn_rad=turn, body_pixels=n)
 
 
-def hued_like_body(bgr: np.ndarray, look: Look, body_bgr: tuple[int, int, int], sure: np.ndarray) -> np.ndarray:
+def hued_like_body(bgr: np.ndarray, look: Look, body_bgr: tuple[int, int, int], sure: np.ndarray,
+                   extent_px: float | None = None) -> np.ndarray:
     """Which pixels of a camera image (BGR uint8 (H, W, 3)) are hued like the body painted ``body_bgr`` seen through
     ``look``, bool (H, W): their chroma relative to the look's neutral lies within :data:`BODY_TURN_DEG` of the
     paint's direction in that look, and reaches past what the ground beside the body shows in that direction (its
-    90th percentile, from the pixels away from the ``sure`` paint (H, W) bool) by :data:`BODY_MIN_CHROMA`, and past
+    90th percentile, from the pixels away from the ``sure`` paint (H, W) bool) by :data:`HUED_MARGIN`, and past
     the noise. A monotone tone curve, a saturation setting and a white balance keep a face's hue where they pull its
     chroma toward grey (a sunlit top face through a film curve's shoulder), so this holds where the body's paint,
     modelled in light, fits too little of it. Such a face is bright: a pixel darker than the sure paint's median luma
     is not taken (the second robot's yellow body beside warm sand under a low sun: its low-sun telephoto world's
     precision, lost by this rule without the bar, came back by +1.5..+1.6 points in three named looks, the Pioneer's
-    telephoto benchmark worlds moved by -0.2..+0.5; so that robot is not held out from the bar)."""
+    telephoto benchmark worlds moved by -0.2..+0.5; so that robot is not held out from the bar).
+
+    Only the sure paint's box grown by half the target's ``extent_px`` (when known) is looked at: a face of the body
+    reaches no further; the ground and the noise are read on every :data:`HUED_GROUND_STRIDE`-th pixel."""
     _, paint_q = chroma_of(np.array(body_bgr, np.uint8))
     hued = np.zeros(sure.shape, bool)
-    if float(np.hypot(*paint_q)) < MIN_PAINT_CHROMA or not sure.any():
+    box = pixel_box(sure)
+    if float(np.hypot(*paint_q)) < MIN_PAINT_CHROMA or box is None:
         return hued
-    y, q = chroma_of(bgr)
-    usable = (y >= LUMA_RANGE[0]) & (y <= LUMA_RANGE[1])
-    _, spread = neutral_chroma(q, usable)
     angle = np.arctan2(paint_q[1], paint_q[0]) + np.radians(REFERENCE_BODY_TURN_DEG) + look.turn_rad
     direction = np.array([np.cos(angle), np.sin(angle)], np.float32)
-    rel = q - np.asarray(look.neutral, np.float32)
-    along = rel @ direction
-    across = np.abs(rel @ np.array([-direction[1], direction[0]], np.float32))
-    away = ~cv2.dilate(sure.astype(np.uint8), np.ones((25, 25), np.uint8)).astype(bool) & usable
-    ground = along[away][::7]
+    normal = np.array([-direction[1], direction[0]], np.float32)
+    neutral = np.asarray(look.neutral, np.float32)
+    # the ground beside the body, and the chroma's noise, on a sample of the image
+    k = HUED_GROUND_STRIDE
+    y_s, q_s = chroma_of(np.ascontiguousarray(bgr[::k, ::k]))
+    usable_s = (y_s >= LUMA_RANGE[0]) & (y_s <= LUMA_RANGE[1])
+    # the chroma's noise: the spread (1.4826 MAD) of the least chromatic 40 % about the look's neutral
+    d = np.hypot(q_s[..., 0][usable_s] - neutral[0], q_s[..., 1][usable_s] - neutral[1])
+    near = d[d <= np.quantile(d, NEUTRAL_SHARE)] if len(d) else np.zeros(1, np.float32)
+    spread = max(1.4826 * float(median(np.abs(near - median(near)))), 0.005)
+    reach = 2 * (HUED_GROUND_AWAY_PX // k) + 1
+    away = ~cv2.dilate(sure[::k, ::k].astype(np.uint8), np.ones((reach, reach), np.uint8)).astype(bool) & usable_s
+    ground = (q_s[away] - neutral) @ direction
     bar = max(float(np.quantile(ground, 0.9)) if len(ground) else 0.0, 0.0) + HUED_MARGIN
     bar = max(bar, BODY_NOISE_SPREADS * spread)
-    hued = usable & (along >= bar) & (across <= along * np.tan(np.radians(BODY_TURN_DEG)))
-    lit = sure & usable   # a face a tone curve's shoulder bleached is bright: at least the sure paint's median luma
-    return hued & (y >= median(y[lit])) if lit.any() else hued
+    grow = int(np.ceil(extent_px / 2)) if extent_px is not None else max(sure.shape)
+    y0, y1 = max(box[0] - grow, 0), min(box[1] + grow + 1, sure.shape[0])
+    x0, x1 = max(box[2] - grow, 0), min(box[3] + grow + 1, sure.shape[1])
+    # (q - neutral) along and across the paint's direction, times the luma: affine in (Y, Cr, Cb), one transform
+    ycc = cv2.cvtColor(np.ascontiguousarray(bgr[y0:y1, x0:x1]), cv2.COLOR_BGR2YCrCb)
+    affine = np.array([[-float(neutral @ direction), direction[0], direction[1], -128.0 * float(direction.sum())],
+                       [-float(neutral @ normal), normal[0], normal[1], -128.0 * float(normal.sum())]], np.float32)
+    scaled = cv2.transform(ycc.astype(np.float32), affine)                  # (h, w, 2): along Y, across Y
+    y = ycc[..., 0]
+    lit = sure[y0:y1, x0:x1] & (y >= LUMA_RANGE[0]) & (y <= LUMA_RANGE[1])
+    # a face a tone curve's shoulder bleached is bright: at least the sure paint's median luma
+    least = max(float(median(y[lit])) if lit.any() else LUMA_RANGE[0], LUMA_RANGE[0])
+    along_y = scaled[..., 0]
+    hued[y0:y1, x0:x1] = ((y >= least) & (y <= LUMA_RANGE[1]) & (along_y >= bar * y)
+                          & (np.abs(scaled[..., 1]) <= along_y * np.float32(np.tan(np.radians(BODY_TURN_DEG)))))
+    return hued
 
 
 def beyond_band(look: Look) -> tuple[np.ndarray, float, float]:
