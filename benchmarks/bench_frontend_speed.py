@@ -5,8 +5,8 @@ second robot) through :func:`vision.blobs.detect_contrast_marks` with the look e
 taking turns in fresh interpreters (``--trees``: this checkout and e.g. a ``git worktree`` of an older commit; a
 tree from before the ``vision/`` room imports ``evopose.blobs``). One OpenCV thread. Each image is timed
 ``--repeats`` times in a round and its least time kept (what the code costs, not what else the machine did). Reports
-the median over rounds of each tree's mean milliseconds per image, per fixture, and the ratio to the first tree. A camera at 10
-fps has 100 ms per frame for the front-end and the search together.
+the median over rounds of each tree's mean milliseconds per image, per fixture, and the ratio to the first tree. A
+camera at 10 fps has 100 ms per frame for the front-end and the search together.
 
     python -m benchmarks.bench_frontend_speed --trees . /tmp/base --rounds 5 --repeats 3
 """

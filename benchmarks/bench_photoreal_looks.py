@@ -56,7 +56,7 @@ RANDOM = "random-"
 CORNER = "corner-"
 
 
-def look_of(base, look: str):
+def look_of(base: "CameraModelSpec", look: str) -> "CameraModelSpec":
     """The camera model ``base`` (a CameraModelSpec) seen through ``look``: a named look, ``random-<seed>`` or
     ``corner-<seed>``."""
     from scenarios.looks import apply_look, corner_look, look_spec, random_look

@@ -2,8 +2,8 @@
 "Looks"), for measuring the image front-end on looks it was never tuned on.
 
 A look is a mapping of :class:`scenarios.camera_model.CameraModelSpec` fields put over a base camera model (the
-world's): :func:`look_spec` applies one by name, :func:`random_look` draws one for training and development, :func:`corner_look`
-one at the edges of those ranges (the hard looks, where a camera's settings add up).
+world's): :func:`look_spec` applies one by name, :func:`random_look` draws one for training and development,
+:func:`corner_look` one at the edges of those ranges (the hard looks, where a camera's settings add up).
 """
 
 from __future__ import annotations

@@ -36,7 +36,7 @@ import numpy as np
 
 from geometry import angle_difference, wrap_angle
 
-from .body_paint import pixel_box
+from .body_paint import GROUND_AWAY_PX, pixel_box
 from .order_stats import median
 
 #: Pixels whose luma is outside this range carry no chroma worth measuring (black, or clipped).
@@ -88,9 +88,8 @@ MAX_NEUTRAL_SHIFT_WITH_BODY = 0.7
 #: corner looks: 0.05 (the body's per-pixel least chroma) -> 0.03 gave recall +1.9..+2.6 points in five corner looks,
 #: precision -0.7..+0.1; 0.015 a further +0.4..+0.8 in six at -0.3..-1.0 in five random looks.
 HUED_MARGIN = 0.03
-#: ... read on every this-many-th pixel of every this-many-th row (the ground's percentile and the chroma's noise),
-#: from the pixels this far and more from the sure paint.
-HUED_GROUND_STRIDE, HUED_GROUND_AWAY_PX = 4, 12
+#: ... read on every this-many-th pixel of every this-many-th row (the ground's percentile and the chroma's noise).
+HUED_GROUND_STRIDE = 4
 #: The correction is bounded: a saturation gain within this range, a turn within this many degrees. Above 1.6 the
 #: gain is a dark tone curve's (AgX Punchy on telephoto-g1-high, a one-off analysis where the cap was chosen: a dark
 #: red body's chroma over its small luma read 2.5 on one camera, 1.3 on the other), not a saturation setting:
@@ -142,9 +141,17 @@ def neutral_chroma(q: np.ndarray, usable: np.ndarray) -> tuple[np.ndarray, float
         d = np.hypot(qa - n[0], qb - n[1])
         near = d <= np.quantile(d, NEUTRAL_SHARE)
         n = np.array([median(qa[near]), median(qb[near])], q.dtype)
-    d = np.hypot(qa - n[0], qb - n[1])
+    return n.astype(np.float32), spread_about(qa, qb, n)
+
+
+def spread_about(qa: np.ndarray, qb: np.ndarray, neutral: np.ndarray) -> float:
+    """The chroma's noise about ``neutral`` (2,): the spread (1.4826 MAD, at least 0.005) of the distances of the
+    :data:`NEUTRAL_SHARE` of chroma samples ``qa``, ``qb`` (N,) nearest it."""
+    d = np.hypot(qa - neutral[0], qb - neutral[1])
+    if not len(d):
+        return 0.005
     near = d[d <= np.quantile(d, NEUTRAL_SHARE)]
-    return n.astype(np.float32), float(max(1.4826 * median(np.abs(near - median(near))), 0.005))
+    return float(max(1.4826 * median(np.abs(near - median(near))), 0.005))
 
 
 def body_mask(q: np.ndarray, usable: np.ndarray, neutral: np.ndarray, spread: float, paint_q: np.ndarray
@@ -298,11 +305,8 @@ def hued_like_body(bgr: np.ndarray, look: Look, body_bgr: tuple[int, int, int], 
     k = HUED_GROUND_STRIDE
     y_s, q_s = chroma_of(np.ascontiguousarray(bgr[::k, ::k]))
     usable_s = (y_s >= LUMA_RANGE[0]) & (y_s <= LUMA_RANGE[1])
-    # the chroma's noise: the spread (1.4826 MAD) of the least chromatic 40 % about the look's neutral
-    d = np.hypot(q_s[..., 0][usable_s] - neutral[0], q_s[..., 1][usable_s] - neutral[1])
-    near = d[d <= np.quantile(d, NEUTRAL_SHARE)] if len(d) else np.zeros(1, np.float32)
-    spread = max(1.4826 * float(median(np.abs(near - median(near)))), 0.005)
-    reach = 2 * (HUED_GROUND_AWAY_PX // k) + 1
+    spread = spread_about(q_s[..., 0][usable_s], q_s[..., 1][usable_s], neutral)
+    reach = 2 * (GROUND_AWAY_PX // k) + 1   # the ground as vision.body_paint reads it: this far from the sure paint
     away = ~cv2.dilate(sure[::k, ::k].astype(np.uint8), np.ones((reach, reach), np.uint8)).astype(bool) & usable_s
     ground = (q_s[away] - neutral) @ direction
     bar = max(float(np.quantile(ground, 0.9)) if len(ground) else 0.0, 0.0) + HUED_MARGIN
@@ -409,5 +413,5 @@ class LookTracker:
 
 
 __all__ = ["Look", "LookTracker", "beyond_band", "body_chroma", "chroma_of", "estimate_look", "hued_like_body",
-           "neutral_chroma",
+           "neutral_chroma", "spread_about",
            "to_reference_look"]

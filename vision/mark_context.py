@@ -95,9 +95,9 @@ SCORER_NAMES = ("shipped", "bars", "all")
 def resolve_scorers(scorer: MarkScorer | str | None, names: tuple[str, ...]
                     ) -> tuple[MarkScorer | str | None, MarkScorer | str | None]:
     """The small-spot scorer and the context model that ``scorer`` names for a palette of ``names`` (None: the
-    hand-set bars there; see :func:`vision.blobs.detect_contrast_marks`). A model given replaces the shipped one of its kind and
-    keeps the other; the shipped small-spot scorer serves any palette whose features it was fitted on (else the
-    bars). ValueError for an unknown name or a small-spot scorer fitted on other features."""
+    hand-set bars there; see :func:`vision.blobs.detect_contrast_marks`). A model given replaces the shipped one of
+    its kind and keeps the other; the shipped small-spot scorer serves any palette whose features it was fitted on
+    (else the bars). ValueError for an unknown name or a small-spot scorer fitted on other features."""
     if isinstance(scorer, str) and scorer not in SCORER_NAMES:
         raise ValueError(f"scorer must be a MarkScorer, {', '.join(map(repr, SCORER_NAMES))} or None, got {scorer!r}")
     if scorer is None or scorer == "bars":

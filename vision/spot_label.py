@@ -76,9 +76,10 @@ def bleached_misfit(spot: np.ndarray, ring: np.ndarray, palette_linear: np.ndarr
         g_ = np.where(coef[:, 1] < 0, 0.0, np.where(coef[:, 0] < 0, white, coef[:, 1]))
         resid = p - s_[:, None] * colour - g_[:, None]
         m = np.linalg.norm(resid, axis=1) / np.maximum(s_ * np.linalg.norm(colour), 1e-6)
-        if colour.sum() >= DARK_PAINT:   # lit: the bleached colour's light, paint and white (a spot brighter than its ring)
-            lit = s_ + 3 * g_ / max(float(colour.sum()), 1e-12)
-            m[_unlit(lit, colour, min_brightness, None if ring_light is None else np.asarray(ring_light)[bright])] = np.inf
+        if colour.sum() >= DARK_PAINT:   # lit by the bleached colour's whole light, paint and white (brighter than
+            lit = s_ + 3 * g_ / max(float(colour.sum()), 1e-12)   # its ring), not by its paint's share alone
+            light = None if ring_light is None else np.asarray(ring_light)[bright]
+            m[_unlit(lit, colour, min_brightness, light)] = np.inf
         misfit[bright, j] = m
     return misfit
 
