@@ -180,3 +180,20 @@ def test_the_scorer_s_training_also_sees_each_frame_through_random_looks(source)
     assert len(seen) > len(plain) and seen_marks.sum() > is_mark.sum() and set(seen_groups) == set(groups)
     np.testing.assert_array_equal(seen, again)
     assert other.shape != seen.shape or not np.array_equal(other, seen)
+
+
+def test_the_scorer_s_training_sees_corner_looks_after_the_random_ones(source, monkeypatch):
+    # evopose train-scorer --corner-looks N: each frame is also developed through N looks at the edges of the random
+    # ranges (scenarios.looks.corner_look), drawn after the frame's random looks from the same seed
+    import vision.train_scorer as ts
+
+    drawn, apply_look = [], ts.apply_look
+    monkeypatch.setattr(ts, "apply_look", lambda base, look: drawn.append(look) or apply_look(base, look))
+    seen, seen_marks, _, _, _ = ts.candidates([source], looks=1, seed=3, corner_looks=2)
+    assert len(drawn) == 2 * 3   # two frames, each through one random look and two corner looks
+    corners = drawn[1:3] + drawn[4:6]
+    assert all(c["saturation"] in (0.4, 0.45, 1.5) and abs(c["exposure_bias_ev"]) == 1.5
+               and c["jpeg_quality"] in (50, 55) for c in corners)
+    drawn.clear()
+    fewer = ts.candidates([source], looks=1, seed=3)[0]
+    assert len(drawn) == 2 and len(seen) > len(fewer) and seen_marks.any()

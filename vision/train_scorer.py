@@ -29,7 +29,7 @@ from vision.mark_context import CONTEXT_FEATURES
 from vision.blobs import SMALL_SPOT_PX, detect_contrast_marks, mark_prior
 from vision.features import match_to_truth
 from scenarios.dataset import open_dataset
-from scenarios.looks import apply_look, random_look
+from scenarios.looks import apply_look, corner_look, random_look
 from scenarios.photoreal.develop import camera_model_of, develop_exr
 from scenarios.errors import WorldError
 
@@ -40,15 +40,17 @@ SCALE_MATCH_PX = {"paper": MATCH_PX, "telephoto": 3.0}
 
 
 def candidates(directories: Sequence[Path], match_px: float = MATCH_PX,
-               progress: Callable[[str], None] | None = None, looks: int = 0, seed: int = 0, scale: str = "paper"
-               ) -> tuple[np.ndarray, np.ndarray, np.ndarray, tuple[str, ...], float]:
+               progress: Callable[[str], None] | None = None, looks: int = 0, seed: int = 0, scale: str = "paper",
+               corner_looks: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray, tuple[str, ...], float]:
     """The features (K, F) of every small-spot candidate in the datasets, whether each is a mark (K,) bool, its
     group (K,): the datasets whose cameras start at the same places (:func:`_place`) are one group, and the feature
     names (:func:`vision.mark_scorer.feature_names`), and the share of the candidates' marks the hand-set bars find.
 
     ``looks``: each frame of a Cycles dataset that kept its radiance (``raw/*.exr``) is also developed through this
     many random camera looks (:func:`scenarios.looks.random_look`, seeded by ``seed``), the front-end estimating
-    each one's look as it does on a camera's images: a scorer that has seen many looks, judged on named ones.
+    each one's look as it does on a camera's images: a scorer that has seen many looks, judged on named ones;
+    ``corner_looks``: and through this many looks at the edges of those ranges (:func:`scenarios.looks.corner_look`,
+    drawn from the same seed after each frame's random ones), where a camera's settings add up.
     ``scale``: ``"paper"`` (marks under SMALL_SPOT_PX, :mod:`vision.mark_scorer`'s features) or ``"telephoto"``
     (the others, :data:`vision.mark_context.CONTEXT_FEATURES`)."""
     if scale not in SCALE_MATCH_PX:
@@ -78,8 +80,9 @@ def candidates(directories: Sequence[Path], match_px: float = MATCH_PX,
                 uv = np.array([m.uv for m in dataset.truth(k).cameras[cam].marks], float).reshape(-1, 2)
                 exr = Path(directory) / cam / "raw" / f"{k:06d}.exr"
                 images = [image]
-                for _ in range(looks if exr.is_file() else 0):
-                    spec = apply_look(camera_model_of(world), random_look(rng))
+                drawn = [random_look(rng) for _ in range(looks)] + [corner_look(rng) for _ in range(corner_looks)]
+                for look in drawn if exr.is_file() else []:
+                    spec = apply_look(camera_model_of(world), look)
                     encoded, _ = develop_exr(world, exr, k, cam, spec)
                     images.append(cv2.imdecode(np.frombuffer(encoded, np.uint8), cv2.IMREAD_COLOR))
                 for seen in images:
@@ -115,16 +118,18 @@ def _place(dataset) -> tuple:
 
 def train(directories: Sequence[Path], out: Path, *, l2: float = 30.0, match_px: float | None = None,
           progress: Callable[[str], None] | None = None, looks: int = 0, seed: int = 0, scale: str = "paper",
-          keep: float | None = None) -> dict:
+          keep: float | None = None, corner_looks: int = 0) -> dict:
     """Fit a scorer on ``directories`` and write it to ``out``; a summary (candidates, marks, threshold, and the
     fitting data's recall and precision of marks among the candidates it keeps). The threshold keeps the share of
     marks the bars find (:func:`vision.mark_scorer.fit` with ``keep``), each geometry (:func:`_place`) scored by
     a model fitted on the others; ``keep``, a share of the marks to keep instead (the shipped context model: 0.98,
     the issue's recall bar). ``match_px`` None: the scale's (:data:`SCALE_MATCH_PX`)."""
     match_px = SCALE_MATCH_PX.get(scale, MATCH_PX) if match_px is None else match_px
-    features, is_mark, groups, names, by_bars = candidates(directories, match_px, progress, looks, seed, scale)
+    features, is_mark, groups, names, by_bars = candidates(directories, match_px, progress, looks, seed, scale,
+                                                           corner_looks)
     fitted_on = "evopose train-scorer " + " ".join(Path(d).name for d in directories) + (
-        f" --looks {looks} --seed {seed}" if looks else "") + (" --scale telephoto" if scale == "telephoto" else "") + (
+        f" --looks {looks}" if looks else "") + (f" --corner-looks {corner_looks}" if corner_looks else "") + (
+        f" --seed {seed}" if looks or corner_looks else "") + (" --scale telephoto" if scale == "telephoto" else "") + (
         f" --keep {keep:g}" if keep is not None else "")
     scorer = mark_scorer.fit(features, is_mark, names, l2=l2, groups=groups, keep=by_bars if keep is None else keep,
                              fitted_on=fitted_on)

@@ -170,6 +170,8 @@ def train_scorer_command(
                                                              "log-loss on the training worlds).")] = 30.0,
     looks: Annotated[int, typer.Option(min=0, max=50, help="Also develop each frame of a dataset with raw EXRs "
                                                           "through this many random camera looks.")] = 0,
+    corner_looks: Annotated[int, typer.Option(min=0, max=50, help="... and through this many looks at the edges of "
+                                                                  "the random looks' ranges.")] = 0,
     seed: Annotated[int, typer.Option(help="Seed of the random looks.")] = 0,
     scale: Annotated[str, typer.Option(help="paper: the mark scorer of 2-4 px marks; telephoto: the context model "
                                             "of marks of 3 px and more (vision/mark_context.json).")] = "paper",
@@ -185,7 +187,7 @@ def train_scorer_command(
         raise typer.BadParameter(f"expected one of {', '.join(SCALE_MATCH_PX)}, got {scale!r}", param_hint="--scale")
     console = Console(stderr=True)
     summary = train(datasets, out, l2=l2, progress=None if as_json else console.print, looks=looks, seed=seed,
-                    scale=scale, keep=keep)
+                    scale=scale, keep=keep, corner_looks=corner_looks)
     if as_json:
         print(json_line(summary))
         return
