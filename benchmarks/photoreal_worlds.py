@@ -22,6 +22,9 @@ robot, their gimbals on it (``look_at``), the crate and the clutter:
 and the lightings high and low at both scales, extending ``exp2-photoreal-husky`` and
 ``exp2-photoreal-telephoto-husky`` (the Pioneer's worlds with only the target's model changed).
 
+``--set bodies-dev`` writes the same worlds with 24 other random robots (seeds from 100): front-end rules are
+chosen on them, and judged on ``bodies`` and the second robot, which they never saw.
+
 ``--set palettes`` writes 12 *training* worlds of recoloured robots at the paper's scale (the training geometries
 t1-t6 under the mid and dawn suns): each world's robot has the Pioneer's shape and marks, a body paint and four mark
 paints of its own (:func:`random_paints`, seeded by the world; its model file beside the world in ``models/``), so
@@ -90,12 +93,18 @@ SETS = {"benchmark": (WORLDS, GEOMETRIES, LIGHTINGS, tuple(SCALES)),
         "husky": (ROOT / "benchmarks" / "worlds" / "photoreal-husky", GEOMETRIES,
                   {k: LIGHTINGS[k] for k in ("high", "low")}, tuple(SCALES)),
         "palettes": (PALETTE_WORLDS, TRAIN_GEOMETRIES, {k: TRAIN_LIGHTINGS[k] for k in ("mid", "dawn")}, ("paper",)),
-        "bodies": (BODY_WORLDS, TRAIN_GEOMETRIES, {k: TRAIN_LIGHTINGS[k] for k in ("mid", "dawn")}, tuple(SCALES))}
+        "bodies": (BODY_WORLDS, TRAIN_GEOMETRIES, {k: TRAIN_LIGHTINGS[k] for k in ("mid", "dawn")}, tuple(SCALES)),
+        "bodies-dev": (ROOT / "benchmarks" / "worlds" / "photoreal-bodies-dev", TRAIN_GEOMETRIES,
+                       {k: TRAIN_LIGHTINGS[k] for k in ("mid", "dawn")}, tuple(SCALES))}
 #: Per set: the shipped world each scale extends and the worlds' name prefix (default: SCALES, "photoreal").
 SET_BASES = {"husky": (HUSKY_SCALES, "photoreal-husky"), "palettes": (SCALES, "photoreal-palettes"),
-             "bodies": (SCALES, "photoreal-bodies")}
+             "bodies": (SCALES, "photoreal-bodies"), "bodies-dev": (SCALES, "photoreal-bodies-dev")}
 #: The sets whose worlds each carry a model of their own (written beside them in ``models/``).
-MODEL_SETS = ("palettes", "bodies")
+MODEL_SETS = ("palettes", "bodies", "bodies-dev")
+#: Per set of random robots, the seed of its first robot (:func:`benchmarks.random_bodies.random_body_model`): the
+#: development robots (``--set bodies-dev``), on which front-end rules are chosen, are other robots than the ``bodies``
+#: that fit the scorers and judge those rules.
+MODEL_SEEDS = {"bodies-dev": 100}
 #: The sets whose ``--render`` adds, per scale, the g1-high world without its target.
 ABSENT_SETS = ("benchmark", "husky")
 #: The gimbals' aim (the robot's centre).
@@ -195,7 +204,8 @@ def write_worlds(world_set: str = "benchmark") -> list[Path]:
                     made = recoloured_model if world_set == "palettes" else random_body_model
                     model = folder / doc["target"]["model"]
                     model.parent.mkdir(parents=True, exist_ok=True)
-                    model.write_text(header + yaml.safe_dump(made(len(paths)), sort_keys=False, width=120,
+                    seed = MODEL_SEEDS.get(world_set, 0) + len(paths)
+                    model.write_text(header + yaml.safe_dump(made(seed), sort_keys=False, width=120,
                                                              default_flow_style=None), encoding="utf-8")
                 path.write_text(header + yaml.safe_dump(doc, sort_keys=False, width=120, default_flow_style=None), encoding="utf-8")
                 paths.append(path)
@@ -212,7 +222,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--set", dest="world_set", choices=tuple(SETS), default="benchmark",
                         help="the benchmark's worlds, the training worlds (other geometries and suns), or the second "
                              "marked target's (husky: the Husky-like UGV, high and low sun), or recoloured training "
-                             "robots (palettes), or random training robots (bodies)")
+                             "robots (palettes), or random training robots (bodies), or other random robots to "
+                             "develop rules on (bodies-dev)")
     args = parser.parse_args(argv)
     paths = write_worlds(args.world_set)
     folder, _, _, scales = SETS[args.world_set]

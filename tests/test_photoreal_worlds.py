@@ -15,9 +15,10 @@ from scenarios.world import load_scenario
 ROOT = Path(__file__).resolve().parents[1]
 
 
-@pytest.mark.parametrize("world_set, count", [("palettes", 12), ("bodies", 24)])
+@pytest.mark.parametrize("world_set, count", [("palettes", 12), ("bodies", 24), ("bodies-dev", 24)])
 def test_the_committed_training_robots_worlds_and_models_are_the_generators(tmp_path, monkeypatch, world_set, count):
-    """Recoloured robots at the paper's scale; random robots at both scales (each world its own robot)."""
+    """Recoloured robots at the paper's scale; random robots at both scales (each world its own robot), the
+    development set's other robots than the training set's."""
     committed_folder = worlds.SETS[world_set][0]
     folder = tmp_path / world_set
     monkeypatch.setitem(worlds.SETS, world_set, (folder, *worlds.SETS[world_set][1:]))
@@ -29,6 +30,10 @@ def test_the_committed_training_robots_worlds_and_models_are_the_generators(tmp_
         model = Path("models") / path.name
         assert (committed_folder / model).read_text(encoding="utf-8") == (folder / model).read_text(
             encoding="utf-8"), model
+    if world_set == "bodies-dev":   # none of the training robots
+        names = {(folder / "models" / p.name).read_text(encoding="utf-8").splitlines()[1] for p in written}
+        trained = {p.read_text(encoding="utf-8").splitlines()[1] for p in (worlds.BODY_WORLDS / "models").glob("*.yaml")}
+        assert len(names) == count and not names & trained
 
 
 def _on_box_face(point: np.ndarray, centre: np.ndarray, size: np.ndarray, normal: np.ndarray) -> bool:
