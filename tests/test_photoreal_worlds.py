@@ -32,7 +32,8 @@ def test_the_committed_training_robots_worlds_and_models_are_the_generators(tmp_
             encoding="utf-8"), model
     if world_set == "bodies-dev":   # none of the training robots
         names = {(folder / "models" / p.name).read_text(encoding="utf-8").splitlines()[1] for p in written}
-        trained = {p.read_text(encoding="utf-8").splitlines()[1] for p in (worlds.BODY_WORLDS / "models").glob("*.yaml")}
+        trained = {p.read_text(encoding="utf-8").splitlines()[1]
+                   for p in (worlds.BODY_WORLDS / "models").glob("*.yaml")}
         assert len(names) == count and not names & trained
 
 
