@@ -89,6 +89,17 @@ def test_a_desaturated_turned_cast_look_is_measured_and_undone():
     assert estimate_look(back, PIONEER_BODY).is_reference
 
 
+
+def test_a_dark_washed_out_body_at_the_papers_scale_is_measured_and_a_scene_without_it_is_not():
+    """Through a flat, dark, desaturated look (the committed paper-scale frames developed through ``flat-cool``) the
+    Pioneer's ~25 px body keeps 0.15-0.25 of chroma: each frame's look is measured from it (under a bar of 0.16 one
+    frame was not, and its marks fell outside the body's paint). The frames without the target find no body."""
+    with_body = [estimate_look(f, PIONEER_BODY, 29.0) for f in _frames("paper-flat-cool")]
+    assert len(with_body) == 8 and all(look.body_pixels > 300 for look in with_body), with_body
+    assert all(look.saturation < 0.55 for look in with_body)   # a look 0.45 saturated is taken back
+    assert all(estimate_look(f, PIONEER_BODY, 29.0).body_pixels == 0 for f in _frames("absent"))
+
+
 def test_neutral_follows_a_white_balance_cast():
     frame = _frames("paper")[0]
     _, q = chroma_of(frame)
