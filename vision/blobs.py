@@ -60,7 +60,7 @@ from .order_stats import median
 from .mark_selection import (densest_cluster, merge_oblique_marks, one_mark_between, one_per_disc, one_scale,
                              same_spots, surrounded)
 from .spot_colour import label_small_spots, labels_of, ring_colours, spot_misfits
-from .spot_position import SMALL_SPOT_PX, coverage_centroids, round_peaks
+from .spot_position import SMALL_SPOT_PX, blob_centroids, coverage_centroids, round_peaks
 from .spot_label import label_colours
 from .scale_space import (STEPS_PER_OCTAVE, contrast_responses, crop_margin, magnitude, scale_space_image,
                           scales)
@@ -127,15 +127,13 @@ MIN_SURROUND = 0.5
 #: which is no paint), then with the paint. Through 16 random looks (lens blur 0-1.5 px; the telephoto training
 #: worlds t1, t2: `bench_photoreal_looks --random-looks 16 --frames 2` with the constants set by hand; never the
 #: benchmark's worlds) recall / precision 0.943 / 0.972 at 1 px alone, 0.962 / 0.973 at 1, 2 and 3 px (the worst
-#: look 0.769 -> 0.875). The surround rule's ring (MIN_SURROUND) stays at 2 px: looked
-#: for further out too, it let through peaks where the second robot's body meets its black plate (its committed
-#: telephoto frames, precision 0.90 -> 0.82; the same veto that kept MIN_PAINT_AROUND), so that robot is not held
-#: out from this choice.
+#: look 0.769 -> 0.875). The surround rule's ring (MIN_SURROUND) stays at 2 px: looked for further out too, it let
+#: through peaks where the second robot's body meets its black plate (its committed telephoto frames, precision 0.90
+#: -> 0.82; the same veto that kept MIN_PAINT_AROUND), so that robot is not held out from this choice.
 RING_GAPS_PX = (1.0, 2.0, 3.0)
-#: Least pixels beside the body for the response's spread to be taken there (else over the whole crop).
-MIN_BACKGROUND_PX = 200
-#: At most about this many pixels beside the body are sampled for the response's spread (a robust statistic).
-MAX_SPREAD_SAMPLES = 20000
+#: Least pixels beside the body for the response's spread to be taken there (else over the whole crop), and at most
+#: about this many of them sampled for it (a robust statistic).
+MIN_BACKGROUND_PX, MAX_SPREAD_SAMPLES = 200, 20000
 #: With the body context, where the prior's largest mark radius is under :data:`SMALL_SPOT_PX`, a spot may misfit
 #: its label this much: the encoder's 4:2:0 chroma (2 x 2 px blocks) leaves such a mark's colour far off its
 #: paint's line, and the body, not the label, rejects the clutter.
@@ -374,6 +372,8 @@ def _detect(bgr: np.ndarray, lin: np.ndarray, names: tuple[str, ...], palette: M
     contrast = mag[in_space] / thresh[lvl]
     spot, ring = spot[good], ring[good]
     pts = coverage_centroids(lin, pts, radius, spot, ring)
+    if prior.radius_px[1] >= SMALL_SPOT_PX and len(pts):   # an oblique mark: its whole blob's centre
+        pts = blob_centroids(lin, pts, spot, ring, max(prior.radius_px[1], float(radius.max())))
     # one detection per place: a stronger peak within its radius (another scale of one spot) wins; an oblique mark's
     # two ends (at 3 px and more) are one detection at their middle (vision.mark_selection.merge_oblique_marks)
     order = np.argsort(-contrast)

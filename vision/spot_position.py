@@ -4,6 +4,7 @@ of its coverage (the share of each pixel the spot's colour covers, on the line f
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
 
 from .features import mark_coverage
@@ -13,6 +14,9 @@ from .ring_pixels import ring_pixels
 SMALL_SPOT_PX = 3.0
 #: Most re-centrings of a spot's coverage window (:func:`coverage_centroids`).
 CENTROID_STEPS = 6
+#: Where spots are SMALL_SPOT_PX and more, a pixel a spot's colour covers at least this share of belongs to its
+#: blob (:func:`blob_centroids`).
+BLOB_COVERAGE = 0.5
 
 
 def round_peaks(dog: np.ndarray, lvl: np.ndarray, ys: np.ndarray, xs: np.ndarray, max_edge_ratio: float
@@ -79,6 +83,39 @@ def coverage_centroids(lin: np.ndarray, pts: np.ndarray, radius: np.ndarray, spo
     return out
 
 
+def blob_centroids(lin: np.ndarray, centres: np.ndarray, spot: np.ndarray, ring: np.ndarray, max_radius: float
+                   ) -> np.ndarray:
+    """Each spot's position (K, 2) as the coverage-weighted centroid of its whole blob: the pixels its colour covers
+    :data:`BLOB_COVERAGE` or more of, 8-connected to the one nearest its ``centres`` (K, 2), with the blend 1 px
+    around them. A disc seen at a grazing angle is an ellipse up to four times as long as wide whose response peaks
+    near one end; a window's mean shift stalls inside such a strip (its centroid is its centre wherever the window
+    lies wholly in it), up to 3-4 px from the mark's centre on a large robot's side. A blob that reaches past
+    ``max_radius`` of the centre (the largest mark, px), or none at the centre, keeps the centre given: the spot's
+    colour is then paint or shade beside it. Shapes: lin (H, W, 3), spot and ring (K, 3)."""
+    h, w = lin.shape[:2]
+    out = np.asarray(centres, float).copy()
+    reach = int(np.ceil(max_radius)) + 2
+    kernel = np.ones((3, 3), np.uint8)
+    for k, (u, v) in enumerate(out.tolist()):
+        cu, cv = int(round(u)), int(round(v))
+        x0, y0, x1, y1 = cu - reach, cv - reach, cu + reach + 1, cv + reach + 1
+        if x0 < 0 or y0 < 0 or x1 > w or y1 > h:
+            continue   # a blob cut by the image's border has no centroid of its own
+        cover = mark_coverage(lin[y0:y1, x0:x1] - ring[k], (spot[k] - ring[k])[None, None, :])
+        blob = (cover >= BLOB_COVERAGE).astype(np.uint8)
+        if not blob[reach, reach]:
+            continue
+        _, labels = cv2.connectedComponents(blob, connectivity=8)
+        mine = labels == labels[reach, reach]
+        if mine[0].any() or mine[-1].any() or mine[:, 0].any() or mine[:, -1].any():
+            continue   # reaches past the largest mark: paint or shade in the spot's colour
+        weight = cover * cv2.dilate(mine.astype(np.uint8), kernel).astype(bool)
+        total = float(weight.sum())
+        ys, xs = np.mgrid[y0:y1, x0:x1]
+        out[k] = (float((weight * xs).sum()) / total, float((weight * ys).sum()) / total)
+    return out
+
+
 def _recentred(lin: np.ndarray, peaks: np.ndarray, radius: np.ndarray, spot: np.ndarray, ring: np.ndarray
                ) -> np.ndarray:
     """:func:`coverage_centroids` of spots of :data:`SMALL_SPOT_PX` and more (K, 2): each window re-centred on its
@@ -130,4 +167,4 @@ def _recentred(lin: np.ndarray, peaks: np.ndarray, radius: np.ndarray, spot: np.
     return centre
 
 
-__all__ = ["CENTROID_STEPS", "SMALL_SPOT_PX", "coverage_centroids", "round_peaks"]
+__all__ = ["BLOB_COVERAGE", "CENTROID_STEPS", "SMALL_SPOT_PX", "blob_centroids", "coverage_centroids", "round_peaks"]
