@@ -95,24 +95,29 @@ def blob_centroids(lin: np.ndarray, centres: np.ndarray, spot: np.ndarray, ring:
     h, w = lin.shape[:2]
     out = np.asarray(centres, float).copy()
     reach = int(np.ceil(max_radius)) + 2
+    centre = np.rint(out).astype(int)                                                   # (K, 2)
+    # a blob cut by the image's border has no centroid of its own
+    at = np.flatnonzero((centre >= reach).all(axis=1) & (centre[:, 0] + reach < w) & (centre[:, 1] + reach < h))
+    if not len(at):
+        return out
+    # every window's coverage in one gather (windows of one shape, by flat index), then each blob's own labelling
+    offsets = np.arange(-reach, reach + 1)
+    index = ((centre[at, 1, None, None] + offsets[None, :, None]) * w
+             + centre[at, 0, None, None] + offsets[None, None, :])                      # (N, S, S)
+    pixels = np.ascontiguousarray(lin).reshape(h * w, -1)
+    cover = mark_coverage(pixels[index] - ring[at, None, None, :], (spot[at] - ring[at])[:, None, None, :])
+    blob = (cover >= BLOB_COVERAGE).astype(np.uint8)
     kernel = np.ones((3, 3), np.uint8)
-    for k, (u, v) in enumerate(out.tolist()):
-        cu, cv = int(round(u)), int(round(v))
-        x0, y0, x1, y1 = cu - reach, cv - reach, cu + reach + 1, cv + reach + 1
-        if x0 < 0 or y0 < 0 or x1 > w or y1 > h:
-            continue   # a blob cut by the image's border has no centroid of its own
-        cover = mark_coverage(lin[y0:y1, x0:x1] - ring[k], (spot[k] - ring[k])[None, None, :])
-        blob = (cover >= BLOB_COVERAGE).astype(np.uint8)
-        if not blob[reach, reach]:
+    for n, k in enumerate(at.tolist()):
+        if not blob[n, reach, reach]:
             continue
-        _, labels = cv2.connectedComponents(blob, connectivity=8)
+        _, labels = cv2.connectedComponents(blob[n], connectivity=8)
         mine = labels == labels[reach, reach]
         if mine[0].any() or mine[-1].any() or mine[:, 0].any() or mine[:, -1].any():
             continue   # reaches past the largest mark: paint or shade in the spot's colour
-        weight = cover * cv2.dilate(mine.astype(np.uint8), kernel).astype(bool)
+        weight = cover[n] * cv2.dilate(mine.astype(np.uint8), kernel).astype(bool)
         total = float(weight.sum())
-        ys, xs = np.mgrid[y0:y1, x0:x1]
-        out[k] = (float((weight * xs).sum()) / total, float((weight * ys).sum()) / total)
+        out[k] = centre[k] + (float(weight.sum(axis=0) @ offsets) / total, float(weight.sum(axis=1) @ offsets) / total)
     return out
 
 
