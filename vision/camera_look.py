@@ -57,9 +57,9 @@ BODY_TURN_DEG, BODY_NOISE_SPREADS, BODY_MIN_CHROMA = 35.0, 5.0, 0.05
 #: Least pixels of the body patch to measure a look from (the paper's scale: the Pioneer's ~25 px across keeps
 #: ~450-600 paint pixels), and the least chroma of its 90th percentile, absolute and in noise spreads: a target's
 #: paint stands out; the ground's faint tint in the paint's hue (frames without the target, named and corner looks:
-#: mostly 0.05-0.10) does not. At 0.16 (first set) a body at the paper's scale through a saturation of 0.4-0.45 and a
-#: stop and a half under (0.14-0.16) went unmeasured, its look was not undone and its marks fell outside its paint.
-#: 0.12 chosen on the paper-scale training worlds through 16 corner looks (:func:`scenarios.looks.corner_look`):
+#: mostly 0.05-0.10) does not. A body at the paper's scale through a saturation of 0.4-0.45 and a stop and a half
+#: under reads 0.14-0.16: under the bar its look is not undone and its marks fall outside its paint. 0.12 chosen on
+#: the paper-scale training worlds through 16 corner looks (:func:`scenarios.looks.corner_look`):
 #: recall +9.2, +12.0, +13.5, +3.8 points in four of them (precision -11 in one, a lens blur of 1.4 px), -0.4..-0.8
 #: in two, the rest unchanged; the telephoto training worlds unchanged but for one look's precision (-0.4). Judged on
 #: the Pioneer's nine paper-scale benchmark worlds (held out): ``flat-cool`` recall 0.576 -> 0.630, precision 0.739
