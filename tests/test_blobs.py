@@ -259,7 +259,13 @@ def test_where_the_context_model_weighs_the_spots_a_mark_misfitting_its_label_re
     # Pioneer's flat-cool frames recall 0.966 -> 1.000 (precision 0.989 -> 0.970), the second robot's 0.938 -> 0.958.
     # Both held out: the bar was chosen on the Pioneer's telephoto training worlds t1, t2, these are its g2 world and
     # the second robot. Since marks are placed at their whole blob's centre (vision.spot_position.blob_centroids) the
-    # second robot's mark is found at either bar (0.979 both; its precision 0.845 with the refitted context model)
+    # second robot's mark is found at either bar. With the context rings following an oblique mark's blob (the
+    # model refitted, its threshold lower) the Pioneer's frames measure precision 0.922 (0.950 before: four
+    # low-contrast spots inside a face at JPEG 50 just over the threshold); the look's nine benchmark worlds
+    # 0.873 -> 0.897 (BENCHMARKS.md, "context rings along an oblique mark"). On the second robot's frames the
+    # weighed bar now finds one mark of 48 fewer than the hand-set one (0.938 against 0.958: a marginal mark's
+    # measures relative to the other spots move with the spots the looser bar lets in); on its five benchmark worlds
+    # it finds 0.9-6.3 points more than the hand-set bar in every named look
     import vision.blobs as blobs
 
     names = ("telephoto-flat-cool", "husky-telephoto")
@@ -267,8 +273,9 @@ def test_where_the_context_model_weighs_the_spots_a_mark_misfitting_its_label_re
     monkeypatch.setattr(blobs, "MAX_LABEL_MISFIT_WEIGHED", blobs.MAX_LABEL_MISFIT)
     barred = {name: _contrast_counts(name, "auto") for name in names}
     assert weighed["telephoto-flat-cool"]["recall"] > barred["telephoto-flat-cool"]["recall"], (weighed, barred)
-    assert weighed["telephoto-flat-cool"]["recall"] >= 0.98 and weighed["telephoto-flat-cool"]["precision"] >= 0.95
-    assert weighed["husky-telephoto"]["recall"] >= barred["husky-telephoto"]["recall"] >= 0.97, (weighed, barred)
+    assert weighed["telephoto-flat-cool"]["recall"] >= 0.98 and weighed["telephoto-flat-cool"]["precision"] >= 0.9
+    husky = weighed["husky-telephoto"]["recall"], barred["husky-telephoto"]["recall"]
+    assert husky[0] >= 0.93 and husky[1] - husky[0] <= 1 / 48 + 1e-9, (weighed, barred)
     assert all(weighed[name]["labels"] == 1.0 for name in names), weighed
 
 
@@ -486,9 +493,10 @@ def test_a_target_400_px_across_is_looked_for_on_the_image_halved_and_its_marks_
     monkeypatch.setattr(scale_space, "HALVE_FROM_EXTENT_PX", np.inf)
     full = pooled(evaluate(root / "husky-telephoto"), "contrast")
     assert half["recall"] >= full["recall"] - 0.05 and half["precision"] >= full["precision"] - 0.02, (half, full)
-    # (absolute bars: recall 0.979, precision 0.845 measured since the context model was refitted on marks placed at
-    # their blobs' centres; 0.958 / 0.979 before, the refit's cost on this robot, BENCHMARKS.md "oblique marks")
-    assert half["recall"] >= 0.95 and half["precision"] >= 0.8, half
+    # (absolute bars: recall 0.938, precision 1.000 measured since the context model's rings follow an oblique mark's
+    # blob (vision.spot_outline); 0.979 / 0.845 before: this fixture's 48 marks lose two that stand on a face's
+    # outline, its false points go; the robot's five benchmark worlds gain recall in every look, BENCHMARKS.md)
+    assert half["recall"] >= 0.93 and half["precision"] >= 0.95, half
 
 
 def _recentred_one_at_a_time(lin, peak, r, spot, ring, steps):
@@ -554,9 +562,12 @@ def test_an_oblique_marks_centre_is_its_whole_blobs_and_a_blob_past_the_largest_
     peaks = np.array([[30.3 - 7.5 * c, 30.6 - 7.5 * s_], [80.0, 30.0]])
     stalled = coverage_centroids(lin, peaks, np.array([3.5, 3.5]), spot, ring)
     assert np.hypot(*(stalled[0] - (30.3, 30.6))) > 2.5          # the window's mean shift alone
-    centred = blob_centroids(lin, stalled, spot, ring, max_radius=14.0)
+    centred, long_axis = blob_centroids(lin, stalled, spot, ring, max_radius=14.0)
     assert np.hypot(*(centred[0] - (30.3, 30.6))) < 0.2, centred
     np.testing.assert_array_equal(centred[1], stalled[1])        # the face: its centre as given
+    # the blob's long half-axis: 12 px along the ellipse's axis (either sign); the face has none of its own
+    assert abs(np.hypot(*long_axis[0]) - 12.0) < 0.8 and abs(abs(long_axis[0] @ (c, s_)) - 12.0) < 0.8, long_axis
+    np.testing.assert_array_equal(long_axis[1], 0.0)
 
 
 def test_the_second_robots_oblique_marks_are_placed_at_their_centres_through_the_front_end():

@@ -54,7 +54,9 @@ def test_the_shipped_context_model_was_fitted_on_training_worlds_only():
     worlds = [w for w in fitted if w.startswith("photoreal")]
     assert worlds and all(w.startswith(("photoreal-telephoto-t", "photoreal-bodies-telephoto-t")) for w in worlds)
     assert "--scale" in fitted and "telephoto" in fitted
-    assert fitted[fitted.index("--keep") + 1] == "0.98"   # the recall bar, not a figure of a held-out world
+    # keep 0.99, not the recall bar of 0.98: chosen on the development robots t1-t3 (never a judged world),
+    # where it raised recall 0.9-2.3 points at precision 0.955 and more (BENCHMARKS.md, "context rings")
+    assert fitted[fitted.index("--keep") + 1] == "0.99"
 
 
 def _contrast(name: str, scorer) -> dict:
@@ -89,8 +91,8 @@ def test_train_scorer_fits_a_context_model_and_names_a_bad_scale(tmp_path):
 def test_the_agents_extraction_uses_a_context_model_it_is_given():
     # by default, or as --mark-scorer (a small-spot scorer's feature check does not refuse it): on the flat-cool
     # telephoto frames, each camera's frames in order as a vehicle extracts them, the bars (--mark-scorer bars) keep
-    # lit-paint specks the model drops (measured: 115 points with the bars, 95 with the shipped model, the marks
-    # found either way)
+    # lit-paint specks the model drops and misses marks it keeps (measured: 114 points with the bars, 85 marks
+    # found; 106 with the shipped model, 88 found)
     from scenarios.dataset import open_dataset
     from vision.extract import feature_extractor
     from vision.features import match_to_truth
@@ -107,6 +109,5 @@ def test_the_agents_extraction_uses_a_context_model_it_is_given():
                 whole = np.array([m.uv for m in data.truth(k).cameras[cam].marks if m.fully_visible])
                 points, found = points + len(got), found + len(match_to_truth(got, whole, 3.0)[0])
         counts[name] = (points, found)
-    assert counts["model"][0] <= counts["bars"][0] - 10, counts
-    assert counts["model"][1] >= counts["bars"][1] - 1, counts
+    assert counts["model"][0] < counts["bars"][0] and counts["model"][1] > counts["bars"][1], counts
     assert counts["default"] == counts["model"], counts

@@ -371,9 +371,9 @@ def _detect(bgr: np.ndarray, lin: np.ndarray, names: tuple[str, ...], palette: M
         labels[good], conf[good], misfit[good]
     contrast = mag[in_space] / thresh[lvl]
     spot, ring = spot[good], ring[good]
-    pts = coverage_centroids(lin, pts, radius, spot, ring)
-    if prior.radius_px[1] >= SMALL_SPOT_PX and len(pts):   # an oblique mark: its whole blob's centre
-        pts = blob_centroids(lin, pts, spot, ring, max(prior.radius_px[1], float(radius.max())))
+    pts, long_axis = coverage_centroids(lin, pts, radius, spot, ring), np.zeros((len(pts), 2))
+    if prior.radius_px[1] >= SMALL_SPOT_PX and len(pts):   # an oblique mark: its whole blob's centre and length
+        pts, long_axis = blob_centroids(lin, pts, spot, ring, max(prior.radius_px[1], float(radius.max())))
     # one detection per place: a stronger peak within its radius (another scale of one spot) wins; an oblique mark's
     # two ends (at 3 px and more) are one detection at their middle (vision.mark_selection.merge_oblique_marks)
     order = np.argsort(-contrast)
@@ -401,7 +401,7 @@ def _detect(bgr: np.ndarray, lin: np.ndarray, names: tuple[str, ...], palette: M
     features = None   # where marks are 3 px and more a context model weighs the spots' context (vision.mark_context)
     if context is not None and paint is not None and depth is not None:   # (depth: at 3 px and more, with a body)
         features = context_features(lab, paint, depth, pts[sel], radius[sel], contrast[sel], misfit[sel],
-                                    conf[sel], RING_GAPS_PX, prior.extent_px or float(max(h, w)))
+                                    conf[sel], RING_GAPS_PX, prior.extent_px or float(max(h, w)), long_axis[sel])
         keep = context.marks(features) if isinstance(context, MarkScorer) else slice(None)   # "all": every spot
         sel, features = sel[keep], features[keep]
     else:

@@ -15,6 +15,7 @@ import numpy as np
 from collections.abc import Callable
 
 from .ring_pixels import ring_pixels
+from .spot_outline import outline_radius
 
 #: Which pixels (bool (H, W)) are hued like the body, given its sure paint (bool (H, W)).
 HuedLikeBody = Callable[[np.ndarray], np.ndarray]
@@ -181,25 +182,30 @@ def body_paint(lin: np.ndarray, body_linear: np.ndarray, clipped: np.ndarray | N
     return sure, touching[patches]
 
 
-def paint_around(paint: np.ndarray, points: np.ndarray, radius: np.ndarray, gap: float = 1.0) -> np.ndarray:
-    """The share of the ring between ``radius`` + ``gap`` and ``radius`` + ``gap`` + 1 px around each point that is
-    the body's ``paint`` (bool (H, W)); outside the image counts as no paint. ``points`` (K, 2) (u, v) pixels, ``radius``
-    (K,) px. A mark on the body is ringed by paint (on a face's outline, about half of it); a spot on the body's
-    outline or on the ground beside it is not (float (K,))."""
+def paint_around(paint: np.ndarray, points: np.ndarray, radius: np.ndarray, gap: float = 1.0,
+                 long_axis: np.ndarray | None = None) -> np.ndarray:
+    """The share of the ring ``gap`` to ``gap`` + 1 px beyond each spot's outline (``radius`` (K,) px; drawn out along
+    ``long_axis`` (K, 2), :mod:`vision.spot_outline`) around each point that is the body's ``paint`` (bool (H, W));
+    outside the image counts as no paint. ``points`` (K, 2) (u, v) pixels. A mark on the body is ringed by paint (on a
+    face's outline, about half of it); a spot on the body's outline or on the ground beside it is not (float (K,))."""
     h, w = paint.shape
     points, radius = np.asarray(points, float).reshape(-1, 2), np.asarray(radius, float).reshape(-1)
+    longest = radius if long_axis is None else np.maximum(radius, np.hypot(*np.asarray(long_axis, float).T))
     share = np.zeros(len(points))
-    reach = np.ceil(radius + gap + 1).astype(int)
+    reach = np.ceil(longest + gap + 1).astype(int)
     for n in np.unique(reach):   # the points whose window has one size together
         at = np.flatnonzero(reach == n)
-        inner = radius[at] + gap
         # the window -n..n about the point's nearest pixel: the point -0.5..0.5 from it
-        yy, xx = ring_pixels(-int(n), 2 * int(n) + 1, -0.5, 0.5, float(inner.min()), float(inner.max()) + 1)
+        yy, xx = ring_pixels(-int(n), 2 * int(n) + 1, -0.5, 0.5, float(radius[at].min() + gap),
+                             float(longest[at].max() + gap) + 1)
         yy, xx = yy - n, xx - n                                                          # (M,) offsets each
         u, v = points[at, 0, None], points[at, 1, None]
         cu, cv = np.rint(u).astype(int), np.rint(v).astype(int)
-        d = np.hypot(xx + cu - u, yy + cv - v)                                           # (N, M)
-        ring = (d >= inner[:, None]) & (d <= inner[:, None] + 1)
+        du, dv = xx + cu - u, yy + cv - v                                                # (N, M)
+        d = np.hypot(du, dv)
+        inner = gap + outline_radius(np.stack([du, dv], axis=2), radius[at],
+                                     None if long_axis is None else long_axis[at])
+        ring = (d >= inner) & (d <= inner + 1)
         ys, xs = yy + cv, xx + cu
         inside = ring & (ys >= 0) & (ys < h) & (xs >= 0) & (xs < w)
         painted = inside & (paint[np.clip(ys, 0, h - 1), np.clip(xs, 0, w - 1)] != 0)

@@ -56,18 +56,20 @@ SHIPPED_CONTEXT = Path(__file__).with_name("mark_context.json")
 
 def context_features(lab: np.ndarray, paint: np.ndarray, depth: np.ndarray, points: np.ndarray,
                      radius: np.ndarray, contrast: np.ndarray, misfit: np.ndarray, confidence: np.ndarray,
-                     ring_gaps: tuple[float, ...], extent_px: float) -> np.ndarray:
+                     ring_gaps: tuple[float, ...], extent_px: float, long_axis: np.ndarray | None = None
+                     ) -> np.ndarray:
     """The :data:`CONTEXT_FEATURES` (K, 10) of the spots at ``points`` of ``radius``, ``contrast``, label
     ``misfit`` and ``confidence`` in an image whose CIE Lab is ``lab`` (H, W, 3) float32, the body's paint ``paint``
     (H, W) bool and each pixel's depth into the body's closed silhouette ``depth`` (H, W) px (its distance
     transform); the paint ring's share is the best of the rings ``ring_gaps`` px beyond each radius; ``extent_px``
-    the target's largest extent in pixels."""
+    the target's largest extent in pixels; ``long_axis`` (K, 2) each spot's blob's long half-axis, which the rings
+    follow (:mod:`vision.spot_outline`; None: round spots)."""
     points = np.asarray(points, float).reshape(-1, 2)
     radius, contrast = np.asarray(radius, float), np.asarray(contrast, float)
     if not len(points):
         return np.zeros((0, len(CONTEXT_FEATURES)))
-    share = np.max([paint_around(paint, points, radius, gap) for gap in ring_gaps], axis=0)
-    around = surrounded(lab, points, radius)
+    share = np.max([paint_around(paint, points, radius, gap, long_axis) for gap in ring_gaps], axis=0)
+    around = surrounded(lab, points, radius, long_axis=long_axis)
     order = np.argsort(radius)
     weight = np.cumsum(contrast[order] ** 2)
     scale = float(radius[order][np.searchsorted(weight, 0.5 * weight[-1])])

@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from .spot_position import coverage_centroids
+from .spot_outline import outline_radius
 
 #: Where marks are 3 px and more: least radius of a spot as a share of the marks' own scale (:func:`one_scale`).
 SCALE_CONSENSUS = 0.55
@@ -66,19 +67,21 @@ def one_scale(radius: np.ndarray, contrast: np.ndarray, share: float = SCALE_CON
     return np.nonzero((radius >= share * scale) & (contrast >= RELATIVE_CONTRAST * strong))[0]
 
 
-def surrounded(lab: np.ndarray, pts: np.ndarray, radius: np.ndarray, directions: int = 16) -> np.ndarray:
-    """The share of directions (float (K,)) in which what lies just outside each spot at ``pts`` (K, 2) of
-    ``radius`` (K,) px, ``radius`` + 2 px away, is its surroundings' usual colour: within half the spot's contrast
-    to them (the median over the directions) in ``lab`` (H, W, 3) float CIE Lab. A mark is ringed by one paint
-    that it stands out from; a contrast peak on an outline between two paints (its centre a blend of them) is
-    not."""
+def surrounded(lab: np.ndarray, pts: np.ndarray, radius: np.ndarray, directions: int = 16,
+               long_axis: np.ndarray | None = None) -> np.ndarray:
+    """The share of directions (float (K,)) in which what lies just outside each spot at ``pts`` (K, 2), 2 px beyond
+    its outline (``radius`` (K,) px; drawn out along ``long_axis`` (K, 2), :mod:`vision.spot_outline`), is its
+    surroundings' usual colour: within half the spot's contrast to them (the median over the directions) in ``lab``
+    (H, W, 3) float CIE Lab. A mark is ringed by one paint that it stands out from; a contrast peak on an outline
+    between two paints (its centre a blend of them) is not."""
     pts, radius = np.asarray(pts, float).reshape(-1, 2), np.asarray(radius, float).reshape(-1)
     if not len(pts):
         return np.zeros(0)
     angle = np.linspace(0.0, 2 * np.pi, directions, endpoint=False)
-    reach = radius[:, None] + 2.0
-    around = _bilinear(lab, pts[:, 0:1] + reach * np.cos(angle)[None, :],
-                       pts[:, 1:2] + reach * np.sin(angle)[None, :])                # (K, D, 3)
+    unit = np.stack([np.cos(angle), np.sin(angle)], axis=1)                        # (D, 2)
+    reach = outline_radius(np.broadcast_to(unit, (len(pts), directions, 2)), radius, long_axis) + 2.0
+    around = _bilinear(lab, pts[:, 0:1] + reach * unit[None, :, 0],
+                       pts[:, 1:2] + reach * unit[None, :, 1])                    # (K, D, 3)
     centre = _bilinear(lab, pts[:, 0:1], pts[:, 1:2])                              # (K, 1, 3)
     usual = np.median(around, axis=1, keepdims=True)                               # (K, 1, 3)
     contrast = np.linalg.norm(centre - usual, axis=2)                              # (K, 1)

@@ -9,6 +9,7 @@ import numpy as np
 
 from .features import mark_coverage
 from .ring_pixels import ring_pixels
+from .spot_outline import half_length
 
 #: Spots under this radius (px) are the paper's scale: one centroid step, spots of one radius together.
 SMALL_SPOT_PX = 3.0
@@ -84,22 +85,24 @@ def coverage_centroids(lin: np.ndarray, pts: np.ndarray, radius: np.ndarray, spo
 
 
 def blob_centroids(lin: np.ndarray, centres: np.ndarray, spot: np.ndarray, ring: np.ndarray, max_radius: float
-                   ) -> np.ndarray:
-    """Each spot's position (K, 2) as the coverage-weighted centroid of its whole blob: the pixels its colour covers
-    :data:`BLOB_COVERAGE` or more of, 8-connected to the one nearest its ``centres`` (K, 2), with the blend 1 px
-    around them. A disc seen at a grazing angle is an ellipse up to four times as long as wide whose response peaks
-    near one end; a window's mean shift stalls inside such a strip (its centroid is its centre wherever the window
+                   ) -> tuple[np.ndarray, np.ndarray]:
+    """Each spot's position (K, 2) as the coverage-weighted centroid of its whole blob, and the blob's long half-axis
+    (K, 2) px from its second moments (:func:`vision.spot_outline.half_length`; zeros where the centre is kept). The
+    blob: the pixels its colour covers :data:`BLOB_COVERAGE` or more of, 8-connected to the one nearest its
+    ``centres`` (K, 2), with the blend 1 px around them. A disc seen at a grazing angle is an ellipse up to four
+    times as long as wide whose response peaks near one end; a window's mean shift stalls inside such a strip (its centroid is its centre wherever the window
     lies wholly in it), up to 3-4 px from the mark's centre on a large robot's side. A blob that reaches past
     ``max_radius`` of the centre (the largest mark, px), or none at the centre, keeps the centre given: the spot's
     colour is then paint or shade beside it. Shapes: lin (H, W, 3), spot and ring (K, 3)."""
     h, w = lin.shape[:2]
     out = np.asarray(centres, float).copy()
+    long_axis = np.zeros_like(out)
     reach = int(np.ceil(max_radius)) + 2
     centre = np.rint(out).astype(int)                                                   # (K, 2)
     # a blob cut by the image's border has no centroid of its own
     at = np.flatnonzero((centre >= reach).all(axis=1) & (centre[:, 0] + reach < w) & (centre[:, 1] + reach < h))
     if not len(at):
-        return out
+        return out, long_axis
     # every window's coverage in one gather (windows of one shape, by flat index), then each blob's own labelling
     offsets = np.arange(-reach, reach + 1)
     index = ((centre[at, 1, None, None] + offsets[None, :, None]) * w
@@ -117,8 +120,13 @@ def blob_centroids(lin: np.ndarray, centres: np.ndarray, spot: np.ndarray, ring:
             continue   # reaches past the largest mark: paint or shade in the spot's colour
         weight = cover[n] * cv2.dilate(mine.astype(np.uint8), kernel).astype(bool)
         total = float(weight.sum())
-        out[k] = centre[k] + (float(weight.sum(axis=0) @ offsets) / total, float(weight.sum(axis=1) @ offsets) / total)
-    return out
+        mean_u, mean_v = float(weight.sum(axis=0) @ offsets) / total, float(weight.sum(axis=1) @ offsets) / total
+        out[k] = centre[k] + (mean_u, mean_v)
+        du, dv = offsets[None, :] - mean_u, offsets[:, None] - mean_v
+        moments = [[(weight * du * du).sum(), (weight * du * dv).sum()], [0.0, (weight * dv * dv).sum()]]
+        moments[1][0] = moments[0][1]
+        long_axis[k] = half_length(np.array([moments]) / total)[0]
+    return out, long_axis
 
 
 def _recentred(lin: np.ndarray, peaks: np.ndarray, radius: np.ndarray, spot: np.ndarray, ring: np.ndarray
