@@ -203,8 +203,9 @@ def paint_around(paint: np.ndarray, points: np.ndarray, radius: np.ndarray, gap:
         cu, cv = np.rint(u).astype(int), np.rint(v).astype(int)
         du, dv = xx + cu - u, yy + cv - v                                                # (N, M)
         d = np.hypot(du, dv)
-        inner = gap + outline_radius(np.stack([du, dv], axis=2), radius[at],
-                                     None if long_axis is None else long_axis[at])
+        drawn = long_axis is not None and bool((longest[at] > radius[at]).any())
+        inner = gap + (outline_radius(np.stack([du, dv], axis=2), radius[at], long_axis[at]) if drawn
+                       else radius[at, None])
         ring = (d >= inner) & (d <= inner + 1)
         ys, xs = yy + cv, xx + cu
         inside = ring & (ys >= 0) & (ys < h) & (xs >= 0) & (xs < w)

@@ -111,6 +111,7 @@ def blob_centroids(lin: np.ndarray, centres: np.ndarray, spot: np.ndarray, ring:
     cover = mark_coverage(pixels[index] - ring[at, None, None, :], (spot[at] - ring[at])[:, None, None, :])
     blob = (cover >= BLOB_COVERAGE).astype(np.uint8)
     kernel = np.ones((3, 3), np.uint8)
+    moments, blobs = np.zeros((len(out), 2, 2)), []   # each blob's second moments (px^2), the spots with a blob
     for n, k in enumerate(at.tolist()):
         if not blob[n, reach, reach]:
             continue
@@ -123,9 +124,11 @@ def blob_centroids(lin: np.ndarray, centres: np.ndarray, spot: np.ndarray, ring:
         mean_u, mean_v = float(weight.sum(axis=0) @ offsets) / total, float(weight.sum(axis=1) @ offsets) / total
         out[k] = centre[k] + (mean_u, mean_v)
         du, dv = offsets[None, :] - mean_u, offsets[:, None] - mean_v
-        moments = [[(weight * du * du).sum(), (weight * du * dv).sum()], [0.0, (weight * dv * dv).sum()]]
-        moments[1][0] = moments[0][1]
-        long_axis[k] = half_length(np.array([moments]) / total)[0]
+        uv = float((weight * du * dv).sum()) / total
+        moments[k] = (float((weight * du * du).sum()) / total, uv), (uv, float((weight * dv * dv).sum()) / total)
+        blobs.append(k)
+    if blobs:
+        long_axis[blobs] = half_length(moments[blobs])
     return out, long_axis
 
 
