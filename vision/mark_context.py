@@ -16,11 +16,13 @@ frames against the bars' 29-31, one frame fewer through ``vivid-warm``, the rest
 default (``detect_contrast_marks(..., scorer="shipped")``); ``scorer="bars"``, ``evopose agent --mark-scorer bars``,
 asks for the bars.
 
-The shipped model is fitted on marks placed at their whole blob's centre (:func:`vision.spot_position.blob_centroids`,
-which moves an oblique mark's measures; the comparisons above are of the fit on the window's positions). On what it
-never saw (BENCHMARKS.md, "oblique marks"): the second robot at telephoto recall 0.80-0.94, precision 0.79-0.81
-through the named looks (the window-positions fit: 0.79-0.92 / 0.82-0.90), random robots outside its fit recall
-0.77-0.90, the Pioneer's benchmark worlds within a point of that fit.
+The shipped model is fitted on marks placed at their whole blob's centre (:func:`vision.spot_position.blob_centroids`),
+its two rings (``paint_around``, ``surrounded``) following an oblique mark's blob along its length
+(:mod:`vision.spot_outline`: a ring of the spot's radius crossed a 4:1 mark and read its own colour as no paint), at a
+keep of 0.99 (chosen on development robots; the comparisons above are of earlier fits). On what it never saw
+(BENCHMARKS.md, "context rings along an oblique mark"): the second robot at telephoto recall 0.82-0.96, precision
+0.90-0.98 through the named looks, six random robots outside its fit recall 0.82-0.92, precision 0.82-0.92, the
+Pioneer's benchmark worlds recall 0.94-1.00 / precision 0.90-0.99.
 
 Every measure is relative to the spot itself, to the others of its image or to the target's extent, never a
 colour: one model serves any robot and palette. Shapes: points (K, 2) pixels ``(u, v)``, per-spot arrays (K,).
