@@ -570,6 +570,23 @@ def test_an_oblique_marks_centre_is_its_whole_blobs_and_a_blob_past_the_largest_
     np.testing.assert_array_equal(long_axis[1], 0.0)
 
 
+def test_each_windows_blob_is_its_own_when_the_windows_are_labelled_side_by_side():
+    from vision.spot_position import _centre_blobs
+
+    # five windows labelled in one mosaic: a full one (its blob every pixel, to its edges) beside a window whose centre
+    # blob runs to the edge they share, with another blob there that only the full window would join to it; one with a
+    # ring around an unset centre (no blob), one whose blob has a diagonal neighbour, and an empty one
+    blob = np.zeros((5, 7, 7), bool)
+    blob[0] = True
+    blob[1, 3, :4] = blob[1, 6, 0] = True
+    blob[2, 2:5, 2:5], blob[2, 3, 3] = True, False
+    blob[3, 3, 3] = blob[3, 4, 4] = blob[3, 0, 6] = True
+    mine = _centre_blobs(blob)
+    assert mine[0].all() and mine[1].sum() == 4 and not mine[1, 6, 0], mine[1]
+    assert not mine[2].any() and not mine[4].any()
+    assert mine[3].sum() == 2 and mine[3, 4, 4] and not mine[3, 0, 6]
+
+
 def test_the_second_robots_oblique_marks_are_placed_at_their_centres_through_the_front_end():
     # the wiring of blob_centroids into detect_contrast_marks: on the second robot's committed telephoto frames (marks
     # up to 15 px, its sides seen obliquely) 9 detections lay 1.5-3 px from their mark with the window alone, 2 now

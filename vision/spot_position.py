@@ -90,10 +90,11 @@ def blob_centroids(lin: np.ndarray, centres: np.ndarray, spot: np.ndarray, ring:
     (K, 2) px from its second moments (:func:`vision.spot_outline.half_length`; zeros where the centre is kept). The
     blob: the pixels its colour covers :data:`BLOB_COVERAGE` or more of, 8-connected to the one nearest its
     ``centres`` (K, 2), with the blend 1 px around them. A disc seen at a grazing angle is an ellipse up to four
-    times as long as wide whose response peaks near one end; a window's mean shift stalls inside such a strip (its centroid is its centre wherever the window
-    lies wholly in it), up to 3-4 px from the mark's centre on a large robot's side. A blob that reaches past
-    ``max_radius`` of the centre (the largest mark, px), or none at the centre, keeps the centre given: the spot's
-    colour is then paint or shade beside it. Shapes: lin (H, W, 3), spot and ring (K, 3)."""
+    times as long as wide whose response peaks near one end; a window's mean shift stalls inside such a strip (its
+    centroid is its centre wherever the window lies wholly in it), up to 3-4 px from the mark's centre on a large
+    robot's side. A blob that reaches past ``max_radius`` of the centre (the largest mark, px), or none at the
+    centre, keeps the centre given: the spot's colour is then paint or shade beside it. Shapes: lin (H, W, 3), spot
+    and ring (K, 3)."""
     h, w = lin.shape[:2]
     out = np.asarray(centres, float).copy()
     long_axis = np.zeros_like(out)
@@ -103,33 +104,54 @@ def blob_centroids(lin: np.ndarray, centres: np.ndarray, spot: np.ndarray, ring:
     at = np.flatnonzero((centre >= reach).all(axis=1) & (centre[:, 0] + reach < w) & (centre[:, 1] + reach < h))
     if not len(at):
         return out, long_axis
-    # every window's coverage in one gather (windows of one shape, by flat index), then each blob's own labelling
+    # every window's coverage in one gather (windows of one shape, by flat index)
     offsets = np.arange(-reach, reach + 1)
     index = ((centre[at, 1, None, None] + offsets[None, :, None]) * w
              + centre[at, 0, None, None] + offsets[None, None, :])                      # (N, S, S)
     pixels = np.ascontiguousarray(lin).reshape(h * w, -1)
-    cover = mark_coverage(pixels[index] - ring[at, None, None, :], (spot[at] - ring[at])[:, None, None, :])
-    blob = (cover >= BLOB_COVERAGE).astype(np.uint8)
-    kernel = np.ones((3, 3), np.uint8)
-    moments, blobs = np.zeros((len(out), 2, 2)), []   # each blob's second moments (px^2), the spots with a blob
-    for n, k in enumerate(at.tolist()):
-        if not blob[n, reach, reach]:
-            continue
-        _, labels = cv2.connectedComponents(blob[n], connectivity=8)
-        mine = labels == labels[reach, reach]
-        if mine[0].any() or mine[-1].any() or mine[:, 0].any() or mine[:, -1].any():
-            continue   # reaches past the largest mark: paint or shade in the spot's colour
-        weight = cover[n] * cv2.dilate(mine.astype(np.uint8), kernel).astype(bool)
-        total = float(weight.sum())
-        mean_u, mean_v = float(weight.sum(axis=0) @ offsets) / total, float(weight.sum(axis=1) @ offsets) / total
-        out[k] = centre[k] + (mean_u, mean_v)
-        du, dv = offsets[None, :] - mean_u, offsets[:, None] - mean_v
-        uv = float((weight * du * dv).sum()) / total
-        moments[k] = (float((weight * du * du).sum()) / total, uv), (uv, float((weight * dv * dv).sum()) / total)
-        blobs.append(k)
-    if blobs:
-        long_axis[blobs] = half_length(moments[blobs])
+    base = ring[at].astype(pixels.dtype)                                               # in the image's precision
+    cover = mark_coverage(pixels[index] - base[:, None, None, :],
+                          (spot[at].astype(pixels.dtype) - base)[:, None, None, :])
+    mine = _centre_blobs(cover >= BLOB_COVERAGE)                                        # (N, S, S)
+    # a blob reaching the window's edge reaches past the largest mark: paint or shade in the spot's colour
+    own = np.flatnonzero(mine.any(axis=(1, 2)) & ~(mine[:, 0].any(axis=1) | mine[:, -1].any(axis=1)
+                                                    | mine[:, :, 0].any(axis=1) | mine[:, :, -1].any(axis=1)))
+    if not len(own):
+        return out, long_axis
+    grown = np.pad(mine[own], ((0, 0), (1, 1), (1, 1)))                                 # with the blend 1 px around
+    size = mine.shape[1]
+    near = np.zeros_like(mine[own])
+    for dy in range(3):
+        for dx in range(3):
+            near |= grown[:, dy:dy + size, dx:dx + size]
+    weight = cover[own] * near                                                          # (B, S, S)
+    total = weight.sum(axis=(1, 2))
+    mean_u = (weight.sum(axis=1) @ offsets) / total
+    mean_v = (weight.sum(axis=2) @ offsets) / total
+    du = offsets[None, None, :] - mean_u[:, None, None]
+    dv = offsets[None, :, None] - mean_v[:, None, None]
+    uu, uv, vv = ((weight * a * b).sum(axis=(1, 2)) / total for a, b in ((du, du), (du, dv), (dv, dv)))
+    k = at[own]
+    out[k] = centre[k] + np.stack([mean_u, mean_v], axis=1)
+    long_axis[k] = half_length(np.stack([np.stack([uu, uv], axis=1), np.stack([uv, vv], axis=1)], axis=1))
     return out, long_axis
+
+
+def _centre_blobs(blob: np.ndarray) -> np.ndarray:
+    """The 8-connected component of each window's centre pixel (bool (N, S, S); none where the centre is not set) of
+    ``blob`` (bool (N, S, S)): the windows labelled together, laid side by side with a row and a column of unset
+    pixels between them, so that no component crosses from one window to the next."""
+    n, size = blob.shape[0], blob.shape[1]
+    cols = int(np.ceil(np.sqrt(n)))
+    rows = -(-n // cols)
+    tiles = np.zeros((rows * cols, size + 1, size + 1), np.uint8)
+    tiles[:n, :size, :size] = blob
+    mosaic = tiles.reshape(rows, cols, size + 1, size + 1).transpose(0, 2, 1, 3).reshape(rows * (size + 1), -1)
+    _, labels = cv2.connectedComponents(mosaic, connectivity=8)
+    labels = labels.reshape(rows, size + 1, cols, size + 1).transpose(0, 2, 1, 3).reshape(-1, size + 1, size + 1)
+    labels = labels[:n, :size, :size]
+    middle = labels[:, size // 2, size // 2]                                            # 0: the centre is not set
+    return (labels == middle[:, None, None]) & (middle > 0)[:, None, None]
 
 
 def _recentred(lin: np.ndarray, peaks: np.ndarray, radius: np.ndarray, spot: np.ndarray, ring: np.ndarray
