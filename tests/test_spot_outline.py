@@ -49,3 +49,7 @@ def test_an_oblique_marks_rings_follow_its_blob_and_read_the_paint_around_it():
     assert surrounded(lab, centre, radius)[0] < 0.7 and surrounded(lab, centre, radius, long_axis=axis)[0] == 1.0
     # a round spot (no long axis, or one under its radius) keeps the circle's rings exactly
     assert paint_around(paint, centre, radius, 1.0, np.zeros((1, 2)))[0] == round_share
+    # several gaps: the best of their rings, as each alone gives it
+    gaps = (1.0, 2.0, 3.0)
+    assert paint_around(paint, centre, radius, gaps, axis)[0] == max(paint_around(paint, centre, radius, g, axis)[0]
+                                                                   for g in gaps)

@@ -406,8 +406,7 @@ def _detect(bgr: np.ndarray, lin: np.ndarray, names: tuple[str, ...], palette: M
         sel, features = sel[keep], features[keep]
     else:
         if paint is not None and len(sel):  # a mark on a face is ringed by the body's paint
-            share = np.max([paint_around(paint, pts[sel], radius[sel], gap) for gap in
-                            (RING_GAPS_PX if large else RING_GAPS_PX[:1])], axis=0)
+            share = paint_around(paint, pts[sel], radius[sel], RING_GAPS_PX if large else RING_GAPS_PX[:1])
             sel = sel[share >= (CANDIDATE_PAINT_AROUND if scoring else MIN_PAINT_AROUND)]
         if large and len(sel):   # a mark is ringed by one paint it stands out from
             sel = sel[surrounded(lab, pts[sel], radius[sel]) >= MIN_SURROUND]

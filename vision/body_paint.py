@@ -182,35 +182,40 @@ def body_paint(lin: np.ndarray, body_linear: np.ndarray, clipped: np.ndarray | N
     return sure, touching[patches]
 
 
-def paint_around(paint: np.ndarray, points: np.ndarray, radius: np.ndarray, gap: float = 1.0,
+def paint_around(paint: np.ndarray, points: np.ndarray, radius: np.ndarray, gap: float | tuple[float, ...] = 1.0,
                  long_axis: np.ndarray | None = None) -> np.ndarray:
     """The share of the ring ``gap`` to ``gap`` + 1 px beyond each spot's outline (``radius`` (K,) px; drawn out along
     ``long_axis`` (K, 2), :mod:`vision.spot_outline`) around each point that is the body's ``paint`` (bool (H, W));
-    outside the image counts as no paint. ``points`` (K, 2) (u, v) pixels. A mark on the body is ringed by paint (on a
-    face's outline, about half of it); a spot on the body's outline or on the ground beside it is not (float (K,))."""
+    outside the image counts as no paint; several gaps: the best of their rings, each window read once. ``points``
+    (K, 2) (u, v) pixels. A mark on the body is ringed by paint (on a face's outline, about half of it); a spot on
+    the body's outline or on the ground beside it is not (float (K,))."""
     h, w = paint.shape
+    gaps = tuple(float(g) for g in np.atleast_1d(gap))
     points, radius = np.asarray(points, float).reshape(-1, 2), np.asarray(radius, float).reshape(-1)
     longest = radius if long_axis is None else np.maximum(radius, np.hypot(*np.asarray(long_axis, float).T))
     share = np.zeros(len(points))
-    reach = np.ceil(longest + gap + 1).astype(int)
+    reach = np.ceil(longest + max(gaps) + 1).astype(int)
     for n in np.unique(reach):   # the points whose window has one size together
         at = np.flatnonzero(reach == n)
         # the window -n..n about the point's nearest pixel: the point -0.5..0.5 from it
-        yy, xx = ring_pixels(-int(n), 2 * int(n) + 1, -0.5, 0.5, float(radius[at].min() + gap),
-                             float(longest[at].max() + gap) + 1)
+        yy, xx = ring_pixels(-int(n), 2 * int(n) + 1, -0.5, 0.5, float(radius[at].min() + min(gaps)),
+                             float(longest[at].max() + max(gaps)) + 1)
         yy, xx = yy - n, xx - n                                                          # (M,) offsets each
         u, v = points[at, 0, None], points[at, 1, None]
         cu, cv = np.rint(u).astype(int), np.rint(v).astype(int)
         du, dv = xx + cu - u, yy + cv - v                                                # (N, M)
         d = np.hypot(du, dv)
         drawn = long_axis is not None and bool((longest[at] > radius[at]).any())
-        inner = gap + (outline_radius(np.stack([du, dv], axis=2), radius[at], long_axis[at]) if drawn
-                       else radius[at, None])
-        ring = (d >= inner) & (d <= inner + 1)
+        outline = (outline_radius(np.stack([du, dv], axis=2), radius[at], long_axis[at]) if drawn
+                   else radius[at, None])
         ys, xs = yy + cv, xx + cu
-        inside = ring & (ys >= 0) & (ys < h) & (xs >= 0) & (xs < w)
-        painted = inside & (paint[np.clip(ys, 0, h - 1), np.clip(xs, 0, w - 1)] != 0)
-        share[at] = np.count_nonzero(painted, axis=1) / np.maximum(np.count_nonzero(ring, axis=1), 1)
+        painted_here = (ys >= 0) & (ys < h) & (xs >= 0) & (xs < w)
+        painted_here &= paint[np.clip(ys, 0, h - 1), np.clip(xs, 0, w - 1)] != 0
+        for g in gaps:
+            inner = g + outline
+            ring = (d >= inner) & (d <= inner + 1)
+            shares = np.count_nonzero(ring & painted_here, axis=1) / np.maximum(np.count_nonzero(ring, axis=1), 1)
+            share[at] = np.maximum(share[at], shares)
     return share
 
 

@@ -70,7 +70,7 @@ def context_features(lab: np.ndarray, paint: np.ndarray, depth: np.ndarray, poin
     radius, contrast = np.asarray(radius, float), np.asarray(contrast, float)
     if not len(points):
         return np.zeros((0, len(CONTEXT_FEATURES)))
-    share = np.max([paint_around(paint, points, radius, gap, long_axis) for gap in ring_gaps], axis=0)
+    share = paint_around(paint, points, radius, ring_gaps, long_axis)
     around = surrounded(lab, points, radius, long_axis=long_axis)
     order = np.argsort(radius)
     weight = np.cumsum(contrast[order] ** 2)
