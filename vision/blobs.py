@@ -406,10 +406,11 @@ def _detect(bgr: np.ndarray, lin: np.ndarray, names: tuple[str, ...], palette: M
         sel, features = sel[keep], features[keep]
     else:
         if paint is not None and len(sel):  # a mark on a face is ringed by the body's paint
-            share = paint_around(paint, pts[sel], radius[sel], RING_GAPS_PX if large else RING_GAPS_PX[:1])
+            share = paint_around(paint, pts[sel], radius[sel], RING_GAPS_PX if large else RING_GAPS_PX[:1],
+                                 long_axis[sel])
             sel = sel[share >= (CANDIDATE_PAINT_AROUND if scoring else MIN_PAINT_AROUND)]
-        if large and len(sel):   # a mark is ringed by one paint it stands out from
-            sel = sel[surrounded(lab, pts[sel], radius[sel]) >= MIN_SURROUND]
+        if large and len(sel):   # a mark is ringed by one paint it stands out from (along an oblique one's blob)
+            sel = sel[surrounded(lab, pts[sel], radius[sel], long_axis=long_axis[sel]) >= MIN_SURROUND]
     pts, labels, conf, radius, contrast = pts[sel], labels[sel], conf[sel], radius[sel], contrast[sel]
     if large and features is None and len(pts) > 2:   # marks of one target share a scale
         keep = one_scale(radius, contrast)
