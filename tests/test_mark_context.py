@@ -109,5 +109,5 @@ def test_the_agents_extraction_uses_a_context_model_it_is_given():
                 whole = np.array([m.uv for m in data.truth(k).cameras[cam].marks if m.fully_visible])
                 points, found = points + len(got), found + len(match_to_truth(got, whole, 3.0)[0])
         counts[name] = (points, found)
-    assert counts["model"][0] < counts["bars"][0] and counts["model"][1] > counts["bars"][1], counts
+    assert counts["model"][0] <= counts["bars"][0] - 5 and counts["model"][1] > counts["bars"][1], counts
     assert counts["default"] == counts["model"], counts
