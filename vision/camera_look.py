@@ -58,15 +58,11 @@ BODY_TURN_DEG, BODY_NOISE_SPREADS, BODY_MIN_CHROMA = 35.0, 5.0, 0.05
 #: ~450-600 paint pixels), and the least chroma of its 90th percentile, absolute and in noise spreads: a target's
 #: paint stands out; the ground's faint tint in the paint's hue (frames without the target, named and corner looks:
 #: mostly 0.05-0.10) does not. A body at the paper's scale through a saturation of 0.4-0.45 and a stop and a half
-#: under reads 0.14-0.16: under the bar its look is not undone and its marks fall outside its paint. 0.12 chosen on
-#: the paper-scale training worlds through 16 corner looks (:func:`scenarios.looks.corner_look`):
-#: recall +9.2, +12.0, +13.5, +3.8 points in four of them (precision -11 in one, a lens blur of 1.4 px), -0.4..-0.8
-#: in two, the rest unchanged; the telephoto training worlds unchanged but for one look's precision (-0.4). Judged on
-#: the Pioneer's nine paper-scale benchmark worlds (held out): ``flat-cool`` recall 0.576 -> 0.630, precision 0.739
-#: -> 0.725, the other named looks unchanged; the telephoto benchmark worlds: ``agx-punchy`` precision 0.978 -> 0.952
-#: (a body read at 0.12-0.16 through its dark curve is now measured), the other looks unchanged; the frames without the
-#: target through 24 looks, 144 images a scale: 99 -> 103 detections at the paper's scale, 41 -> 43 at telephoto
-#: (BENCHMARKS.md, "a dark, washed-out body").
+#: under reads 0.14-0.16: under the bar its look would not be undone and its marks would fall outside its paint. The
+#: bar was chosen on the paper-scale training worlds through 16 corner looks (:func:`scenarios.looks.corner_look`)
+#: and judged on the benchmark worlds and frames without the target (BENCHMARKS.md, "a dark, washed-out body": its
+#: gain at the paper's scale through ``flat-cool``, its cost at telephoto through ``agx-punchy``, whose dark curve
+#: leaves one camera's body at 0.12-0.16).
 MIN_BODY_PIXELS, MIN_BODY_CHROMA, MIN_BODY_SPREADS = 40, 0.12, 20.0
 #: Where the target is LOOK_STRIDE_FROM_EXTENT_PX or more across (the prior's extent), the body's patch is found on
 #: every LOOK_STRIDE-th pixel of every LOOK_STRIDE-th row (a quarter of the pixels) of an image at least

@@ -6,7 +6,7 @@ crosses the mark itself along its length: the rings that measure its context (:f
 :func:`vision.mark_selection.surrounded`) read the mark's own colour there and take it for no paint. The outline
 here keeps the radius across the blob and its half-length along it (:func:`vision.spot_position.blob_centroids`
 measures the blob's second moments), so a ring follows it. Shapes: ``long_axis`` (K, 2) px, a vector along the long
-axis as long as its half-length (zeros: a round spot, or no blob of its own).
+axis as long as its half-length (zeros: no blob of its own; one no longer than the radius leaves the circle).
 """
 
 from __future__ import annotations
