@@ -18,6 +18,7 @@ resolution; the whole image when the window gives too few.
 
 from __future__ import annotations
 
+import time
 from collections.abc import Callable
 from typing import Protocol
 
@@ -29,6 +30,7 @@ from vision.mark_context import resolve_scorers
 from vision.camera_look import LookTracker, estimate_look
 from vision.label_chroma import LabelChromaGate, spot_chroma
 from vision.features import MarkDetections, colour_ranges, detect_colour_marks, detect_corners, x_junctions
+from vision.front_end_pace import FrontEndPace, detect_halved
 from vision.mark_scorer import MarkScorer
 from vision.spot_position import SMALL_SPOT_PX
 from vision.window import Window, grown, locate_body, target_window
@@ -80,7 +82,7 @@ MIN_WINDOW_MARKS = 4
 
 
 def feature_extractor(kind: str, target: TargetModel, area: Bounds | None = None,
-                      scorer: MarkScorer | str | None = None) -> FeatureExtractor:
+                      scorer: MarkScorer | str | None = None, period_s: float | None = None) -> FeatureExtractor:
     """The :class:`FeatureExtractor` of ``kind`` (one of :data:`FEATURE_KINDS`) for ``target``: ``marks`` and
     ``contrast`` label each mark with its colour's index in the model's palette (the order of
     :meth:`scenarios.target.TargetModel.colour_labels`), except where a camera's 2-4 px marks keep too little of
@@ -88,7 +90,9 @@ def feature_extractor(kind: str, target: TargetModel, area: Bounds | None = None
     the target) from which ``contrast`` derives the marks' size in each camera's image. ``scorer``: which spots
     ``contrast`` keeps as marks (:func:`vision.blobs.detect_contrast_marks`: None or ``"shipped"`` the shipped
     scorers, ``"bars"`` the hand-set bars, or a small-spot scorer or context model replacing the shipped one of its
-    kind); ValueError when a scorer was fitted on other features than the front-end computes."""
+    kind); ValueError when a scorer was fitted on other features than the front-end computes. ``period_s``: the
+    camera's frame period, which ``contrast`` keeps by running on the image halved where the target is large and its
+    frames at full resolution take too long (:mod:`vision.front_end_pace`; None: always full resolution)."""
     if kind == "auto":
         raise ValueError("resolve 'auto' first (resolve_features): whether the images come from a camera")
     if kind == "corners":
@@ -112,9 +116,11 @@ def feature_extractor(kind: str, target: TargetModel, area: Bounds | None = None
 
     looks: dict[tuple, LookTracker] = {}   # per camera (its intrinsics): a camera keeps its look
     gates: dict[tuple, LabelChromaGate] = {}   # and its encoder: whether its 2-4 px marks keep their colour
+    paces: dict[tuple, FrontEndPace] = {}   # and how long its frames take
 
     def contrast_marks(image: np.ndarray, camera: Camera | None = None,
                        near: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        start = time.perf_counter()
         prior = MarkPrior() if camera is None or area is None else mark_prior(
             camera, target.mark_radius, size, area.lo[:3], area.hi[:3])
         key = None if camera is None else (camera.fx, camera.fy, camera.cx, camera.cy, camera.width, camera.height)
@@ -133,9 +139,15 @@ def feature_extractor(kind: str, target: TargetModel, area: Bounds | None = None
         # let the pair find the robot (looks-long paper-g2-low-flat-cool: 0 good frames of 40 instead of 12)
         seen = image if followed is None else part
         look = tracker.update(estimate_look(seen, body, prior.extent_px)) if tracker.due() else tracker.current()
-        found, points = window_first(lambda part: detect_contrast_marks(part, palette, prior, body=body,
-                                                                        scorer=scorer or "shipped", look=look),
-                                     image, window)
+        pace = paces.setdefault(key, FrontEndPace(period_s))
+        halve = pace.halve(prior)
+
+        def at_full(part: np.ndarray, prior: MarkPrior) -> MarkDetections:
+            return detect_contrast_marks(part, palette, prior, body=body, scorer=scorer or "shipped", look=look)
+
+        found, points = window_first(lambda part: detect_halved(at_full, part, prior) if halve else
+                                     at_full(part, prior), image, window)
+        pace.timed(time.perf_counter() - start, halve)
         if prior.radius_px[1] >= SMALL_SPOT_PX:
             return points, found.labels
         gate = gates.setdefault(key, LabelChromaGate())

@@ -49,7 +49,8 @@ def open_camera(config: AgentConfig, scenario: Scenario, bus: FleetBus | None = 
     try:
         camera_images = config.source is not None or scenario.render.camera_model is not None
         extract = feature_extractor(resolve_features(config.features, camera_images), scenario.model,
-                                    scenario.bounds() if scenario.spec.search else None, scorer)
+                                    scenario.bounds() if scenario.spec.search else None, scorer,
+                                    period_s=1.0 / (config.fps or scenario.spec.fps))
     except ValueError as error:  # a scorer fitted on another palette
         raise FleetError(f"--mark-scorer {config.mark_scorer}: {error}") from None
     if config.source is None:

@@ -1,0 +1,100 @@
+"""The contrast front-end keeps a camera's rate: halved where the target is large and full-resolution frames overrun
+(vision/front_end_pace.py), back at full resolution when the halved frames leave room."""
+
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from scenarios.dataset import open_dataset
+from vision.blobs import ContrastMarks
+from vision.extract import feature_extractor
+from vision.features import match_to_truth
+from vision.front_end_pace import FRONT_END_SHARE, RECENT, RETURN_SHARE, FULL_OVER_HALVED, FrontEndPace, \
+    detect_halved
+from vision.mark_prior import MarkPrior
+
+DATA = Path(__file__).parent / "data" / "photoreal"
+LARGE = MarkPrior((3.0, 14.0), 480.0)   # the second robot at telephoto: its scale space is built halved
+SMALL = MarkPrior((2.5, 12.0), 210.0)   # the Pioneer at telephoto: never halved
+
+
+def test_frames_over_the_share_of_the_period_halve_a_large_target_and_room_to_spare_returns_it():
+    pace = FrontEndPace(0.1)
+    over = FRONT_END_SHARE * 0.1 * 1.2
+    for _ in range(RECENT - 1):
+        pace.timed(over, False)
+        assert not pace.halve(LARGE)                 # a decision takes RECENT frames
+    pace.timed(over, False)
+    assert pace.halve(LARGE) and not pace.halve(SMALL)
+    # halved frames whose full-resolution time would still overrun the return bar: halved on
+    for _ in range(RECENT):
+        pace.timed(RETURN_SHARE * 0.1 / FULL_OVER_HALVED * 1.2, True)
+    assert pace.halve(LARGE)
+    for _ in range(RECENT):
+        pace.timed(RETURN_SHARE * 0.1 / FULL_OVER_HALVED * 0.8, True)
+    assert not pace.halve(LARGE)
+
+
+def test_one_slow_frame_decides_nothing_and_without_a_period_nothing_is_halved():
+    pace = FrontEndPace(0.1)
+    for seconds in (0.03, 0.5, 0.03, 0.03):
+        pace.timed(seconds, False)
+    assert not pace.halve(LARGE)
+    free = FrontEndPace(None)
+    for _ in range(2 * RECENT):
+        free.timed(10.0, False)
+    assert not free.halve(LARGE)
+    with pytest.raises(ValueError, match="period_s"):
+        FrontEndPace(0.0)
+
+
+def test_halved_detections_come_back_in_the_full_images_pixels():
+    seen = {}
+
+    def detect(image, prior):
+        seen["shape"], seen["prior"] = image.shape, prior
+        return ContrastMarks(points=np.array([[10.0, 20.0]]), labels=np.array([0]), areas=np.array([28]),
+                             names=("red",), radius=np.array([3.0]), label_confidence=np.ones(1),
+                             contrast=np.ones(1))
+
+    found = detect_halved(detect, np.zeros((101, 64, 3), np.uint8), LARGE)
+    assert seen["shape"] == (50, 32, 3)
+    assert seen["prior"] == MarkPrior((1.5, 7.0), 240.0)
+    assert found.points.tolist() == [[20.5, 40.5]] and found.radius.tolist() == [6.0]
+    assert found.areas.tolist() == [112]
+
+
+def _run(name: str, period_s: float, rounds: int = 3) -> tuple[list[np.ndarray], float]:
+    """The agent's extractor over a fixture's frames, ``rounds`` times (the look tracked, the pace decided): the
+    last round's points per image and its recall of fully visible marks (3 px)."""
+    ds = open_dataset(DATA / name)
+    world = ds.world()
+    extract = feature_extractor("contrast", world.model, world.bounds(), period_s=period_s)
+    points, found, visible = [], 0, 0
+    for round_ in range(rounds):
+        for cam in ds.cameras:
+            for k in range(ds.frames):
+                image = cv2.imread(str(ds.image_path(cam, k)), cv2.IMREAD_COLOR)
+                pts, _ = extract(image, ds.camera(cam, k), near=ds.truth(k).target_pose)
+                if round_ == rounds - 1:
+                    marks = ds.truth(k).cameras[cam].marks
+                    whole = np.array([m.uv for m in marks if m.fully_visible])
+                    points.append(pts)
+                    found += len(match_to_truth(pts, whole, 3.0)[0])
+                    visible += len(whole)
+    return points, found / visible
+
+
+def test_an_overrunning_front_end_finds_the_second_robots_marks_on_the_image_halved():
+    # a period no frame can keep: every frame after the first RECENT runs halved (the second robot is 456-500 px
+    # across); a period every frame keeps: full resolution throughout
+    halved_points, halved_recall = _run("husky-telephoto", 1e-9)
+    full_points, full_recall = _run("husky-telephoto", 1e9)
+    assert any(len(a) != len(b) or not np.array_equal(a, b) for a, b in zip(halved_points, full_points))
+    assert full_recall >= 0.93 and halved_recall >= 0.9
+
+
+def test_a_target_too_small_to_halve_is_never_halved():
+    assert all(np.array_equal(a, b) for a, b in zip(_run("telephoto", 1e-9, 2)[0], _run("telephoto", 1e9, 2)[0]))
