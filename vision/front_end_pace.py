@@ -6,8 +6,9 @@ resolution once the halved frames leave room for it.
 
 The rule is a time budget, not a fitted constant: a frame is the image decoded, the marks found, the pose estimated
 (10-20 ms at telephoto) and the result published, so the front-end may take :data:`FRONT_END_SHARE` of the period.
-Halving costs the second robot's telephoto worlds 3-5 points of recall (BENCHMARKS.md, "the whole front-end on
-the image halved"); a frame later than its tick costs the whole frame (the vehicle skips to the newest tick).
+Halving costs the second robot's telephoto worlds 0-4.6 points of recall and 2.9-5.2 of precision an image; a frame
+later than its tick costs the whole frame (the vehicle skips to the newest tick). BENCHMARKS.md, "the second robot at
+10 fps, halved when it overruns": ticks skipped 12-42 of 40 -> 4-14, good poses per tick 0.46-0.73 -> 0.70-0.86.
 State: the recent timings of one camera, one writer (the vehicle's frame loop)."""
 
 from __future__ import annotations
@@ -28,8 +29,9 @@ FRONT_END_SHARE = 0.6
 #: Share of the period under which the halved front-end's time, times :data:`FULL_OVER_HALVED`, returns it to full
 #: resolution (below FRONT_END_SHARE: a front-end near the bar does not switch back and forth).
 RETURN_SHARE = 0.5
-#: How much longer a frame takes at full resolution than halved: 1.6 on the second robot's five telephoto worlds
-#: (0.152 s against 0.094 s an image through the named looks, BENCHMARKS.md).
+#: How much longer a frame takes at full resolution than halved: 1.6-1.9 on the second robot's five telephoto worlds
+#: (0.152 s against 0.094 and 0.082 s an image through the named looks, runs of different days; BENCHMARKS.md): the
+#: lower end, so that a front-end returns to full resolution only with room to spare.
 FULL_OVER_HALVED = 1.6
 #: The timings a decision takes the median of (one slow frame, a page fault or a team-mate's burst, decides nothing).
 RECENT = 3
