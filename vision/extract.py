@@ -30,7 +30,7 @@ from vision.mark_context import resolve_scorers
 from vision.camera_look import LookTracker, estimate_look
 from vision.label_chroma import LabelChromaGate, spot_chroma
 from vision.features import MarkDetections, colour_ranges, detect_colour_marks, detect_corners, x_junctions
-from vision.front_end_pace import FrontEndPace, detect_halved
+from vision.front_end_pace import FrontEndPace, detect_halved, halved_image
 from vision.mark_scorer import MarkScorer
 from vision.spot_position import SMALL_SPOT_PX
 from vision.window import Window, grown, locate_body, target_window
@@ -138,9 +138,13 @@ def feature_extractor(kind: str, target: TargetModel, area: Bounds | None = None
         # whole image: a paint-box window's ground, in a cold flat look at the paper's scale, set a look that never
         # let the pair find the robot (looks-long paper-g2-low-flat-cool: 0 good frames of 40 instead of 12)
         seen = image if followed is None else part
-        look = tracker.update(estimate_look(seen, body, prior.extent_px)) if tracker.due() else tracker.current()
         pace = paces.setdefault(key, FrontEndPace(period_s))
         halve = pace.halve(prior)
+        if tracker.due():   # on the image halved too when the front-end is (a look is the body's colour statistics)
+            look = tracker.update(estimate_look(seen, body, prior.extent_px) if not halve else
+                                  estimate_look(halved_image(seen), body, prior.extent_px / 2))
+        else:
+            look = tracker.current()
 
         def at_full(part: np.ndarray, prior: MarkPrior) -> MarkDetections:
             return detect_contrast_marks(part, palette, prior, body=body, scorer=scorer or "shipped", look=look)

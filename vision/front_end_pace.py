@@ -69,13 +69,19 @@ class FrontEndPace:
             self.halving, self._recent = False, []
 
 
+def halved_image(image: np.ndarray) -> np.ndarray:
+    """``image`` (H, W, C) halved: each 2 x 2 block's mean (cv2.INTER_AREA; an odd last row or column dropped), its
+    pixel (u, v) the full image's (2 u + 0.5, 2 v + 0.5)."""
+    h, w = image.shape[:2]
+    return cv2.resize(image[:h // 2 * 2, :w // 2 * 2], (w // 2, h // 2), interpolation=cv2.INTER_AREA)
+
+
 def detect_halved(detect: Callable[[np.ndarray, MarkPrior], ContrastMarks], image: np.ndarray,
                   prior: MarkPrior) -> ContrastMarks:
     """``detect(image, prior)`` run on ``image`` (H, W, 3) halved (cv2.INTER_AREA) with the prior's radii and extent
     halved; its points and radii in the full image's pixels (the halved pixel (u, v) is the full image's
     (2 u + 0.5, 2 v + 0.5))."""
-    h, w = image.shape[:2]
-    small = cv2.resize(image[:h // 2 * 2, :w // 2 * 2], (w // 2, h // 2), interpolation=cv2.INTER_AREA)
+    small = halved_image(image)
     half = MarkPrior((max(prior.radius_px[0] / 2, 0.5), prior.radius_px[1] / 2),
                      None if prior.extent_px is None else prior.extent_px / 2)
     found = detect(small, half)
@@ -84,4 +90,4 @@ def detect_halved(detect: Callable[[np.ndarray, MarkPrior], ContrastMarks], imag
                                areas=np.asarray(found.areas) * 4)
 
 
-__all__ = ["FRONT_END_SHARE", "FULL_OVER_HALVED", "FrontEndPace", "RETURN_SHARE", "detect_halved"]
+__all__ = ["FRONT_END_SHARE", "FULL_OVER_HALVED", "FrontEndPace", "RETURN_SHARE", "detect_halved", "halved_image"]
