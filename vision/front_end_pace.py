@@ -8,7 +8,7 @@ The rule is a time budget, not a fitted constant: a frame is the image decoded, 
 (10-20 ms at telephoto) and the result published, so the front-end may take :data:`FRONT_END_SHARE` of the period.
 Halving costs the second robot's telephoto worlds 0-4.6 points of recall and 2.9-5.2 of precision an image; a frame
 later than its tick costs the whole frame (the vehicle skips to the newest tick). BENCHMARKS.md, "the second robot at
-10 fps, halved when it overruns": ticks skipped 12-42 of 40 -> 4-14, good poses per tick 0.46-0.73 -> 0.70-0.86.
+10 fps, halved when it overruns": ticks skipped 12-42 of 40 -> 4-16, good poses per tick 0.46-0.73 -> 0.68-0.86.
 State: the recent timings of one camera, one writer (the vehicle's frame loop)."""
 
 from __future__ import annotations
