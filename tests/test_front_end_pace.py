@@ -11,8 +11,8 @@ from scenarios.dataset import open_dataset
 from vision.blobs import ContrastMarks
 from vision.extract import feature_extractor
 from vision.features import match_to_truth
-from vision.front_end_pace import FRONT_END_SHARE, RECENT, RETURN_SHARE, FULL_OVER_HALVED, FrontEndPace, \
-    detect_halved
+from vision.front_end_pace import FRONT_END_SHARE, FULL_OVER_HALVED, RECENT, RETURN_SHARE, FrontEndPace, \
+    detect_halved, placed_at_full
 from vision.mark_prior import MarkPrior
 
 DATA = Path(__file__).parent / "data" / "photoreal"
@@ -98,3 +98,19 @@ def test_an_overrunning_front_end_finds_the_second_robots_marks_on_the_image_hal
 
 def test_a_target_too_small_to_halve_is_never_halved():
     assert all(np.array_equal(a, b) for a, b in zip(_run("telephoto", 1e-9, 2)[0], _run("telephoto", 1e9, 2)[0]))
+
+
+def test_a_mark_found_on_the_image_halved_is_placed_at_its_whole_blobs_centre_at_full_resolution():
+    # an oblique black mark (a 4:1 ellipse, 12 x 3 px half-axes) on a yellow face, found 3 px off along its length
+    # (a halved pixel is two: the halved blob joined the dark beside it): placed again on the full image
+    image = np.zeros((80, 120, 3), np.uint8)
+    image[:] = (40, 190, 220)
+    big = np.zeros((80 * 8, 120 * 8, 3), np.uint8)
+    big[:] = (40, 190, 220)
+    cv2.ellipse(big, (int(60.5 * 8), int(40.5 * 8)), (12 * 8, 3 * 8), 0, 0, 360, (25, 25, 25), -1)
+    image = cv2.resize(big, (120, 80), interpolation=cv2.INTER_AREA)   # the disc's edge blended into its pixels
+    centre = np.array([[60.5 - 0.5 / 8 * 7, 40.5 - 0.5 / 8 * 7]])       # the drawn centre in the resized pixels
+    found = centre + [[3.0, 0.0]]
+    placed = placed_at_full(image, None, found, np.array([3.0]), 14.0)
+    assert np.abs(placed - centre).max() < 0.3 < np.abs(found - centre).max()
+    assert placed_at_full(image, None, np.zeros((0, 2)), np.zeros(0), 14.0).shape == (0, 2)

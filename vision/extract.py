@@ -149,7 +149,7 @@ def feature_extractor(kind: str, target: TargetModel, area: Bounds | None = None
         def at_full(part: np.ndarray, prior: MarkPrior) -> MarkDetections:
             return detect_contrast_marks(part, palette, prior, body=body, scorer=scorer or "shipped", look=look)
 
-        found, points = window_first(lambda part: detect_halved(at_full, part, prior) if halve else
+        found, points = window_first(lambda part: detect_halved(at_full, part, prior, look) if halve else
                                      at_full(part, prior), image, window)
         pace.timed(time.perf_counter() - start, halve)
         if prior.radius_px[1] >= SMALL_SPOT_PX:

@@ -21,6 +21,10 @@ import cv2
 import numpy as np
 
 from .blobs import ContrastMarks
+from .body_paint import LINEAR_OF_BYTE
+from .camera_look import Look, to_reference_look
+from .spot_colour import ring_colours
+from .spot_position import blob_centroids, coverage_centroids
 from .mark_prior import MarkPrior
 from .scale_space import halved
 
@@ -76,18 +80,46 @@ def halved_image(image: np.ndarray) -> np.ndarray:
     return cv2.resize(image[:h // 2 * 2, :w // 2 * 2], (w // 2, h // 2), interpolation=cv2.INTER_AREA)
 
 
+def placed_at_full(image: np.ndarray, look: Look | None, points: np.ndarray, radius: np.ndarray,
+                   max_radius: float) -> np.ndarray:
+    """Each mark's position (K, 2) taken again on the full image (H, W, 3) uint8, from its position ``points``
+    (K, 2) and ``radius`` (K,) found on the image halved, ``max_radius`` the largest a mark can have (px): the
+    coverage re-centred and the centroid of its whole blob at full resolution
+    (:func:`vision.spot_position.blob_centroids`, with its spot's colour and its ring's, in linear light after the
+    camera's ``look`` is undone); where no blob of its own is found, the halved position. A halved pixel is two:
+    an oblique mark's blob there joins the dark beside it sooner, and the position falls 3-6 px off."""
+    if not len(points):
+        return points
+    reach = int(np.ceil(max(max_radius, radius.max()))) + 6
+    h, w = image.shape[:2]
+    x0, y0 = (np.maximum(np.floor(points.min(axis=0)).astype(int) - reach, 0)).tolist()
+    x1, y1 = (np.minimum(np.ceil(points.max(axis=0)).astype(int) + reach + 1, [w, h])).tolist()
+    part = image[y0:y1, x0:x1]
+    lin = LINEAR_OF_BYTE[to_reference_look(part, look) if isinstance(look, Look) else part]
+    local = points - (x0, y0)
+    at = np.clip(np.rint(local).astype(int), 0, [x1 - x0 - 1, y1 - y0 - 1])
+    # the spot's colour as the front-end takes it (vision.blobs: its centre blurred at half its radius)
+    spot = np.array([cv2.GaussianBlur(lin[max(y - 2, 0):y + 3, max(x - 2, 0):x + 3], (0, 0), 0.5 * r)
+                     [min(y, 2), min(x, 2)] for (x, y), r in zip(at.tolist(), radius.tolist())]).reshape(-1, 3)
+    ring = ring_colours(lin, local, radius)
+    placed = coverage_centroids(lin, local, radius, spot, ring)
+    placed, _ = blob_centroids(lin, placed, spot, ring, max(max_radius, float(radius.max())))
+    return placed + (x0, y0)
+
+
 def detect_halved(detect: Callable[[np.ndarray, MarkPrior], ContrastMarks], image: np.ndarray,
-                  prior: MarkPrior) -> ContrastMarks:
-    """``detect(image, prior)`` run on ``image`` (H, W, 3) halved (cv2.INTER_AREA) with the prior's radii and extent
-    halved; its points and radii in the full image's pixels (the halved pixel (u, v) is the full image's
-    (2 u + 0.5, 2 v + 0.5))."""
+                  prior: MarkPrior, look: Look | None = None) -> ContrastMarks:
+    """``detect(image, prior)`` run on ``image`` (H, W, 3) halved (:func:`halved_image`) with the prior's radii and
+    extent halved; its radii in the full image's pixels and its marks placed at full resolution
+    (:func:`placed_at_full`, the camera's ``look`` undone: None, the reference look)."""
     small = halved_image(image)
     half = MarkPrior((max(prior.radius_px[0] / 2, 0.5), prior.radius_px[1] / 2),
                      None if prior.extent_px is None else prior.extent_px / 2)
     found = detect(small, half)
-    radius = None if found.radius is None else found.radius * 2
-    return dataclasses.replace(found, points=found.points * 2 + 0.5, radius=radius,
-                               areas=np.asarray(found.areas) * 4)
+    radius = found.radius * 2
+    points = placed_at_full(image, look, found.points * 2 + 0.5, radius, prior.radius_px[1])
+    return dataclasses.replace(found, points=points, radius=radius, areas=np.asarray(found.areas) * 4)
 
 
-__all__ = ["FRONT_END_SHARE", "FULL_OVER_HALVED", "FrontEndPace", "RETURN_SHARE", "detect_halved", "halved_image"]
+__all__ = ["FRONT_END_SHARE", "FULL_OVER_HALVED", "FrontEndPace", "RETURN_SHARE", "detect_halved", "halved_image",
+           "placed_at_full"]
