@@ -1,14 +1,15 @@
 """The contrast front-end keeps a camera's rate (issue 32, deliverable 5): where the target is so large in the image
 that its scale space is built halved anyway (:func:`vision.scale_space.halved`: 400 px across and more, the second
 robot at telephoto), and the front-end at full resolution takes more of the frame period than a frame can give it,
-the whole front-end runs on the image halved (its paint, positions, colours and context too), and returns to full
-resolution once the halved frames leave room for it.
+the front-end runs on the image halved (its paint, look, scale space, colours and context) and places the marks it
+keeps at full resolution, and returns to full resolution once the halved frames leave room for it.
 
 The rule is a time budget, not a fitted constant: a frame is the image decoded, the marks found, the pose estimated
 (10-20 ms at telephoto) and the result published, so the front-end may take :data:`FRONT_END_SHARE` of the period.
-Halving costs the second robot's telephoto worlds 0-4.6 points of recall and 2.9-5.2 of precision an image; a frame
-later than its tick costs the whole frame (the vehicle skips to the newest tick). BENCHMARKS.md, "the second robot at
-10 fps, halved when it overruns": ticks skipped 12-42 of 40 -> 4-16, good poses per tick 0.46-0.73 -> 0.68-0.86.
+Halved, the second robot's telephoto worlds change by -3.4..+1.5 points of recall and -3.8..-0.9 of precision an
+image (the marks kept placed at full resolution, :func:`placed_at_full`); a frame later than its tick costs the whole
+frame (the vehicle skips to the newest tick). BENCHMARKS.md, "the second robot at 10 fps, halved when it overruns":
+ticks skipped 12-48 of 40 -> 6-22, good poses per tick 0.43-0.73 -> 0.61-0.83, good frames 95 % in every look.
 State: the recent timings of one camera, one writer (the vehicle's frame loop)."""
 
 from __future__ import annotations
@@ -34,7 +35,7 @@ FRONT_END_SHARE = 0.6
 #: resolution (below FRONT_END_SHARE: a front-end near the bar does not switch back and forth).
 RETURN_SHARE = 0.5
 #: How much longer a frame takes at full resolution than halved: 1.6-1.9 on the second robot's five telephoto worlds
-#: (0.152 s against 0.094 and 0.082 s an image through the named looks, runs of different days; BENCHMARKS.md): the
+#: (0.152 s against 0.082-0.094 s an image through the named looks, runs of different days; BENCHMARKS.md): the
 #: lower end, so that a front-end returns to full resolution only with room to spare.
 FULL_OVER_HALVED = 1.6
 #: The timings a decision takes the median of (one slow frame, a page fault or a team-mate's burst, decides nothing).
