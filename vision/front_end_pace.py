@@ -91,7 +91,8 @@ def placed_at_full(image: np.ndarray, look: Look | None, points: np.ndarray, rad
     an oblique mark's blob there joins the dark beside it sooner, and the position falls 3-6 px off."""
     if not len(points):
         return points
-    reach = int(np.ceil(max(max_radius, radius.max()))) + 6
+    # every window the placing reads lies within twice the largest radius and a few pixels of its mark
+    reach = 2 * int(np.ceil(max(max_radius, radius.max()))) + 6
     h, w = image.shape[:2]
     x0, y0 = (np.maximum(np.floor(points.min(axis=0)).astype(int) - reach, 0)).tolist()
     x1, y1 = (np.minimum(np.ceil(points.max(axis=0)).astype(int) + reach + 1, [w, h])).tolist()
