@@ -1,6 +1,9 @@
 """The contrast front-end keeps a camera's rate: halved where the target is large and full-resolution frames overrun
 (vision/front_end_pace.py), back at full resolution when the halved frames leave room."""
 
+import json
+import subprocess
+import sys
 from pathlib import Path
 
 import cv2
@@ -14,6 +17,7 @@ from vision.features import match_to_truth
 from vision.front_end_pace import FRONT_END_SHARE, FULL_OVER_HALVED, RECENT, RETURN_SHARE, FrontEndPace, \
     detect_halved, placed_at_full
 from vision.mark_prior import MarkPrior
+from tests.fleet_procs import ROOT, free_port
 
 DATA = Path(__file__).parent / "data" / "photoreal"
 LARGE = MarkPrior((3.0, 14.0), 480.0)   # the second robot at telephoto: its scale space is built halved
@@ -114,3 +118,29 @@ def test_a_mark_found_on_the_image_halved_is_placed_at_its_whole_blobs_centre_at
     placed = placed_at_full(image, None, found, np.array([3.0]), 14.0)
     assert np.abs(placed - centre).max() < 0.3 < np.abs(found - centre).max()
     assert placed_at_full(image, None, np.zeros((0, 2)), np.zeros(0), 14.0).shape == (0, 2)
+
+
+def _agent_frames(world: str, frames: int) -> tuple[list[dict], dict]:
+    """A real agent process alone on ``world`` at 50 fps, a period whose 0.6 no front-end here keeps (it takes
+    60-220 ms a frame): its frames' JSON lines and its summary."""
+    done = subprocess.run([sys.executable, "-m", "agents.cli", "agent", "--fleet", "pace", "--scenario", world,
+                           "--vehicle", "H1", "--frames", str(frames), "--fps", "50", "--json", "--no-multicast",
+                           "--listen", f"tcp/127.0.0.1:{free_port()}"], cwd=ROOT, capture_output=True, text=True,
+                          timeout=300)
+    assert done.returncode == 0 and "Traceback" not in done.stderr, done.stderr
+    records = [json.loads(line) for line in done.stdout.splitlines() if line.startswith("{")]
+    return [r for r in records if r.get("event") == "frame"], next(r for r in records if r.get("event") == "summary")
+
+
+def test_an_agent_that_overruns_its_clock_on_a_large_target_halves_and_says_so_and_stays_right():
+    frames, summary = _agent_frames("exp2-photoreal-telephoto-husky", 7)
+    assert len(frames) == 7
+    # the first RECENT frames at full resolution are timed; every later one runs halved, and its JSON line says so
+    assert [r.get("front_end") for r in frames] == [None] * RECENT + ["halved"] * (7 - RECENT)
+    assert summary["halved_frames"] == 7 - RECENT
+    for r in frames:   # halved or not, every published pose within 5 cm and 1 deg of the truth (measured <= 1.8 cm)
+        error = r["error"]
+        assert error["position"] <= 0.05 and max(error[a] for a in ("roll", "pitch", "yaw")) <= 1.0, r["error"]
+    # the Pioneer at telephoto (200-220 px across) is never halved, however late
+    frames, summary = _agent_frames("exp2-photoreal-telephoto", 5)
+    assert all("front_end" not in r for r in frames) and summary["halved_frames"] == 0

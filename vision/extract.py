@@ -47,7 +47,9 @@ class FeatureExtractor(Protocol):
     detector behind one call. ``camera`` (with its ``world_from_camera``) lets a detector know how large the target's
     marks can be in this image (:func:`vision.blobs.mark_prior`); without it a generic range is searched. ``near``, a
     pose (``world_from_target`` (6,)) the target is expected near (the last good estimate): ``contrast`` and ``marks``
-    then look in a window around its projection first (:mod:`vision.window`); ``corners`` takes the whole image."""
+    then look in a window around its projection first (:mod:`vision.window`); ``corners`` takes the whole image.
+    ``contrast``'s extractor also says whether its last frame ran on the image halved to keep the camera's rate (its
+    ``halved`` attribute, :mod:`vision.front_end_pace`)."""
 
     def __call__(self, image: np.ndarray, camera: Camera | None = None,
                  near: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray | None]:
@@ -152,12 +154,14 @@ def feature_extractor(kind: str, target: TargetModel, area: Bounds | None = None
         found, points = window_first(lambda part: detect_halved(at_full, part, prior, look) if halve else
                                      at_full(part, prior), image, window)
         pace.timed(time.perf_counter() - start, halve)
+        contrast_marks.halved = halve
         if prior.radius_px[1] >= SMALL_SPOT_PX:
             return points, found.labels
         gate = gates.setdefault(key, LabelChromaGate())
         carried = gate.update(spot_chroma(image, points, found.radius, look))
         return points, found.labels if carried else None
 
+    contrast_marks.halved = False
     return contrast_marks
 
 

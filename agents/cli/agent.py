@@ -21,7 +21,8 @@ def summary_table(summary: dict) -> Table:
                   title_justify="left")
     table.add_column(style="bold")
     table.add_column(justify="right")
-    table.add_row("frames", f"{summary['frames']} ({summary['late_frames']} skipped late)")
+    halved = f", {summary['halved_frames']} halved" if summary.get("halved_frames") else ""
+    table.add_row("frames", f"{summary['frames']} ({summary['late_frames']} skipped late{halved})")
     table.add_row("estimates (good)", f"{summary['estimates']} ({summary['good']})")
     if summary.get("set_aside"):
         table.add_row("set aside (jumped off the track)", f"{summary['set_aside']}")

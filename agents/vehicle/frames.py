@@ -99,6 +99,8 @@ class Frame:
         cost; unlike ``render_s`` it does not grow while the thread waits for a core.
     extract_s : float
         Seconds the front-end took to find the marks in it (the vehicle's own work, unlike ``render_s``).
+    halved : bool
+        Whether the front-end ran on the image halved to keep the camera's rate (:mod:`vision.front_end_pace`).
     """
 
     index: int
@@ -113,6 +115,7 @@ class Frame:
     skipped: str | None = None
     render_cpu_s: float = 0.0
     extract_s: float = 0.0
+    halved: bool = False
 
 
 def default_extractor(scenario: Scenario) -> FeatureExtractor:
@@ -146,7 +149,7 @@ class SimulatedCamera:
         points, labels = self.extract(rendered.image, rendered.camera, near)
         return Frame(index, scene, stamp_ns, rendered.image, rendered.camera, points,
                      self.scenario.target_pose(scene), render_s, labels, render_cpu_s=render_cpu_s,
-                     extract_s=time.perf_counter() - t1)
+                     extract_s=time.perf_counter() - t1, halved=getattr(self.extract, "halved", False))
 
     def close(self) -> None:
         """Nothing to release (a real source closes its device or file)."""

@@ -59,6 +59,7 @@ class RunRecord:
     set_aside: int = 0  #: frames good on their own that jumped off the published track (docs/design.md §2)
     solves: int = 0
     late_frames: int = 0
+    halved_frames: int = 0  #: frames whose front-end ran on the image halved to keep the clock (vision.front_end_pace)
     stale_events: int = 0  #: times a live team-mate's data went stale (frozen or cut off)
     frame_errors: int = 0  #: frames whose estimate raised (a bug): the vehicle reset its estimator and went on
     multi_view_frames: int = 0

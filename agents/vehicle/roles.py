@@ -344,10 +344,12 @@ class CameraVehicle(Vehicle):
         t_end = time.perf_counter()
         self.record.frame_total_s.append(t_end - t_acquire)
         self.record.extract_s.append(frame.extract_s)
+        self.record.halved_frames += frame.halved
         self.emit({**event.to_json(), "timing_s": {
             "late": late_s, "image": frame.render_s, "extract": frame.extract_s,
             "share": t_pair - t_acquire - frame.render_s - frame.extract_s, "pair": t_step - t_pair,
-            "step": t_end - t_step, "total": t_end - t_acquire, "cpu": time.thread_time() - cpu0}})
+            "step": t_end - t_step, "total": t_end - t_acquire, "cpu": time.thread_time() - cpu0},
+            **({"front_end": "halved"} if frame.halved else {})})
 
     def send(self, message: Message | Hint) -> None:
         """Publish a message of :func:`step` or :func:`idle`; hints no faster than ``hint_rate_hz``."""

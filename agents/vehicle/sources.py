@@ -279,7 +279,7 @@ class SourceCamera:
         t1 = time.perf_counter()
         points, labels = self.extract(image, camera, near)
         return Frame(index, k, stamp_ns, image, camera, points, None, read_s, labels,
-                     extract_s=time.perf_counter() - t1)
+                     extract_s=time.perf_counter() - t1, halved=getattr(self.extract, "halved", False))
 
     def _skipped(self, index: int, stamp_ns: int, read_s: float, why: str) -> Frame:
         """A tick without a usable frame: no points, a black image, the last camera (before any: the intrinsics
