@@ -144,3 +144,11 @@ def test_an_agent_that_overruns_its_clock_on_a_large_target_halves_and_says_so_a
     # the Pioneer at telephoto (200-220 px across) is never halved, however late
     frames, summary = _agent_frames("exp2-photoreal-telephoto", 5)
     assert all("front_end" not in r for r in frames) and summary["halved_frames"] == 0
+
+
+def test_the_pace_answers_a_plain_bool_for_a_prior_of_numpy_numbers():
+    # a dataset's camera gives numpy floats: the answer goes into an agent's JSON summary (json cannot write np.bool_)
+    pace = FrontEndPace(0.1)
+    for _ in range(RECENT):
+        pace.timed(1.0, False)
+    assert type(pace.halve(MarkPrior((np.float64(2.5), np.float64(12.0)), np.float64(210.0)))) is bool

@@ -154,7 +154,7 @@ def feature_extractor(kind: str, target: TargetModel, area: Bounds | None = None
         found, points = window_first(lambda part: detect_halved(at_full, part, prior, look) if halve else
                                      at_full(part, prior), image, window)
         pace.timed(time.perf_counter() - start, halve)
-        contrast_marks.halved = halve
+        contrast_marks.halved = bool(halve)
         if prior.radius_px[1] >= SMALL_SPOT_PX:
             return points, found.labels
         gate = gates.setdefault(key, LabelChromaGate())

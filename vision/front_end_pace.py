@@ -56,7 +56,7 @@ class FrontEndPace:
     def halve(self, prior: MarkPrior) -> bool:
         """Whether this frame's front-end runs on the image halved: the pace says so and the target, seen with
         ``prior``, is large enough (:func:`vision.scale_space.halved`)."""
-        return self.halving and halved(prior)
+        return bool(self.halving and halved(prior))
 
     def timed(self, seconds: float, was_halved: bool) -> None:
         """A frame's front-end took ``seconds``, ``was_halved`` or at full resolution."""

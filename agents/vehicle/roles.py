@@ -344,7 +344,7 @@ class CameraVehicle(Vehicle):
         t_end = time.perf_counter()
         self.record.frame_total_s.append(t_end - t_acquire)
         self.record.extract_s.append(frame.extract_s)
-        self.record.halved_frames += frame.halved
+        self.record.halved_frames += bool(frame.halved)
         self.emit({**event.to_json(), "timing_s": {
             "late": late_s, "image": frame.render_s, "extract": frame.extract_s,
             "share": t_pair - t_acquire - frame.render_s - frame.extract_s, "pair": t_step - t_pair,
