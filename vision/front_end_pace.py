@@ -9,7 +9,7 @@ The rule is a time budget, not a fitted constant: a frame is the image decoded, 
 Halved, the second robot's telephoto worlds change by -3.4..+1.5 points of recall and -3.8..-0.9 of precision an
 image (the marks kept placed at full resolution, :func:`placed_at_full`); a frame later than its tick costs the whole
 frame (the vehicle skips to the newest tick). BENCHMARKS.md, "the second robot at 10 fps, halved when it overruns":
-ticks skipped 12-48 of 40 -> 6-22, good poses per tick 0.43-0.73 -> 0.61-0.83, good frames 95 % in every look.
+ticks skipped 12-48 of 40 -> 6-22, good poses per tick 0.43-0.73 -> 0.61-0.83, good frames 90-95 % in every look.
 State: the recent timings of one camera, one writer (the vehicle's frame loop)."""
 
 from __future__ import annotations
