@@ -15,7 +15,7 @@ from vision.blobs import ContrastMarks
 from vision.extract import feature_extractor
 from vision.features import match_to_truth
 from vision.front_end_pace import FRONT_END_SHARE, FULL_OVER_HALVED, RECENT, RETURN_SHARE, FrontEndPace, \
-    detect_halved, placed_at_full
+    detect_halved, largest_mark_px, placed_at_full
 from vision.mark_prior import MarkPrior
 from tests.fleet_procs import ROOT, free_port
 
@@ -39,6 +39,20 @@ def test_frames_over_the_share_of_the_period_halve_a_large_target_and_room_to_sp
     for _ in range(RECENT):
         pace.timed(RETURN_SHARE * 0.1 / FULL_OVER_HALVED * 0.8, True)
     assert not pace.halve(LARGE)
+
+
+def test_a_target_tracked_far_across_a_deep_area_is_not_halved_however_near_it_could_be():
+    pace = FrontEndPace(0.1)
+    for _ in range(RECENT):
+        pace.timed(1.0, False)
+    # the prior's nearest marks are 14 px; tracked where its largest mark is 4 px, halving would leave 2 px marks
+    assert pace.halve(LARGE) and pace.halve(LARGE, 12.0) and not pace.halve(LARGE, 4.0)
+
+
+def test_a_marks_radius_where_the_target_is_tracked():
+    from evopose import Camera
+    camera = Camera(fx=2400.0, fy=2400.0, cx=320.0, cy=240.0, width=640, height=480)
+    assert largest_mark_px(camera, np.array([0.0, 0.0, 20.0, 0.0, 0.0, 0.0]), 0.1) == pytest.approx(12.0)
 
 
 def test_one_slow_frame_decides_nothing_and_without_a_period_nothing_is_halved():

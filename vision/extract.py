@@ -30,7 +30,7 @@ from vision.mark_context import resolve_scorers
 from vision.camera_look import LookTracker, estimate_look
 from vision.label_chroma import LabelChromaGate, spot_chroma
 from vision.features import MarkDetections, colour_ranges, detect_colour_marks, detect_corners, x_junctions
-from vision.front_end_pace import FrontEndPace, detect_halved, halved_image
+from vision.front_end_pace import FrontEndPace, detect_halved, halved_image, largest_mark_px
 from vision.mark_scorer import MarkScorer
 from vision.spot_position import SMALL_SPOT_PX
 from vision.window import Window, grown, locate_body, target_window
@@ -141,7 +141,8 @@ def feature_extractor(kind: str, target: TargetModel, area: Bounds | None = None
         # let the pair find the robot (looks-long paper-g2-low-flat-cool: 0 good frames of 40 instead of 12)
         seen = image if followed is None else part
         pace = paces.setdefault(key, FrontEndPace(period_s))
-        halve = pace.halve(prior)
+        halve = pace.halve(prior, None if near is None or camera is None else
+                           largest_mark_px(camera, near, target.mark_radius))
         if tracker.due():   # on the image halved too when the front-end is (a look is the body's colour statistics)
             look = tracker.update(estimate_look(seen, body, prior.extent_px) if not halve else
                                   estimate_look(halved_image(seen), body, prior.extent_px / 2))

@@ -17,6 +17,7 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Callable
 from statistics import median
+from typing import TYPE_CHECKING
 
 import cv2
 import numpy as np
@@ -25,9 +26,12 @@ from .blobs import ContrastMarks
 from .body_paint import LINEAR_OF_BYTE
 from .camera_look import Look, to_reference_look
 from .spot_colour import ring_colours
-from .spot_position import blob_centroids, coverage_centroids
+from .spot_position import SMALL_SPOT_PX, blob_centroids, coverage_centroids
 from .mark_prior import MarkPrior
 from .scale_space import halved
+
+if TYPE_CHECKING:
+    from evopose import Camera
 
 #: Share of the frame period the front-end may take at full resolution before it runs halved.
 FRONT_END_SHARE = 0.6
@@ -53,10 +57,12 @@ class FrontEndPace:
         self.halving = False
         self._recent: list[float] = []
 
-    def halve(self, prior: MarkPrior) -> bool:
+    def halve(self, prior: MarkPrior, mark_px_now: float | None = None) -> bool:
         """Whether this frame's front-end runs on the image halved: the pace says so and the target, seen with
-        ``prior``, is large enough (:func:`vision.scale_space.halved`)."""
-        return bool(self.halving and halved(prior))
+        ``prior``, is large enough (:func:`vision.scale_space.halved`: the prior's nearest marks), and its largest
+        mark where it is tracked now, ``mark_px_now`` (px, :func:`largest_mark_px`; None: not tracked), keeps 3 px
+        and more halved: a target far across a deep operating area is not halved however near it could be."""
+        return bool(self.halving and halved(prior) and (mark_px_now is None or mark_px_now >= 2 * SMALL_SPOT_PX))
 
     def timed(self, seconds: float, was_halved: bool) -> None:
         """A frame's front-end took ``seconds``, ``was_halved`` or at full resolution."""
@@ -72,6 +78,13 @@ class FrontEndPace:
             self.halving, self._recent = True, []
         elif self.halving and typical * FULL_OVER_HALVED < RETURN_SHARE * self.period_s:
             self.halving, self._recent = False, []
+
+
+def largest_mark_px(camera: Camera, pose: np.ndarray, mark_radius: float) -> float:
+    """The radius (px) a mark of ``mark_radius`` (m) has facing ``camera`` at the target's position of ``pose``
+    (``world_from_target`` (6,))."""
+    position = camera.camera_from_world[:3, :3] @ np.asarray(pose, float)[:3] + camera.camera_from_world[:3, 3]
+    return float(max(camera.fx, camera.fy) * mark_radius / max(float(np.linalg.norm(position)), 1e-6))
 
 
 def halved_image(image: np.ndarray) -> np.ndarray:
@@ -124,4 +137,4 @@ def detect_halved(detect: Callable[[np.ndarray, MarkPrior], ContrastMarks], imag
 
 
 __all__ = ["FRONT_END_SHARE", "FULL_OVER_HALVED", "FrontEndPace", "RETURN_SHARE", "detect_halved", "halved_image",
-           "placed_at_full"]
+           "largest_mark_px", "placed_at_full"]
