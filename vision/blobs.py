@@ -59,7 +59,7 @@ from .mark_scorer import MarkScorer, candidate_features
 from .order_stats import median
 from .mark_selection import (densest_cluster, merge_oblique_marks, one_mark_between, one_per_disc, one_scale,
                              same_spots, surrounded)
-from .spot_colour import label_small_spots, labels_of, ring_colours, spot_misfits
+from .spot_colour import label_small_spots, labels_of, ring_colours, spot_colours, spot_misfits
 from .spot_position import SMALL_SPOT_PX, blob_centroids, coverage_centroids, round_peaks
 from .spot_label import label_colours
 from .scale_space import (STEPS_PER_OCTAVE, contrast_responses, crop_margin, magnitude, scale_space_image,
@@ -340,9 +340,7 @@ def _detect(bgr: np.ndarray, lin: np.ndarray, names: tuple[str, ...], palette: M
         pts, radius = 2 * pts + 0.5, 2 * radius
         ys, xs = np.clip(np.rint(pts[:, 1]).astype(int), 0, h - 1), np.clip(np.rint(pts[:, 0]).astype(int), 0, w - 1)
     # colours: the spot (finest blur at the centre) and its ring (median around, outside the mark), linear light
-    spot = np.array([lin[y, x] if r < 1.5 else cv2.GaussianBlur(lin[max(y - 2, 0):y + 3, max(x - 2, 0):x + 3],
-                                                                (0, 0), 0.5 * r)[min(y, 2), min(x, 2)]
-                     for y, x, r in zip(ys.tolist(), xs.tolist(), radius.tolist())]).reshape(-1, 3)
+    spot = spot_colours(lin, xs, ys, radius)
     ring = ring_colours(lin, np.stack([xs, ys], axis=1).astype(float), radius)
     pal = _srgb_to_linear(np.array([palette[n] for n in names], np.float32) / 255.0)
     scene = float(median(lin[::4, ::4].sum(axis=2).reshape(-1)))

@@ -30,7 +30,8 @@ from vision.mark_context import resolve_scorers
 from vision.camera_look import LookTracker, estimate_look
 from vision.label_chroma import LabelChromaGate, spot_chroma
 from vision.features import MarkDetections, colour_ranges, detect_colour_marks, detect_corners, x_junctions
-from vision.front_end_pace import FrontEndPace, detect_halved, halved_image, largest_mark_px
+from vision.front_end_pace import FrontEndPace, detect_halved, largest_mark_px
+from vision.scale_space import halved_image
 from vision.mark_scorer import MarkScorer
 from vision.spot_position import SMALL_SPOT_PX
 from vision.window import Window, grown, locate_body, target_window

@@ -19,16 +19,15 @@ from collections.abc import Callable
 from statistics import median
 from typing import TYPE_CHECKING
 
-import cv2
 import numpy as np
 
 from .blobs import ContrastMarks
 from .body_paint import LINEAR_OF_BYTE
 from .camera_look import Look, to_reference_look
-from .spot_colour import ring_colours
+from .spot_colour import ring_colours, spot_colours
 from .spot_position import SMALL_SPOT_PX, blob_centroids, coverage_centroids
 from .mark_prior import MarkPrior
-from .scale_space import halved
+from .scale_space import halved, halved_image, halved_prior
 
 if TYPE_CHECKING:
     from evopose import Camera
@@ -87,13 +86,6 @@ def largest_mark_px(camera: Camera, pose: np.ndarray, mark_radius: float) -> flo
     return float(max(camera.fx, camera.fy) * mark_radius / max(float(np.linalg.norm(position)), 1e-6))
 
 
-def halved_image(image: np.ndarray) -> np.ndarray:
-    """``image`` (H, W, C) halved: each 2 x 2 block's mean (cv2.INTER_AREA; an odd last row or column dropped), its
-    pixel (u, v) the full image's (2 u + 0.5, 2 v + 0.5)."""
-    h, w = image.shape[:2]
-    return cv2.resize(image[:h // 2 * 2, :w // 2 * 2], (w // 2, h // 2), interpolation=cv2.INTER_AREA)
-
-
 def placed_at_full(image: np.ndarray, look: Look | None, points: np.ndarray, radius: np.ndarray,
                    max_radius: float) -> np.ndarray:
     """Each mark's position (K, 2) taken again on the full image (H, W, 3) uint8, from its position ``points``
@@ -113,9 +105,7 @@ def placed_at_full(image: np.ndarray, look: Look | None, points: np.ndarray, rad
     lin = LINEAR_OF_BYTE[to_reference_look(part, look) if isinstance(look, Look) else part]
     local = points - (x0, y0)
     at = np.clip(np.rint(local).astype(int), 0, [x1 - x0 - 1, y1 - y0 - 1])
-    # the spot's colour as the front-end takes it (vision.blobs: its centre blurred at half its radius)
-    spot = np.array([cv2.GaussianBlur(lin[max(y - 2, 0):y + 3, max(x - 2, 0):x + 3], (0, 0), 0.5 * r)
-                     [min(y, 2), min(x, 2)] for (x, y), r in zip(at.tolist(), radius.tolist())]).reshape(-1, 3)
+    spot = spot_colours(lin, at[:, 0], at[:, 1], radius)   # as the front-end takes it
     ring = ring_colours(lin, local, radius)
     placed = coverage_centroids(lin, local, radius, spot, ring)
     placed, _ = blob_centroids(lin, placed, spot, ring, max(max_radius, float(radius.max())))
@@ -124,17 +114,14 @@ def placed_at_full(image: np.ndarray, look: Look | None, points: np.ndarray, rad
 
 def detect_halved(detect: Callable[[np.ndarray, MarkPrior], ContrastMarks], image: np.ndarray,
                   prior: MarkPrior, look: Look | None = None) -> ContrastMarks:
-    """``detect(image, prior)`` run on ``image`` (H, W, 3) halved (:func:`halved_image`) with the prior's radii and
+    """``detect(image, prior)`` run on ``image`` (H, W, 3) halved (:func:`vision.scale_space.halved_image`) with the prior's radii and
     extent halved; its radii in the full image's pixels and its marks placed at full resolution
     (:func:`placed_at_full`, the camera's ``look`` undone: None, the reference look)."""
-    small = halved_image(image)
-    half = MarkPrior((max(prior.radius_px[0] / 2, 0.5), prior.radius_px[1] / 2),
-                     None if prior.extent_px is None else prior.extent_px / 2)
-    found = detect(small, half)
+    found = detect(halved_image(image), halved_prior(prior))
     radius = found.radius * 2
     points = placed_at_full(image, look, found.points * 2 + 0.5, radius, prior.radius_px[1])
     return dataclasses.replace(found, points=points, radius=radius, areas=np.asarray(found.areas) * 4)
 
 
-__all__ = ["FRONT_END_SHARE", "FULL_OVER_HALVED", "FrontEndPace", "RETURN_SHARE", "detect_halved", "halved_image",
+__all__ = ["FRONT_END_SHARE", "FULL_OVER_HALVED", "FrontEndPace", "RETURN_SHARE", "detect_halved",
            "largest_mark_px", "placed_at_full"]

@@ -52,21 +52,29 @@ def halved(prior: MarkPrior) -> bool:
             and prior.radius_px[1] >= 2 * SMALL_SPOT_PX)
 
 
+def halved_image(image: np.ndarray) -> np.ndarray:
+    """``image`` (H, W) or (H, W, C) halved: each 2 x 2 block's mean (cv2.INTER_AREA; an odd last row or column
+    dropped), its pixel (u, v) the full image's (2 u + 0.5, 2 v + 0.5)."""
+    h, w = image.shape[:2]
+    return cv2.resize(image[:h // 2 * 2, :w // 2 * 2], (w // 2, h // 2), interpolation=cv2.INTER_AREA)
+
+
+def halved_prior(prior: MarkPrior) -> MarkPrior:
+    """``prior`` for the image halved: its radii (at least 0.5 px) and extent halved."""
+    return MarkPrior((max(prior.radius_px[0] / 2, 0.5), prior.radius_px[1] / 2),
+                     None if prior.extent_px is None else prior.extent_px / 2)
+
+
 def scale_space_image(lab: np.ndarray, prior: MarkPrior, region: np.ndarray | None
                       ) -> tuple[np.ndarray, MarkPrior, np.ndarray | None]:
     """The image the scale space is built on, its prior and its region where marks can be (bool (H', W') or None):
     ``lab`` (H, W, 3) float32 itself, ``prior`` and ``region`` (H, W), or all three halved (:func:`halved`; the
-    region where any of a 2 x 2 block's pixels is)."""
+    region where half or more of a 2 x 2 block's pixels are: the uint8 block mean rounds 0.25 to 0)."""
     h, w = lab.shape[:2]
     if not halved(prior) or min(h, w) < 20:
         return lab, prior, region
-    size = (w // 2, h // 2)
-    space = cv2.resize(lab[:h // 2 * 2, :w // 2 * 2], size, interpolation=cv2.INTER_AREA)
-    half = MarkPrior((max(prior.radius_px[0] / 2, 0.5), prior.radius_px[1] / 2), prior.extent_px / 2)
-    if region is not None:
-        region = cv2.resize(region[:h // 2 * 2, :w // 2 * 2].astype(np.uint8), size,
-                            interpolation=cv2.INTER_AREA) > 0
-    return space, half, region
+    return (halved_image(lab), halved_prior(prior),
+            None if region is None else halved_image(region.astype(np.uint8)) > 0)
 
 
 def contrast_responses(lab: np.ndarray, sigmas: np.ndarray) -> np.ndarray:
@@ -100,4 +108,5 @@ def magnitude(dog: np.ndarray) -> np.ndarray:
 
 
 __all__ = ["CHROMA_WEIGHT", "HALVE_FROM_EXTENT_PX", "INCREMENTAL_SIGMA", "MIN_MARGIN_PX", "STEPS_PER_OCTAVE",
-           "contrast_responses", "crop_margin", "halved", "magnitude", "scale_space_image", "scales"]
+           "contrast_responses", "crop_margin", "halved", "halved_image", "halved_prior", "magnitude",
+           "scale_space_image", "scales"]

@@ -70,6 +70,16 @@ def chroma_420(field: np.ndarray, x0: int, y0: int) -> np.ndarray:
     return up[oy:oy + h, ox:ox + w]
 
 
+def spot_colours(image: np.ndarray, xs: np.ndarray, ys: np.ndarray, radius: np.ndarray) -> np.ndarray:
+    """Each spot's own colour (K, C) in ``image`` (H, W, C) at pixels (``xs``, ``ys``) (K,) int: the pixel itself
+    under 1.5 px of ``radius`` (K,), else the centre of its 5 x 5 window blurred at half the radius (the finest blur
+    at the centre: the mark's paint, not its edge's blend)."""
+    return np.array([image[y, x] if r < 1.5 else cv2.GaussianBlur(image[max(y - 2, 0):y + 3, max(x - 2, 0):x + 3],
+                                                                  (0, 0), 0.5 * r)[min(y, 2), min(x, 2)]
+                     for y, x, r in zip(np.asarray(ys).tolist(), np.asarray(xs).tolist(),
+                                        np.asarray(radius).tolist())]).reshape(-1, image.shape[2])
+
+
 def ring_colours(image: np.ndarray, points: np.ndarray, radius: np.ndarray) -> np.ndarray:
     """The median colour (K, C) of each spot's ring in ``image`` (H, W, C), ``radius + 1.5`` to ``radius + 3`` px
     from ``points`` (K, 2): the surroundings a spot is blended with (here in Y Cr Cb; :mod:`vision.blobs` in
@@ -227,4 +237,5 @@ def labels_of(misfit: np.ndarray, explained: np.ndarray, min_explained: float | 
     return np.where(np.isfinite(best) & colour, order[:, 0], -1), confidence
 
 
-__all__ = ["chroma_420", "label_small_spots", "labels_of", "ring_colours", "spot_misfits", "to_ycrcb"]
+__all__ = ["chroma_420", "label_small_spots", "labels_of", "ring_colours", "spot_colours", "spot_misfits",
+           "to_ycrcb"]
