@@ -5,11 +5,12 @@ the front-end runs on the image halved (its paint, look, scale space, colours an
 keeps at full resolution, and returns to full resolution once the halved frames leave room for it.
 
 The rule is a time budget, not a fitted constant: a frame is the image decoded, the marks found, the pose estimated
-(10-20 ms at telephoto) and the result published, so the front-end may take :data:`FRONT_END_SHARE` of the period.
-Halved, the second robot's telephoto worlds change by -3.4..+1.5 points of recall and -3.8..-0.9 of precision an
-image (the marks kept placed at full resolution, :func:`placed_at_full`); a frame later than its tick costs the whole
-frame (the vehicle skips to the newest tick). BENCHMARKS.md, "the second robot at 10 fps, halved when it overruns":
-ticks skipped 12-48 of 40 -> 6-22, good poses per tick 0.43-0.73 -> 0.61-0.83, good frames 90-95 % in every look.
+(10-16 ms at telephoto, the agents' ``timing_s`` "step") and the result published, so the front-end may take
+:data:`FRONT_END_SHARE` of the period. Halved, the second robot's telephoto images give -3.4..+1.5 points of recall
+and -3.8..-0.9 of precision against full resolution (the marks kept placed at full resolution,
+:func:`placed_at_full`); a frame later than its tick costs the whole frame (the vehicle skips to the newest tick).
+On its 20-frame sequence through four looks the pair skips 6-22 ticks of 40 with the pace, 12-48 at full resolution,
+and is good on 90-95 % of frames (BENCHMARKS.md, "the second robot at 10 fps, halved when it overruns").
 State: the recent timings of one camera, one writer (the vehicle's frame loop)."""
 
 from __future__ import annotations
@@ -37,9 +38,9 @@ FRONT_END_SHARE = 0.6
 #: Share of the period under which the halved front-end's time, times :data:`FULL_OVER_HALVED`, returns it to full
 #: resolution (below FRONT_END_SHARE: a front-end near the bar does not switch back and forth).
 RETURN_SHARE = 0.5
-#: How much longer a frame takes at full resolution than halved: 1.6-1.9 on the second robot's five telephoto worlds
-#: (0.152 s against 0.082-0.094 s an image through the named looks, runs of different days; BENCHMARKS.md): the
-#: lower end, so that a front-end returns to full resolution only with room to spare.
+#: How much longer a frame takes at full resolution than halved: 1.65 on the second robot's five telephoto worlds
+#: (0.152 s against 0.092 s an image through the named looks, runs of different days; BENCHMARKS.md, "the second
+#: robot at 10 fps, halved when it overruns"), rounded down so that a front-end returns only with room to spare.
 FULL_OVER_HALVED = 1.6
 #: The timings a decision takes the median of (one slow frame, a page fault or a team-mate's burst, decides nothing).
 RECENT = 3
