@@ -19,8 +19,9 @@ asks for the bars.
 The shipped model is fitted on marks placed at their whole blob's centre (:func:`vision.spot_position.blob_centroids`),
 its two rings (``paint_around``, ``surrounded``) following an oblique mark's blob along its length
 (:mod:`vision.spot_outline`: a ring of the spot's radius crossed a 4:1 mark and read its own colour as no paint), at a
-keep of 0.99 (chosen on development robots; the comparisons above are of earlier fits). On what it never saw
-(BENCHMARKS.md, "context rings along an oblique mark"): the second robot at telephoto recall 0.82-0.96, precision
+keep of 0.99 (chosen on development robots, after the second robot's figures at 0.98 were seen; the comparisons
+above are of earlier fits). On what it was never fitted on (BENCHMARKS.md, "context rings along an oblique mark"):
+the second robot at telephoto recall 0.82-0.96, precision
 0.90-0.98 through the named looks, six random robots outside its fit recall 0.82-0.93, precision 0.82-0.92, the
 Pioneer's benchmark worlds recall 0.94-1.00 / precision 0.90-0.99.
 
