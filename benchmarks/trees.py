@@ -24,9 +24,11 @@ def run_in_tree(tree: Path, script: str, args: list[str], env: dict[str, str] | 
 
 
 def label(tree: Path) -> str:
-    """A tree by its commit (short hash), or its folder's name."""
+    """A tree by its commit (short hash; "+ changes" when tracked files differ from it), or its folder's name."""
     out = subprocess.run(["git", "-C", str(tree), "rev-parse", "--short", "HEAD"], capture_output=True, text=True)
-    return out.stdout.strip() or tree.name
+    changed = subprocess.run(["git", "-C", str(tree), "status", "--porcelain", "--untracked-files=no"],
+                             capture_output=True, text=True).stdout.strip()
+    return (out.stdout.strip() + (" + changes" if changed else "")) or tree.name
 
 
 __all__ = ["label", "run_in_tree"]

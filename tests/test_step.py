@@ -79,6 +79,10 @@ def test_each_share_mode_is_one_policy():
     assert [m for m, p in POLICIES.items() if p.sends_hints and p.takes_hints] == ["hint"]
     features = share_policy("features")   # as many generations as the views' points allow, 1 to 4 (agreeing mates)
     assert [features.generations_per_frame(n) for n in (20, 40, 80, 160, 1000)] == [4, 4, 2, 1, 1]
+    assert [features.generations_per_frame(n, 0.1) for n in (20, 40, 80, 160, 1000)] == [4, 4, 2, 1, 1]
+    # a faster clock, fewer points a frame (a slice keeps its share of the tick); a slower one, more
+    assert [features.generations_per_frame(n, 1 / 30) for n in (20, 30, 40, 160)] == [2, 1, 1, 1]
+    assert [features.generations_per_frame(n, 0.2) for n in (80, 160, 320)] == [4, 2, 1]
     assert share_policy("hint").generations_per_frame(40) is None and share_policy("hint").candidate_margin > 0
     with pytest.raises(ValueError, match="share mode must be one of none, raw, features, hint, got 'x'"):
         share_policy("x")

@@ -35,8 +35,10 @@ from agents.vehicle.team_views import MateView, build_views, encode_image
 #: search from scratch makes 256-1024 fresh starts (SearchOptions.min_starts, _loose; up to 4x on a small problem;
 #: in these slices never fewer, evopose/cooperative.py's Cooperation._optimiser), ~51 a generation: 20-80
 #: generations, which at one a frame outlast a 2 s sequence. Four on two paper-scale views
-#: take 24-36 ms of a 100 ms frame (benchmarks/bench_photoreal_fleet.py, "frame ms").
-POINTS_PER_FRAME, MAX_GENERATIONS_PER_FRAME = 160, 4
+#: take 24-36 ms of a 100 ms frame (benchmarks/bench_photoreal_fleet.py, "frame ms"). POINTS_PER_FRAME is a
+#: frame of REFERENCE_FRAME_PERIOD_S (the paper's ~10 fps); a faster clock allows proportionally fewer points a
+#: frame, so a slice keeps its share of the tick (at 30 fps a third: 1-2 generations).
+POINTS_PER_FRAME, MAX_GENERATIONS_PER_FRAME, REFERENCE_FRAME_PERIOD_S = 160, 4, 0.1
 #: Hint mode: a team-mate's pose whose mismatch on the own views is at most this much higher than the own
 #: best's is taken (the own views cannot tell the two apart; the team-mate sees from elsewhere).
 HINT_MARGIN = 0.1
@@ -79,11 +81,13 @@ class SharePolicy:
     idle_generations: bool
     same_views: bool
 
-    def generations_per_frame(self, points: int) -> int | None:
-        """Generations of a search per frame on views of ``points`` image points in all (None: by time)."""
+    def generations_per_frame(self, points: int, period_s: float | None = None) -> int | None:
+        """Generations of a search per frame on views of ``points`` image points in all, at a frame period of
+        ``period_s`` seconds (None: :data:`REFERENCE_FRAME_PERIOD_S`); None: by time."""
         if not self.same_views:
             return None
-        return int(np.clip(POINTS_PER_FRAME // max(points, 1), 1, MAX_GENERATIONS_PER_FRAME))
+        allowed = POINTS_PER_FRAME * (1.0 if period_s is None else period_s / REFERENCE_FRAME_PERIOD_S)
+        return int(np.clip(allowed // max(points, 1), 1, MAX_GENERATIONS_PER_FRAME))
 
     @property
     def search_share_of_frame(self) -> float:
@@ -239,7 +243,8 @@ def step(state: VehicleState, inputs: FrameInputs) -> tuple[VehicleState, list[M
     estimator, estimate = state.cooperation.estimate(
         state.estimator, views, knowledge=inputs.knowledge, hints=inputs.hints, frame=inputs.index, instant=taken,
         budget_s=inputs.budget_s, candidates=np.array(candidates) if candidates else None, candidate_margin=margin,
-        generations=policy.generations_per_frame(sum(len(view.points) for view in views)), clock=inputs.clock)
+        generations=policy.generations_per_frame(sum(len(view.points) for view in views), state.frame_period_s),
+        clock=inputs.clock)
     seconds = inputs.clock() - t0
     sol = estimate.solution
     # what goes out is the track's fused pose (evopose/pose_filter.py): a good frame that jumped off it is set aside
