@@ -19,6 +19,7 @@ import numpy as np
 
 from geometry import random_rotations, rotation_from_euler
 
+from .kernel_backend import align_positions
 from .neighbours import k_nearest
 from .problem import Bounds, PoseProblem, View
 
@@ -129,11 +130,9 @@ def align_to_view(problem: PoseProblem, view: View, poses: np.ndarray, rng: np.r
     For every individual the visible projected model is shifted onto the robust centre
     of the image points (or of its region, see :func:`image_regions`) and scaled (through
     depth) to their robust spread: a weak-perspective moment match, jittered for
-    diversity. Shapes (n, 6) -> (n, 6).
+    diversity (compiled: :func:`evopose.align_kernel.align_positions`). Shapes (n, 6) -> (n, 6).
     """
-    from .fitness import project_into_view  # local: fitness imports init's siblings only
-
-    cam = view.camera
+    cam, model = view.camera, problem.model
     n = len(poses)
     if regions is None:
         c, sp = _robust_centre_spread(view.points)
@@ -141,33 +140,11 @@ def align_to_view(problem: PoseProblem, view: View, poses: np.ndarray, rng: np.r
     centre_img, spread_img = regions[0], np.maximum(regions[1], 1.0)
     target_centre = centre_img + rng.standard_normal((n, 2)) * shift_jitter * spread_img[:, None]
     target_spread = spread_img * np.exp(scale_jitter * rng.standard_normal(n))
-    centroid_target = problem.model.points.mean(axis=0)
-    R = rotation_from_euler(poses[:, 3:])
-    poses = poses.copy()
-    for _ in range(iterations):
-        proj = project_into_view(problem.model, view, poses)
-        count = proj.usable.sum(axis=1)
-        ok = count >= 2
-        if not np.any(ok):
-            break
-        cu = _masked_median(proj.uv[..., 0], proj.usable, count)
-        cv = _masked_median(proj.uv[..., 1], proj.usable, count)
-        spread = _masked_median(np.hypot(proj.uv[..., 0] - cu[:, None], proj.uv[..., 1] - cv[:, None]),
-                                proj.usable, count)
-        ok &= spread > 0.5
-        c_world = poses[:, :3] + R @ centroid_target
-        c_cam = c_world @ cam.camera_from_world[:3, :3].T + cam.camera_from_world[:3, 3]
-        ok &= c_cam[:, 2] > 0
-        z = np.where(ok, c_cam[:, 2], 1.0)
-        u_c = cam.fx * c_cam[:, 0] / z + cam.cx
-        v_c = cam.fy * c_cam[:, 1] / z + cam.cy
-        new_u = target_centre[:, 0] + (u_c - cu)
-        new_v = target_centre[:, 1] + (v_c - cv)
-        new_z = z * spread / target_spread
-        new_cam = np.stack([(new_u - cam.cx) / cam.fx * new_z, (new_v - cam.cy) / cam.fy * new_z, new_z], axis=1)
-        new_world = new_cam @ cam.world_from_camera[:3, :3].T + cam.world_from_camera[:3, 3]
-        new_t = new_world - R @ centroid_target
-        poses[ok, :3] = new_t[ok]
+    poses = np.array(poses, dtype=float, order="C")
+    with_normals = model.normals is not None
+    align_positions(poses, model.points, model.normals if with_normals else np.zeros((1, 3)), with_normals,
+                    cam.intrinsics, cam.camera_from_world, cam.world_from_camera, model.points.mean(axis=0),
+                    target_centre, target_spread, iterations)
     return poses
 
 

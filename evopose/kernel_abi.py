@@ -1,6 +1,7 @@
 """What the compiled kernels are, without compiling anything: their constants and the types they are called with.
 
-The kernels (:mod:`evopose.projection`, :mod:`evopose.kernels`, :mod:`evopose.refine_kernel`) are numba functions;
+The kernels (:mod:`evopose.projection`, :mod:`evopose.kernels`, :mod:`evopose.refine_kernel`,
+:mod:`evopose.align_kernel`) are numba functions;
 an agent runs them from a module compiled ahead of time (:mod:`evopose.kernel_build`) when one is built and current,
 else through numba's JIT, and :mod:`evopose.kernel_backend` makes that choice (docs/design.md §2, "Compiled kernels").
 This module holds what both sides share and imports neither numba nor a kernel, so that the choice costs nothing:
@@ -43,6 +44,8 @@ EXPORTS: dict[str, tuple[str, str, tuple[str, ...]]] = {
                         (_F2, _F2, _F1, _B2, _F1, _F1, _F1)),
     "nearest_row": ("evopose.kernels", "none", (_F1, _F1, _F1, _B1, _F1, _F1, _F1, "b1", _I1, _F1, _I1, _F1)),
     "nearest_sorted": ("evopose.kernels", f"Tuple(({_F1}, {_I1}, {_B1}))", (_F2, _F2, _I1, "b1")),
+    "align_positions": ("evopose.align_kernel", "none",
+                        (_F2, _F2, _F2, "b1", _F1, _F2, _F2, _F1, _F2, _F1, "i8")),
     "refine_population": ("evopose.refine_kernel", "none",
                           (_F2, _F1, _F1, _F1, _B1, _B1, _F2, _F2, "b1", _F2, _F3, _F1, _F1, _F2, _F2, _F1, _F2, _I1,
                            "i8", _I1, _F1, "f8", "f8")),
@@ -57,6 +60,7 @@ AOT_MODULES: dict[str, tuple[str, ...]] = {
 #: Arguments written in place, by kernel (positions in :data:`EXPORTS`' argument types).
 WRITTEN: dict[str, tuple[int, ...]] = {
     "project_pose": (6, 7, 8, 9, 10),
+    "align_positions": (0,),
     "nearest_row": (8, 9, 10, 11),
     "refine_population": (0, 1),
 }
@@ -64,4 +68,4 @@ WRITTEN: dict[str, tuple[int, ...]] = {
 #: The project's files whose text is the compiled code (relative to the repository root), this one included: its
 #: constants are compiled in. A built module carries a key made from them (:func:`evopose.kernel_backend.build_key`).
 SOURCES = ("geometry/__init__.py", "evopose/kernel_abi.py", "evopose/kernel_build.py", "evopose/projection.py",
-           "evopose/kernels.py", "evopose/refine_kernel.py")
+           "evopose/kernels.py", "evopose/refine_kernel.py", "evopose/align_kernel.py")

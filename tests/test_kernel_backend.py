@@ -104,7 +104,8 @@ def jit_as_cached():
     running process can differ from the code it caches in the last bits of a result (its in-process code is
     linked and inlined otherwise); the cached code is what the compiled module's is. So the kernels' modules are
     imported afresh, their dispatchers then load what this process (or an earlier one) compiled and cached."""
-    for name in ("evopose.projection", "evopose.kernels", "evopose.refine_kernel"):  # callees first
+    callees_first = ("evopose.projection", "evopose.kernels", "evopose.refine_kernel", "evopose.align_kernel")
+    for name in callees_first:
         importlib.reload(importlib.import_module(name))
     return kernel_backend.load_jit()
 
