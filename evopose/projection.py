@@ -98,6 +98,85 @@ def project_pose(s, model, normals, use_normals, intr, cfw, u, v, usable, R, Rc)
 
 
 @nb.njit(cache=True, fastmath=FASTMATH, nogil=True)
+def pinhole_derivatives(X, Y, Z, intr):  # pragma: no cover - compiled
+    """The derivatives of :func:`pinhole`'s pixel ``(u, v)`` by the optical-frame point: ``(du/dX, du/dY, du/dZ,
+    dv/dX, dv/dY, dv/dZ)``, distortion included (``Z`` > :data:`MIN_DEPTH`)."""
+    iz = 1.0 / Z
+    x = X * iz
+    y = Y * iz
+    # d(xd, yd) / d(x, y): the identity without distortion
+    a, b, c, d = 1.0, 0.0, 0.0, 1.0
+    k1, k2, p1, p2, k3 = intr[4], intr[5], intr[6], intr[7], intr[8]
+    if k1 != 0.0 or k2 != 0.0 or p1 != 0.0 or p2 != 0.0 or k3 != 0.0:
+        r2 = x * x + y * y
+        radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
+        slope = k1 + r2 * (2.0 * k2 + 3.0 * k3 * r2)   # d radial / d r2
+        a = radial + 2.0 * x * x * slope + 2.0 * p1 * y + 6.0 * p2 * x
+        b = 2.0 * x * y * slope + 2.0 * p1 * x + 2.0 * p2 * y
+        c = b
+        d = radial + 2.0 * y * y * slope + 6.0 * p1 * y + 2.0 * p2 * x
+    fx, fy = intr[0], intr[1]
+    # (x, y) by (X, Y, Z): (1/Z, 0, -x/Z) and (0, 1/Z, -y/Z)
+    return (fx * a * iz, fx * b * iz, -fx * (a * x + b * y) * iz,
+            fy * c * iz, fy * d * iz, -fy * (c * x + d * y) * iz)
+
+
+@nb.njit(cache=True, fastmath=FASTMATH, nogil=True)
+def pose_jacobian(s, model, intr, cfw, usable, free, J):  # pragma: no cover - compiled
+    """The derivatives of every usable model point's pixel by the pose ``s`` (6,): ``J`` (M, 2, 6) = d(u, v) / d s,
+    zero for a parameter not ``free`` (6,) and for a point not ``usable`` (M,) (:func:`project_pose`'s flags).
+    Analytic: ``X = C R(s) p + C t + c`` (``C``, ``c`` the camera's rotation and origin), so d X / d t is a column of
+    ``C`` and d X / d angle is ``C (d R / d angle) p``, each then through :func:`pinhole_derivatives`."""
+    cr, sr = np.cos(s[3]), np.sin(s[3])
+    cp, sp = np.cos(s[4]), np.sin(s[4])
+    cy, sy = np.cos(s[5]), np.sin(s[5])
+    # R = Rz(yaw) Ry(pitch) Rx(roll) (geometry.rotation_entries) and its derivative by each angle, row-major
+    rot = (cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr,
+           sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr,
+           -sp, cp * sr, cp * cr)
+    d_roll = (0.0, cy * sp * cr + sy * sr, -cy * sp * sr + sy * cr,
+              0.0, sy * sp * cr - cy * sr, -sy * sp * sr - cy * cr,
+              0.0, cp * cr, -cp * sr)
+    d_pitch = (-cy * sp, cy * cp * sr, cy * cp * cr,
+               -sy * sp, sy * cp * sr, sy * cp * cr,
+               -cp, -sp * sr, -sp * cr)
+    d_yaw = (-sy * cp, -sy * sp * sr - cy * cr, -sy * sp * cr + cy * sr,
+             cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr,
+             0.0, 0.0, 0.0)
+    t0 = cfw[0, 0] * s[0] + cfw[0, 1] * s[1] + cfw[0, 2] * s[2] + cfw[0, 3]
+    t1 = cfw[1, 0] * s[0] + cfw[1, 1] * s[1] + cfw[1, 2] * s[2] + cfw[1, 3]
+    t2 = cfw[2, 0] * s[0] + cfw[2, 1] * s[1] + cfw[2, 2] * s[2] + cfw[2, 3]
+    dw = np.empty((4, 3))   # d (world point - position) / d (nothing, roll, pitch, yaw) per point: R p, R' p
+    for m in range(model.shape[0]):
+        for d in range(6):
+            J[m, 0, d] = 0.0
+            J[m, 1, d] = 0.0
+        if not usable[m]:
+            continue
+        px, py, pz = model[m, 0], model[m, 1], model[m, 2]
+        for k, e in enumerate((rot, d_roll, d_pitch, d_yaw)):
+            dw[k, 0] = e[0] * px + e[1] * py + e[2] * pz
+            dw[k, 1] = e[3] * px + e[4] * py + e[5] * pz
+            dw[k, 2] = e[6] * px + e[7] * py + e[8] * pz
+        X = cfw[0, 0] * dw[0, 0] + cfw[0, 1] * dw[0, 1] + cfw[0, 2] * dw[0, 2] + t0
+        Y = cfw[1, 0] * dw[0, 0] + cfw[1, 1] * dw[0, 1] + cfw[1, 2] * dw[0, 2] + t1
+        Z = cfw[2, 0] * dw[0, 0] + cfw[2, 1] * dw[0, 1] + cfw[2, 2] * dw[0, 2] + t2
+        ux, uy, uz, vx, vy, vz = pinhole_derivatives(X, Y, Z, intr)
+        for d in range(6):
+            if not free[d]:
+                continue
+            if d < 3:   # d X / d position: column d of the camera's rotation
+                gx, gy, gz = cfw[0, d], cfw[1, d], cfw[2, d]
+            else:
+                k = d - 2
+                gx = cfw[0, 0] * dw[k, 0] + cfw[0, 1] * dw[k, 1] + cfw[0, 2] * dw[k, 2]
+                gy = cfw[1, 0] * dw[k, 0] + cfw[1, 1] * dw[k, 1] + cfw[1, 2] * dw[k, 2]
+                gz = cfw[2, 0] * dw[k, 0] + cfw[2, 1] * dw[k, 1] + cfw[2, 2] * dw[k, 2]
+            J[m, 0, d] = ux * gx + uy * gy + uz * gz
+            J[m, 1, d] = vx * gx + vy * gy + vz * gz
+
+
+@nb.njit(cache=True, fastmath=FASTMATH, nogil=True)
 def project_poses(poses, model, normals, use_normals, intr, cfw):  # pragma: no cover - compiled
     """Project the model (M, 3) under every pose (N, 6): ``u``, ``v`` (N, M) pixels and ``usable`` (N, M)."""
     N = poses.shape[0]

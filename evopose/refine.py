@@ -93,7 +93,8 @@ def refine(objective: PoseObjective, poses: np.ndarray, fitness: np.ndarray | No
                       np.array(objective.weights, dtype=float), np.array(objective.taus, dtype=float),
                       sigmas, packed.pts, packed.pz, packed.mz, packed.offsets, objective.mode, kinds, values,
                       SOFT_OUTLIER, damping)
-    # count every projection of the model as an evaluation: 7 per step (pose + 6 Jacobian columns),
+    # count every projection of the model as an evaluation: 7 per step (pose + 6 Jacobian columns: analytic, counted
+    # as the finite differences they replaced, so that budgets compare across versions),
     # one fitness per hard step, and the fitness before the first hard step and at the end
     n_hard = int(np.count_nonzero(kinds == STEP_KINDS["hard"]))
     objective.counter.add(len(poses) * (7 * len(kinds) + n_hard + 2))

@@ -1,7 +1,7 @@
 """Compiled local refinement: the whole annealing schedule of every individual in one call.
 
 Per individual and step: project the model into every weighted view (pinhole +
-plumb_bob, finite-difference Jacobian), accumulate Gauss–Newton normal equations from
+plumb_bob, its analytic Jacobian), accumulate Gauss–Newton normal equations from
 soft (EM-ICP) or hard (nearest-neighbour) matches, take a damped step, hold fixed
 parameters, and bring the pose back into the search box. Hard steps are accepted only
 when the fitness drops. The projection (:mod:`evopose.projection`), the view terms and the
@@ -21,10 +21,9 @@ import numpy as np
 from .kernel_abi import FASTMATH as _FASTMATH
 from .kernel_abi import MUTUAL
 from .kernels import is_typed, nearest_row, view_term_row
-from .projection import project_pose
+from .projection import pose_jacobian, project_pose
 
 _TWO_PI = 2.0 * np.pi
-_FD = np.array([1e-5, 1e-5, 1e-5, 1e-6, 1e-6, 1e-6])
 
 
 @nb.njit(cache=True, fastmath=_FASTMATH, nogil=True)
@@ -249,10 +248,7 @@ def refine_population(poses, fitness, lo, hi, periodic, free, model, normals, us
         typed[k] = is_typed(mz[k], pz[offsets[k]:offsets[k + 1]])
     u = np.empty(M)
     v = np.empty(M)
-    u_d = np.empty(M)
-    v_d = np.empty(M)
     usable = np.empty(M, np.bool_)
-    usable_d = np.empty(M, np.bool_)
     J = np.empty((M, 2, 6))
     w_pair = np.empty((M, P_max))
     row = np.empty(P_max)
@@ -283,19 +279,7 @@ def refine_population(poses, fitness, lo, hi, periodic, free, model, normals, us
                 if weights[k] == 0.0:
                     continue
                 project_pose(s, model, normals, use_normals, intr[k], cfw[k], u, v, usable, R, Rc)
-                for d in range(6):
-                    if not step_free[d]:
-                        for m in range(M):
-                            J[m, 0, d] = 0.0
-                            J[m, 1, d] = 0.0
-                        continue
-                    for e in range(6):
-                        s_try[e] = s[e]
-                    s_try[d] += _FD[d]
-                    project_pose(s_try, model, normals, use_normals, intr[k], cfw[k], u_d, v_d, usable_d, R, Rc)
-                    for m in range(M):
-                        J[m, 0, d] = (u_d[m] - u[m]) / _FD[d]
-                        J[m, 1, d] = (v_d[m] - v[m]) / _FD[d]
+                pose_jacobian(s, model, intr[k], cfw[k], usable, step_free, J)
                 a, b = offsets[k], offsets[k + 1]
                 px = pts[a:b, 0]
                 py = pts[a:b, 1]

@@ -263,3 +263,39 @@ def test_the_refinements_own_solve_matches_lapack_and_gives_a_zero_for_a_zero_pi
     singular = np.diag([2.0, 0.0, 1.0, 1.0, 1.0, 1.0])
     got = solve(singular.copy(), np.ones(6))
     assert np.isfinite(got).all() and got[1] == 0.0 and got[0] == 0.5
+
+
+@pytest.mark.parametrize("distortion", [(0.0,) * 5, (-0.2, 0.05, 1e-3, -2e-3, 0.01)], ids=["pinhole", "plumb_bob"])
+def test_the_refinements_jacobian_is_the_projections_derivative(distortion):
+    """The refinement's analytic Jacobian (evopose.projection.pose_jacobian) against central differences of the
+    projection itself, every usable point and parameter; a parameter held fixed and an unusable point get zero."""
+    from evopose import projection as kernels   # the numba functions themselves (the refinement's callees)
+
+    rng = np.random.default_rng(11)
+    intr = np.array([800.0, 790.0, 320.0, 240.0, *distortion])
+    cfw = np.eye(4)
+    cfw[:3, :3] = rotation_from_euler(np.array([2.5, 0.1, -0.3]))
+    cfw[:3, 3] = [0.3, -0.2, 12.0]
+    model = rng.normal(scale=0.4, size=(30, 3))
+    normals = model / np.linalg.norm(model, axis=1, keepdims=True)
+    u, v, usable = np.empty(30), np.empty(30), np.empty(30, bool)
+    r, rc = np.empty((3, 3)), np.empty((3, 3))
+    for _ in range(5):
+        s = np.concatenate([rng.normal(scale=0.5, size=3), rng.uniform(-np.pi, np.pi, 3)])
+        kernels.project_pose(s, model, normals, True, intr, cfw, u, v, usable, r, rc)
+        assert 5 < usable.sum() < 30   # some points face away: their rows must be zero
+        free = np.array([True, True, False, True, True, True])
+        J = np.full((30, 2, 6), np.nan)
+        kernels.pose_jacobian(s, model, intr, cfw, usable, free, J)
+        numeric = np.zeros((30, 2, 6))
+        for d in np.flatnonzero(free):
+            h = 1e-6
+            up, vp, um, vm = (np.empty(30) for _ in range(4))
+            sp, sm = s.copy(), s.copy()
+            sp[d] += h
+            sm[d] -= h
+            kernels.project_pose(sp, model, normals, True, intr, cfw, up, vp, np.empty(30, bool), r, rc)
+            kernels.project_pose(sm, model, normals, True, intr, cfw, um, vm, np.empty(30, bool), r, rc)
+            numeric[:, 0, d], numeric[:, 1, d] = (up - um) / (2 * h), (vp - vm) / (2 * h)
+        np.testing.assert_allclose(J[usable], numeric[usable], rtol=1e-5, atol=1e-4)
+        assert not J[~usable].any() and not J[:, :, 2].any()
