@@ -13,13 +13,15 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
-from geometry import rotation_entries
+from geometry import rotation_entries, rotation_entry_derivatives
 
 from .kernel_abi import FAR_AWAY_PX, FASTMATH, MIN_DEPTH
 
 
 #: ``R = Rz(yaw) Ry(pitch) Rx(roll)`` as nine scalars: the one convention (:func:`geometry.rotation_entries`), compiled.
 _rotation_entries = nb.njit(cache=True, fastmath=FASTMATH, nogil=True)(rotation_entries)
+#: ... and its derivatives by the three angles (:func:`geometry.rotation_entry_derivatives`), compiled.
+_rotation_entry_derivatives = nb.njit(cache=True, fastmath=FASTMATH, nogil=True)(rotation_entry_derivatives)
 
 
 @nb.njit(cache=True, fastmath=FASTMATH, nogil=True)
@@ -127,22 +129,9 @@ def pose_jacobian(s, model, intr, cfw, usable, free, J):  # pragma: no cover - c
     zero for a parameter not ``free`` (6,) and for a point not ``usable`` (M,) (:func:`project_pose`'s flags).
     Analytic: ``X = C R(s) p + C t + c`` (``C``, ``c`` the camera's rotation and origin), so d X / d t is a column of
     ``C`` and d X / d angle is ``C (d R / d angle) p``, each then through :func:`pinhole_derivatives`."""
-    cr, sr = np.cos(s[3]), np.sin(s[3])
-    cp, sp = np.cos(s[4]), np.sin(s[4])
-    cy, sy = np.cos(s[5]), np.sin(s[5])
-    # R = Rz(yaw) Ry(pitch) Rx(roll) (geometry.rotation_entries) and its derivative by each angle, row-major
-    rot = (cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr,
-           sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr,
-           -sp, cp * sr, cp * cr)
-    d_roll = (0.0, cy * sp * cr + sy * sr, -cy * sp * sr + sy * cr,
-              0.0, sy * sp * cr - cy * sr, -sy * sp * sr - cy * cr,
-              0.0, cp * cr, -cp * sr)
-    d_pitch = (-cy * sp, cy * cp * sr, cy * cp * cr,
-               -sy * sp, sy * cp * sr, sy * cp * cr,
-               -cp, -sp * sr, -sp * cr)
-    d_yaw = (-sy * cp, -sy * sp * sr - cy * cr, -sy * sp * cr + cy * sr,
-             cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr,
-             0.0, 0.0, 0.0)
+    # R (geometry.rotation_entries) and its derivative by each angle, row-major
+    rot = _rotation_entries(s[3], s[4], s[5])
+    d_roll, d_pitch, d_yaw = _rotation_entry_derivatives(s[3], s[4], s[5])
     t0 = cfw[0, 0] * s[0] + cfw[0, 1] * s[1] + cfw[0, 2] * s[2] + cfw[0, 3]
     t1 = cfw[1, 0] * s[0] + cfw[1, 1] * s[1] + cfw[1, 2] * s[2] + cfw[1, 3]
     t2 = cfw[2, 0] * s[0] + cfw[2, 1] * s[1] + cfw[2, 2] * s[2] + cfw[2, 3]

@@ -31,6 +31,27 @@ def rotation_entries(roll, pitch, yaw):
             -sp, cp * sr, cp * cr)
 
 
+def rotation_entry_derivatives(roll, pitch, yaw):
+    """The entries of ``d R / d roll``, ``d R / d pitch`` and ``d R / d yaw`` of :func:`rotation_entries`'s ``R``: three
+    tuples of nine, row-major, for scalars or arrays of one shape (constant zeros as 0.0).
+
+    Plain numpy on purpose: :mod:`evopose.projection` compiles this very function with numba (the refinement's
+    analytic Jacobian)."""
+    cr, sr = np.cos(roll), np.sin(roll)
+    cp, sp = np.cos(pitch), np.sin(pitch)
+    cy, sy = np.cos(yaw), np.sin(yaw)
+    d_roll = (0.0, cy * sp * cr + sy * sr, sy * cr - cy * sp * sr,
+              0.0, sy * sp * cr - cy * sr, -sy * sp * sr - cy * cr,
+              0.0, cp * cr, -cp * sr)
+    d_pitch = (-cy * sp, cy * cp * sr, cy * cp * cr,
+               -sy * sp, sy * cp * sr, sy * cp * cr,
+               -cp, -sp * sr, -sp * cr)
+    d_yaw = (-sy * cp, -(sy * sp * sr + cy * cr), cy * sr - sy * sp * cr,
+             cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr,
+             0.0, 0.0, 0.0)
+    return d_roll, d_pitch, d_yaw
+
+
 def rotation_from_euler(rpy: np.ndarray) -> np.ndarray:
     """Rotation matrices ``Rz(yaw) Ry(pitch) Rx(roll)``: rpy (..., 3) radians -> (..., 3, 3)."""
     rpy = np.asarray(rpy, dtype=float)
@@ -257,5 +278,5 @@ def random_rotations(n: int, rng: np.random.Generator) -> np.ndarray:
 __all__ = ["ANGLE_PARAMS", "PARAM_NAMES", "angle_difference", "canonical_pose", "euler_from_quaternion",
            "euler_from_rotation", "invert_transform", "matrix_from_pose", "pose_difference", "pose_error",
            "pose_from_matrix", "quaternion_from_euler", "quaternion_from_rotation", "random_rotations",
-           "rotation_angle", "rotation_entries", "rotation_error", "rotation_from_euler", "rotation_from_quaternion",
-           "rotation_from_rotvec", "rotvec_from_rotation", "wrap_angle"]
+           "rotation_angle", "rotation_entries", "rotation_entry_derivatives", "rotation_error", "rotation_from_euler",
+           "rotation_from_quaternion", "rotation_from_rotvec", "rotvec_from_rotation", "wrap_angle"]

@@ -56,6 +56,22 @@ def test_rotation_from_euler_matches_scipy_xyz():
     np.testing.assert_allclose(rotation_from_euler(rpy), expected, atol=1e-14)
 
 
+def test_the_rotation_entries_derivatives_are_the_rotations_derivatives():
+    """geometry.rotation_entry_derivatives (the refinement's analytic Jacobian) against central differences of
+    rotation_from_euler, at random attitudes and at pitch +-90 deg."""
+    from geometry import rotation_entry_derivatives
+
+    rng = np.random.default_rng(2)
+    angles = [*rng.uniform(-np.pi, np.pi, (6, 3)), np.array([0.4, np.pi / 2, -1.0]), np.array([0.4, -np.pi / 2, 1.0])]
+    for rpy in angles:
+        got = [np.reshape(np.array(d, float), (3, 3)) for d in rotation_entry_derivatives(*rpy)]
+        for axis in range(3):
+            h = np.zeros(3)
+            h[axis] = 1e-6
+            numeric = (rotation_from_euler(rpy + h) - rotation_from_euler(rpy - h)) / 2e-6
+            np.testing.assert_allclose(got[axis], numeric, atol=1e-9)
+
+
 def test_rotation_from_euler_is_rz_ry_rx():
     roll, pitch, yaw = 0.3, -0.7, 2.1
 
