@@ -96,7 +96,7 @@ LAST_BITS = 1e-12
 #: The refinement's poses, whose finite-difference Jacobian (steps of 1e-5, 1e-6) makes the last bit of a
 #: projection 1e-9 of a step, and whose accepted or rejected steps can then differ for an individual: the search's
 #: answer is compared (below), each individual's only loosely.
-REFINED = 1e-3
+REFINED = 1e-11
 
 
 def jit_as_cached():
