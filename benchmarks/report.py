@@ -23,7 +23,7 @@ ORDER = ("solvers", "solver_regression", "softposit", "solver_phases", "confiden
          "photoreal_features_opencv_camera", "photoreal_features_train",
          "photoreal_fleet", "photoreal_fleet_long", "photoreal_fleet_paper_long", "photoreal_tracking",
          "photoreal_encoding", "photoreal_looks", "photoreal_looks_husky", "photoreal_looks_bodies_telephoto", "photoreal_looks_context",
-         "photoreal_looks_halved", "photoreal_looks_lit_share", "photoreal_looks_lightness", "photoreal_looks_clipped", "photoreal_looks_random_side", "photoreal_looks_edge", "photoreal_looks_stride",
+         "photoreal_looks_halved", "photoreal_looks_dark_paint", "photoreal_looks_lit_share", "photoreal_looks_lightness", "photoreal_looks_clipped", "photoreal_looks_random_side", "photoreal_looks_edge", "photoreal_looks_stride",
          "photoreal_looks_weighed_misfit",
          "photoreal_looks_train_telephoto",
          "photoreal_fleet_looks",
@@ -74,6 +74,8 @@ TITLES = {
                                   "through camera looks",
     "photoreal_looks_weighed_misfit": "Mark front-ends through camera looks: a label's misfit weighed by the context "
                                       "model, side by side",
+    "photoreal_looks_dark_paint": "Mark front-ends through camera looks: a dark paint's fit against its ring's light, "
+                                  "side by side",
     "photoreal_looks_lit_share": "Mark front-ends through camera looks: the lit-paint share 0.45 against 0.35, side "
                                  "by side",
     "photoreal_looks_lightness": "Mark front-ends through camera looks: a spot's lightness against its ring, side by "
