@@ -7,7 +7,7 @@ spread (the lower median distance to that centre) over the target spread; ``iter
 moves. A pose with fewer than two usable points, a spread of half a pixel or less, or its centroid behind the camera
 is left where it is. The arithmetic is that of the NumPy formulation it replaced (tests/test_align_kernel.py holds it
 as the reference); a search makes 400-800 starts a generation, and array operations on them cost more than their
-arithmetic (1.9 ms a generation against ~0.2 ms compiled).
+arithmetic (1.9 ms a generation against 0.6 ms compiled, BENCHMARKS.md "Where a solve's time goes").
 
 Array conventions as :mod:`evopose.projection`'s; ``wfc`` (4, 4) is ``world_from_camera`` (the inverse of ``cfw``).
 """
