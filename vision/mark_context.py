@@ -21,9 +21,10 @@ its two rings (``paint_around``, ``surrounded``) following an oblique mark's blo
 (:mod:`vision.spot_outline`: a ring of the spot's radius crossed a 4:1 mark and read its own colour as no paint), at a
 keep of 0.99 (chosen on development robots, after the second robot's figures at 0.98 were seen; the comparisons
 above are of earlier fits). On what it was never fitted on (BENCHMARKS.md, "context rings along an oblique mark"):
-the second robot at telephoto recall 0.82-0.96, precision
-0.90-0.98 through the named looks, six random robots outside its fit recall 0.82-0.93, precision 0.82-0.92, the
-Pioneer's benchmark worlds recall 0.94-1.00 / precision 0.90-0.99.
+the second robot at telephoto recall 0.82-0.96, precision 0.90-0.98 through the named looks (0.87-0.96 with the label
+rules chosen since on its worlds through corner looks: BENCHMARKS.md, "the lit-paint share", "a dark paint's fit"),
+six random robots outside its fit recall 0.82-0.93, precision 0.82-0.92, the Pioneer's benchmark worlds recall
+0.94-1.00 / precision 0.90-0.99.
 
 Every measure is relative to the spot itself, to the others of its image or to the target's extent, never a
 colour: one model serves any robot and palette. Shapes: points (K, 2) pixels ``(u, v)``, per-spot arrays (K,).
