@@ -116,8 +116,8 @@ def placed_at_full(image: np.ndarray, look: Look | None, points: np.ndarray, rad
 
 def detect_halved(detect: Callable[[np.ndarray, MarkPrior], ContrastMarks], image: np.ndarray,
                   prior: MarkPrior, look: Look | None = None) -> ContrastMarks:
-    """``detect(image, prior)`` run on ``image`` (H, W, 3) halved (:func:`vision.scale_space.halved_image`) with the prior's radii and
-    extent halved; its radii in the full image's pixels and its marks placed at full resolution
+    """``detect(image, prior)`` run on ``image`` (H, W, 3) halved (:func:`vision.scale_space.halved_image`) with
+    the prior's radii and extent halved; its radii in the full image's pixels and its marks placed at full resolution
     (:func:`placed_at_full`, the camera's ``look`` undone: None, the reference look)."""
     found = detect(halved_image(image), halved_prior(prior))
     radius = found.radius * 2
