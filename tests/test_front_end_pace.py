@@ -24,27 +24,42 @@ LARGE = MarkPrior((3.0, 14.0), 480.0)   # the second robot at telephoto: its sca
 SMALL = MarkPrior((2.5, 12.0), 210.0)   # the Pioneer at telephoto: never halved
 
 
-def test_frames_over_the_share_of_the_period_halve_a_large_target_and_room_to_spare_returns_it():
+def _at_full(period_s: float = 0.1) -> FrontEndPace:
+    """A pace whose halved frames left room for full resolution: at full resolution."""
+    pace = FrontEndPace(period_s)
+    for _ in range(RECENT):
+        pace.timed(RETURN_SHARE * period_s / FULL_OVER_HALVED * 0.8, True)
+    assert not pace.halve(LARGE)
+    return pace
+
+
+def test_a_camera_with_a_clock_starts_halved_and_halved_frames_with_room_to_spare_return_it():
     pace = FrontEndPace(0.1)
+    assert pace.halve(LARGE) and not pace.halve(SMALL)   # its first frames, from scratch, are its slowest
+    for _ in range(RECENT - 1):
+        pace.timed(RETURN_SHARE * 0.1 / FULL_OVER_HALVED * 0.8, True)
+        assert pace.halve(LARGE)                     # a decision takes RECENT frames
+    pace.timed(RETURN_SHARE * 0.1 / FULL_OVER_HALVED * 0.8, True)
+    assert not pace.halve(LARGE)
+    # halved frames whose full-resolution time would still overrun the return bar: halved on
+    pace = FrontEndPace(0.1)
+    for _ in range(2 * RECENT):
+        pace.timed(RETURN_SHARE * 0.1 / FULL_OVER_HALVED * 1.2, True)
+    assert pace.halve(LARGE)
+
+
+def test_frames_over_the_share_of_the_period_halve_a_large_target():
+    pace = _at_full()
     over = FRONT_END_SHARE * 0.1 * 1.2
     for _ in range(RECENT - 1):
         pace.timed(over, False)
         assert not pace.halve(LARGE)                 # a decision takes RECENT frames
     pace.timed(over, False)
     assert pace.halve(LARGE) and not pace.halve(SMALL)
-    # halved frames whose full-resolution time would still overrun the return bar: halved on
-    for _ in range(RECENT):
-        pace.timed(RETURN_SHARE * 0.1 / FULL_OVER_HALVED * 1.2, True)
-    assert pace.halve(LARGE)
-    for _ in range(RECENT):
-        pace.timed(RETURN_SHARE * 0.1 / FULL_OVER_HALVED * 0.8, True)
-    assert not pace.halve(LARGE)
 
 
 def test_a_target_tracked_far_across_a_deep_area_is_not_halved_however_near_it_could_be():
     pace = FrontEndPace(0.1)
-    for _ in range(RECENT):
-        pace.timed(1.0, False)
     # the prior's nearest marks are 14 px; tracked where its largest mark is 4 px, halving would leave 2 px marks
     assert pace.halve(LARGE) and pace.halve(LARGE, 12.0) and not pace.halve(LARGE, 4.0)
 
@@ -56,7 +71,7 @@ def test_a_marks_radius_where_the_target_is_tracked():
 
 
 def test_one_slow_frame_decides_nothing_and_without_a_period_nothing_is_halved():
-    pace = FrontEndPace(0.1)
+    pace = _at_full()
     for seconds in (0.03, 0.5, 0.03, 0.03):
         pace.timed(seconds, False)
     assert not pace.halve(LARGE)
@@ -106,8 +121,8 @@ def _run(name: str, period_s: float, rounds: int = 3) -> tuple[list[np.ndarray],
 
 
 def test_an_overrunning_front_end_finds_the_second_robots_marks_on_the_image_halved():
-    # a period no frame can keep: every frame after the first RECENT runs halved (the second robot is 456-500 px
-    # across); a period every frame keeps: full resolution throughout
+    # a period no frame can keep: every frame runs halved (the second robot is 456-500 px across); a period every
+    # frame keeps: full resolution after the first RECENT frames (halved, as every camera with a clock starts)
     halved_points, halved_recall = _run("husky-telephoto", 1e-9)
     full_points, full_recall = _run("husky-telephoto", 1e9)
     assert any(len(a) != len(b) or not np.array_equal(a, b) for a, b in zip(halved_points, full_points))
@@ -149,9 +164,10 @@ def _agent_frames(world: str, frames: int) -> tuple[list[dict], dict]:
 def test_an_agent_that_overruns_its_clock_on_a_large_target_halves_and_says_so_and_stays_right():
     frames, summary = _agent_frames("exp2-photoreal-telephoto-husky", 7)
     assert len(frames) == 7
-    # the first RECENT frames at full resolution are timed; every later one runs halved, and its JSON line says so
-    assert [r.get("front_end") for r in frames] == [None] * RECENT + ["halved"] * (7 - RECENT)
-    assert summary["halved_frames"] == 7 - RECENT
+    # it starts halved and its halved frames leave no room for full resolution: every frame halved, each JSON line
+    # says so
+    assert [r.get("front_end") for r in frames] == ["halved"] * 7
+    assert summary["halved_frames"] == 7
     for r in frames:   # halved or not, every published pose within 5 cm and 1 deg of the truth (measured <= 1.8 cm)
         error = r["error"]
         assert error["position"] <= 0.05 and max(error[a] for a in ("roll", "pitch", "yaw")) <= 1.0, r["error"]
@@ -162,7 +178,4 @@ def test_an_agent_that_overruns_its_clock_on_a_large_target_halves_and_says_so_a
 
 def test_the_pace_answers_a_plain_bool_for_a_prior_of_numpy_numbers():
     # a dataset's camera gives numpy floats: the answer goes into an agent's JSON summary (json cannot write np.bool_)
-    pace = FrontEndPace(0.1)
-    for _ in range(RECENT):
-        pace.timed(1.0, False)
-    assert type(pace.halve(MarkPrior((np.float64(2.5), np.float64(12.0)), np.float64(210.0)))) is bool
+    assert type(FrontEndPace(0.1).halve(MarkPrior((np.float64(2.5), np.float64(12.0)), np.float64(210.0)))) is bool

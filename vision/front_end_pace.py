@@ -2,7 +2,9 @@
 that its scale space is built halved anyway (:func:`vision.scale_space.halved`: 400 px across and more, the second
 robot at telephoto), and the front-end at full resolution takes more of the frame period than a frame can give it,
 the front-end runs on the image halved (its paint, look, scale space, colours and context) and places the marks it
-keeps at full resolution, and returns to full resolution once the halved frames leave room for it.
+keeps at full resolution, and returns to full resolution once the halved frames leave room for it. A camera with a
+clock starts halved: its first frames, with no pose to look near and a search from scratch, are its slowest (163-312
+ms a frame of the second robot's pair at full resolution), and its halved frames say whether full resolution fits.
 
 The rule is a time budget, not a fitted constant: a frame is the image decoded, the marks found, the pose estimated
 (10-16 ms at telephoto, the agents' ``timing_s`` "step") and the result published, so the front-end may take
@@ -55,7 +57,9 @@ class FrontEndPace:
         if period_s is not None and not period_s > 0:
             raise ValueError(f"period_s must be > 0, got {period_s}")
         self.period_s = period_s
-        self.halving = False
+        # with a clock to keep, a camera starts halved (where its target is large enough): its first frames, with no
+        # window yet and a search from scratch, are its slowest, and its halved frames say whether full resolution fits
+        self.halving = period_s is not None
         self._recent: list[float] = []
 
     def halve(self, prior: MarkPrior, mark_px_now: float | None = None) -> bool:
