@@ -11,7 +11,7 @@ The rule is a time budget, not a fitted constant: a frame is the image decoded, 
 :data:`FRONT_END_SHARE` of the period. Halved, the second robot's telephoto images give -3.4..+1.5 points of recall
 and -3.8..-0.9 of precision against full resolution (the marks kept placed at full resolution,
 :func:`placed_at_full`); a frame later than its tick costs the whole frame (the vehicle skips to the newest tick).
-On its 20-frame sequence through four looks the pair skips 0-12 ticks of 40 starting halved (2-18 starting at full
+On its 20-frame sequence through four looks the pair skips 0-12 ticks of 40 starting halved (4-18 starting at full
 resolution, side by side; 12-48 at full resolution throughout), and is good on 90-95 % of frames (BENCHMARKS.md, "the
 second robot at 10 fps, halved when it overruns").
 State: the recent timings of one camera, one writer (the vehicle's frame loop)."""
