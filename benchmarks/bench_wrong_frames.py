@@ -18,8 +18,9 @@ answer is judged against the truth and against eq. (4) itself (the views' own we
 
 Per dataset: frames of each kind, confident ones and good ones (converged, confident and precise: what an agent
 publishes as good), each with those wrong (> 0.5 m or 5 deg), and per camera the
-fully visible marks the front-end found (within 1.5 px where marks are under 3 px, else 3 px), its points, and
-the frames whose labels its gate kept. Writes ``benchmarks/results/wrong_frames.md``.
+fully visible marks the front-end found (within 1.5 px where marks are under 3 px, else 3 px), its points, the
+false ones among them (within that radius of no mark, whole or in part, one to one), and the frames whose labels its
+gate kept. Writes ``benchmarks/results/wrong_frames.md``.
 """
 
 from __future__ import annotations
@@ -53,7 +54,7 @@ DESCRIPTION = ("Each frame from scratch with both cameras, as a pair's first fra
                "the answer fits at least as well as the truth polished (eq. (1) on these points prefers a wrong "
                "pose). *good*: converged, confident and precise, what an agent publishes as good; *wrong* there: "
                "> 0.5 m or 5 deg off. Marks: fully visible marks the front-end found (1.5 px under 3 px marks, else "
-               "3 px).")
+               "3 px); false points: within that radius of no mark, whole or in part (one to one).")
 
 
 def _errors(pose: np.ndarray, truth: np.ndarray) -> tuple[float, float]:
@@ -78,11 +79,14 @@ def frame_rows(directory: Path) -> list[dict]:
             views.append(View(camera, points, 1.0 / len(data.cameras), labels))
             marks = data.truth(k).cameras[name].marks
             whole = np.array([m.uv for m in marks if m.fully_visible], float).reshape(-1, 2)
+            every = np.array([m.uv for m in marks], float).reshape(-1, 2)
             prior = mark_prior(camera, world.model.mark_radius, world.model.size, area.lo[:3], area.hi[:3])
             radius_px = 1.5 if prior.radius_px[1] < SMALL_SPOT_PX else 3.0
             found = len(match_to_truth(points, whole, radius_px)[0]) if len(points) and len(whole) else 0
+            # a point on a mark (seen whole or in part) within the radius, one to one: the rest are false
+            on_marks = len(match_to_truth(points, every, radius_px)[0]) if len(points) and len(every) else 0
             cameras.append({"found": found, "visible": len(whole), "points": len(points),
-                            "labelled": labels is not None})
+                            "false": len(points) - on_marks, "labelled": labels is not None})
         problem = PoseProblem(model, tuple(views), area)
         truth = data.truth(k).target_pose
         answer = solve(problem, options, seed=k)
@@ -111,7 +115,7 @@ def summary_table(rows: list[dict], key: str) -> list[str]:
     """Per ``key`` ("look" or "dataset"): frames of each kind, confident ones, and the front-end's marks."""
     lines = [f"| {key} | frames | right | wrong, search (kept when started at the truth) | wrong, information | "
              "confident (and wrong) | good (and wrong) | marks found / fully visible, per camera | points per camera | "
-             "frames with labels, per camera |", "|" + "---|" * 10]
+             "false points of all, per camera | frames with labels, per camera |", "|" + "---|" * 11]
     for name in sorted({r[key] for r in rows}):
         group = [r for r in rows if r[key] == name]
         kinds = Counter(r["kind"] for r in group)
@@ -120,6 +124,8 @@ def summary_table(rows: list[dict], key: str) -> list[str]:
         found = [sum(r["cameras"][c]["found"] for r in group) for c in range(n_cameras)]
         visible = [sum(r["cameras"][c]["visible"] for r in group) for c in range(n_cameras)]
         points = [np.mean([r["cameras"][c]["points"] for r in group]) for c in range(n_cameras)]
+        false = [sum(r["cameras"][c]["false"] for r in group) for c in range(n_cameras)]
+        every = [sum(r["cameras"][c]["points"] for r in group) for c in range(n_cameras)]
         labelled = [sum(r["cameras"][c]["labelled"] for r in group) for c in range(n_cameras)]
         lines.append(
             f"| {name} | {len(group)} | {kinds['right']} | {kinds['wrong, search']} ({kept}) | "
@@ -127,7 +133,8 @@ def summary_table(rows: list[dict], key: str) -> list[str]:
             f"({sum(r['confident_wrong'] for r in group)}) | {sum(r['good'] for r in group)} "
             f"({sum(r['good'] and r['confident_wrong'] for r in group)}) | "
             + ", ".join(f"{f}/{v}" for f, v in zip(found, visible)) + " | "
-            + ", ".join(f"{p:.1f}" for p in points) + " | " + ", ".join(map(str, labelled)) + " |")
+            + ", ".join(f"{p:.1f}" for p in points) + " | " + ", ".join(f"{f}/{n}" for f, n in zip(false, every))
+            + " | " + ", ".join(map(str, labelled)) + " |")
     return lines
 
 
