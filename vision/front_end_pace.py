@@ -51,7 +51,8 @@ RECENT = 3
 
 class FrontEndPace:
     """Whether a camera's next frame runs the front-end halved (:meth:`halve`), from the time its recent frames took
-    (:meth:`timed`). ``period_s``: the camera's frame period (None: no clock to keep, never halved)."""
+    (:meth:`timed`). ``period_s``: the camera's frame period (None: no clock to keep, never halved); with one, the
+    camera starts halved."""
 
     def __init__(self, period_s: float | None) -> None:
         if period_s is not None and not period_s > 0:
