@@ -46,6 +46,8 @@ class FrameEvent:
     solved: bool = False
     from_hint: bool = False
     seconds: float = 0.0
+    #: generations of the search this estimate came from, so far (a search from scratch runs in slices, one a frame)
+    generations: int = 0
     error: dict | None = None
     estimate: Estimate | None = None
     scene_frame: int | None = None
@@ -81,7 +83,7 @@ class FrameEvent:
                    "trust": self.trust.level, "good": self.trust.good, "converged": self.trust.converged,
                    "confident": self.trust.confident, "precise": self.trust.precise,
                    "standing": self.trust.standing, "solved": self.solved,
-                   "from_hint": self.from_hint, "seconds": self.seconds}
+                   "from_hint": self.from_hint, "seconds": self.seconds, "generations": self.generations}
             if not self.trust.good:  # why the estimate is not good (evopose.trust.Trust.reason)
                 out["reason"] = self.trust.reason
             if self.error is not None:

@@ -270,7 +270,7 @@ def step(state: VehicleState, inputs: FrameInputs) -> tuple[VehicleState, list[M
         unlabelled=tuple(v for v in used if v in dropped),
         knowledge=tuple(k.name for k in inputs.knowledge), pose=tuple(float(v) for v in pose),
         fitness=float(sol.fitness), mismatch=estimate.mismatch, trust=trust, solved=estimate.solved,
-        from_hint=bool(sol.from_hint), seconds=seconds,
+        from_hint=bool(sol.from_hint), seconds=seconds, generations=int(sol.generations),
         error=None if inputs.truth is None else pose_error(pose, inputs.truth), estimate=estimate)
     return state, messages, event
 
