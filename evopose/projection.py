@@ -131,11 +131,10 @@ def pose_jacobian(s, model, intr, cfw, usable, free, J):  # pragma: no cover - c
     ``C`` and d X / d angle is ``C (d R / d angle) p``, each then through :func:`pinhole_derivatives`."""
     # R (geometry.rotation_entries) and its derivative by each angle, row-major
     rot = _rotation_entries(s[3], s[4], s[5])
-    d_roll, d_pitch, d_yaw = _rotation_entry_derivatives(s[3], s[4], s[5])
+    by_angle = _rotation_entry_derivatives(s[3], s[4], s[5])   # d R / d (roll, pitch, yaw)
     t0 = cfw[0, 0] * s[0] + cfw[0, 1] * s[1] + cfw[0, 2] * s[2] + cfw[0, 3]
     t1 = cfw[1, 0] * s[0] + cfw[1, 1] * s[1] + cfw[1, 2] * s[2] + cfw[1, 3]
     t2 = cfw[2, 0] * s[0] + cfw[2, 1] * s[1] + cfw[2, 2] * s[2] + cfw[2, 3]
-    dw = np.empty((4, 3))   # d (world point - position) / d (nothing, roll, pitch, yaw) per point: R p, R' p
     for m in range(model.shape[0]):
         for d in range(6):
             J[m, 0, d] = 0.0
@@ -143,24 +142,26 @@ def pose_jacobian(s, model, intr, cfw, usable, free, J):  # pragma: no cover - c
         if not usable[m]:
             continue
         px, py, pz = model[m, 0], model[m, 1], model[m, 2]
-        for k, e in enumerate((rot, d_roll, d_pitch, d_yaw)):
-            dw[k, 0] = e[0] * px + e[1] * py + e[2] * pz
-            dw[k, 1] = e[3] * px + e[4] * py + e[5] * pz
-            dw[k, 2] = e[6] * px + e[7] * py + e[8] * pz
-        X = cfw[0, 0] * dw[0, 0] + cfw[0, 1] * dw[0, 1] + cfw[0, 2] * dw[0, 2] + t0
-        Y = cfw[1, 0] * dw[0, 0] + cfw[1, 1] * dw[0, 1] + cfw[1, 2] * dw[0, 2] + t1
-        Z = cfw[2, 0] * dw[0, 0] + cfw[2, 1] * dw[0, 1] + cfw[2, 2] * dw[0, 2] + t2
+        wx = rot[0] * px + rot[1] * py + rot[2] * pz   # R p
+        wy = rot[3] * px + rot[4] * py + rot[5] * pz
+        wz = rot[6] * px + rot[7] * py + rot[8] * pz
+        X = cfw[0, 0] * wx + cfw[0, 1] * wy + cfw[0, 2] * wz + t0
+        Y = cfw[1, 0] * wx + cfw[1, 1] * wy + cfw[1, 2] * wz + t1
+        Z = cfw[2, 0] * wx + cfw[2, 1] * wy + cfw[2, 2] * wz + t2
         ux, uy, uz, vx, vy, vz = pinhole_derivatives(X, Y, Z, intr)
         for d in range(6):
             if not free[d]:
                 continue
             if d < 3:   # d X / d position: column d of the camera's rotation
                 gx, gy, gz = cfw[0, d], cfw[1, d], cfw[2, d]
-            else:
-                k = d - 2
-                gx = cfw[0, 0] * dw[k, 0] + cfw[0, 1] * dw[k, 1] + cfw[0, 2] * dw[k, 2]
-                gy = cfw[1, 0] * dw[k, 0] + cfw[1, 1] * dw[k, 1] + cfw[1, 2] * dw[k, 2]
-                gz = cfw[2, 0] * dw[k, 0] + cfw[2, 1] * dw[k, 1] + cfw[2, 2] * dw[k, 2]
+            else:       # d X / d angle: C (d R / d angle) p
+                e = by_angle[d - 3]
+                ax = e[0] * px + e[1] * py + e[2] * pz
+                ay = e[3] * px + e[4] * py + e[5] * pz
+                az = e[6] * px + e[7] * py + e[8] * pz
+                gx = cfw[0, 0] * ax + cfw[0, 1] * ay + cfw[0, 2] * az
+                gy = cfw[1, 0] * ax + cfw[1, 1] * ay + cfw[1, 2] * az
+                gz = cfw[2, 0] * ax + cfw[2, 1] * ay + cfw[2, 2] * az
             J[m, 0, d] = ux * gx + uy * gy + uz * gz
             J[m, 1, d] = vx * gx + vy * gy + vz * gz
 
