@@ -20,10 +20,11 @@ bars loosened one after the other, each loosening kept for the next, and counted
 * *off the body*: found only without the body's context, at the candidates' own bar (the body's paint was not
   found around it, :mod:`vision.body_paint`);
 * *no peak*: none of these finds it: no local maximum of the scale space's response within the match radius (a mark
-  merged with a neighbour, blurred or darkened under the ground's texture).
+  merged with a neighbour, blurred or darkened under the ground's texture; or a long ellipse, a disc seen at a grazing
+  angle, whose response peaks near its ends).
 
-Marks missed for *weak peak* and *no peak* reasons carry too little contrast for this front-end's detector; the
-others were seen and rejected by a later decision. A diagnostic: the bars are loosened by setting the front-end's
+A *weak peak* carries too little contrast for this front-end's detector, and so does a *no peak* mark unless its
+response peaked off its centre; the others were seen and rejected by a later decision. A diagnostic: the bars are loosened by setting the front-end's
 module constants for one call each (restored after), so it runs in its own worker processes.
 """
 
@@ -118,7 +119,9 @@ def census(directory: Path, look: str, frames: int | None) -> dict:
 def markdown(rows: list[dict], command: str, looks: list[str]) -> str:
     lines = ["## Where the front-end loses marks: a census per look", "",
              f"Produced by `{command}`; {provenance()}, OpenCV {cv2.__version__}.", "",
-             " ".join(__doc__.split("\n\n")[2].split()), ""]
+             " ".join(__doc__.split("\n\n")[3].split()), "",
+             *("* " + " ".join(item.split()) for item in __doc__.split("\n\n")[4].split("* ")[1:]), "",
+             " ".join(__doc__.split("\n\n")[5].split()), ""]
     for model, scale in sorted({(r["model"], r["scale"]) for r in rows}):
         lines += [f"### {model}, {scale} scale", "",
                   "| look | fully visible | found | " + " | ".join(CAUSES) + " |", "|---|---|---|" + "---|" * len(CAUSES)]
