@@ -21,16 +21,18 @@ bars loosened one after the other, each loosening kept for the next, and counted
   found around it, :mod:`vision.body_paint`);
 * *no peak*: none of these finds it: no local maximum of the scale space's response within the match radius (a mark
   merged with a neighbour, blurred or darkened under the ground's texture; or a long ellipse, a disc seen at a grazing
-  angle, whose response peaks near its ends).
+  angle, whose response peaks near its ends), or its peak lost to a stronger one within its radius (every run keeps one
+  detection per place, :func:`vision.mark_selection.same_spots`).
 
-A *weak peak* carries too little contrast for this front-end's detector, and so does a *no peak* mark unless its
-response peaked off its centre; the others were seen and rejected by a later decision. A diagnostic: the bars are loosened by setting the front-end's
+A *weak peak* carries too little contrast for this front-end's detector, and so may a *no peak* mark; the others were
+seen and rejected by a later decision. A diagnostic: the bars are loosened by setting the front-end's
 module constants for one call each (restored after), so it runs in its own worker processes.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import sys
 from collections import Counter
@@ -94,6 +96,7 @@ def census(directory: Path, look: str, frames: int | None) -> dict:
     area = world.bounds()
     spec = look_of(camera_model_of(world), look)
     counts: Counter = Counter()
+    missed = []
     for cam in dataset.cameras:
         for k in range(dataset.frames if frames is None else min(frames, dataset.frames)):
             encoded, _ = develop_exr(world, Path(directory) / cam / "raw" / f"{k:06d}.exr", k, cam, spec)
@@ -111,9 +114,12 @@ def census(directory: Path, look: str, frames: int | None) -> dict:
                 if hit[0]:
                     counts["found"] += 1
                 else:
-                    counts[next((c for c, h in zip(CAUSES, hit[1:]) if h), CAUSES[-1])] += 1
+                    cause = next((c for c, h in zip(CAUSES, hit[1:]) if h), CAUSES[-1])
+                    counts[cause] += 1
+                    missed.append({"dataset": directory.name, "look": look, "camera": cam, "frame": k,
+                                   "uv": whole[j].round(1).tolist(), "cause": cause})
     return {"model": world.model.name, "scale": _scale_of(dataset.manifest.world), "look": look,
-            "counts": dict(counts)}
+            "counts": dict(counts), "missed": missed}
 
 
 def markdown(rows: list[dict], command: str, looks: list[str]) -> str:
@@ -148,6 +154,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--frames", type=int, default=None, help="the first N frames of each dataset (default: all)")
     parser.add_argument("--jobs", type=int, default=2)
     parser.add_argument("--out", type=Path, default=DEFAULT_OUT)
+    parser.add_argument("--misses", type=Path, default=None, help="also write every missed mark (JSON lines)")
     args = parser.parse_args(argv)
     looks = [f"{RANDOM}{i}" for i in range(args.random_looks)] + [f"{CORNER}{i}" for i in range(args.corner_looks)]
     looks = looks or [lk for lk in args.looks.split(",") if lk]
@@ -156,6 +163,8 @@ def main(argv: list[str] | None = None) -> int:
         rows = list(pool.map(census, *zip(*jobs)))
     command = ".venv/bin/python -m benchmarks.bench_mark_misses " + " ".join(sys.argv[1:] if argv is None else argv)
     args.out.write_text(markdown(rows, command, looks))
+    if args.misses is not None:
+        args.misses.write_text("".join(json.dumps(m) + "\n" for r in rows for m in r["missed"]))
     print(f"wrote {args.out} ({os.path.getsize(args.out)} bytes)")
     return 0
 
