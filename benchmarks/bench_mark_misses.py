@@ -129,15 +129,16 @@ def markdown(rows: list[dict], command: str, looks: list[str]) -> str:
              *("* " + " ".join(item.split()) for item in __doc__.split("\n\n")[4].split("* ")[1:]), "",
              " ".join(__doc__.split("\n\n")[5].split()), ""]
     for model, scale in sorted({(r["model"], r["scale"]) for r in rows}):
-        lines += [f"### {model}, {scale} scale", "",
-                  "| look | fully visible | found | " + " | ".join(CAUSES) + " |", "|---|---|---|" + "---|" * len(CAUSES)]
+        lines += [f"### {model}, {scale} scale", "", "| look | fully visible | found | " + " | ".join(CAUSES) + " |",
+                  "|---|---|---|" + "---|" * len(CAUSES)]
         for look in looks:
             total: Counter = Counter()
             for r in rows:
                 if (r["model"], r["scale"], r["look"]) == (model, scale, look):
                     total.update(r["counts"])
             if total["visible"]:
-                lines.append(f"| {look} | {total['visible']} | {total['found']} ({total['found'] / total['visible']:.3f}) | "
+                share = total["found"] / total["visible"]
+                lines.append(f"| {look} | {total['visible']} | {total['found']} ({share:.3f}) | "
                              + " | ".join(str(total[c]) for c in CAUSES) + " |")
         lines.append("")
     return "\n".join(lines) + "\n"
