@@ -571,6 +571,27 @@ def test_an_oblique_marks_centre_is_its_whole_blobs_and_a_blob_past_the_largest_
     np.testing.assert_array_equal(long_axis[1], 0.0)
 
 
+def test_an_oblique_mark_joined_by_a_blend_to_an_area_of_its_colour_is_cut_from_it(monkeypatch):
+    # the second robot's dark mark on the thin yellow strip beside its dark top plate: the blend between mark and plate
+    # is over half the mark's colour, so the mark's blob joins the plate's and reaches past the largest mark; at a
+    # higher coverage the blend is not the mark's colour and the mark's blob is its own
+    import vision.spot_position as sp
+
+    lin = np.full((60, 100, 3), 0.6, np.float32)       # the strip's paint
+    ys, xs = np.mgrid[0:60, 0:100]
+    mark = (((xs - 40.3) / 9.0) ** 2 + ((ys - 30.6) / 4.0) ** 2) <= 1
+    lin[mark] = 0.05                                     # the dark mark
+    lin[:25, :] = 0.05                                   # the dark plate, its edge 1.6 px above the mark's top
+    lin[25:27, 37:44] = 0.6 - 0.55 * 0.58                # a blend, 0.58 of the way to the mark's colour, joins them
+    spot, ring = np.array([[0.05] * 3]), np.array([[0.6] * 3])
+    stalled = np.array([[36.8, 30.5]])                   # a peak 3.5 px toward the mark's end
+    centred, _ = sp.blob_centroids(lin, stalled, spot, ring, max_radius=12.0)
+    assert np.hypot(*(centred[0] - (40.3, 30.6))) < 0.5, centred
+    monkeypatch.setattr(sp, "SEPARATING_COVERAGE", ())
+    kept, _ = sp.blob_centroids(lin, stalled, spot, ring, max_radius=12.0)
+    np.testing.assert_array_equal(kept, stalled)         # joined to the plate: no blob of its own, the peak kept
+
+
 def test_each_windows_blob_is_its_own_when_the_windows_are_labelled_side_by_side():
     from vision.spot_position import _centre_blobs
 

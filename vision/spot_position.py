@@ -18,6 +18,9 @@ CENTROID_STEPS = 6
 #: Where spots are SMALL_SPOT_PX and more, a pixel a spot's colour covers at least this share of belongs to its
 #: blob (:func:`blob_centroids`).
 BLOB_COVERAGE = 0.5
+#: ... or, where that blob reaches past the largest mark, the first of these coverages at which the centre's blob does
+#: not (a mark joined through a blend to an area of its colour beside it); none: the blob is that area's.
+SEPARATING_COVERAGE: tuple[float, ...] = (0.6, 0.7, 0.8)
 
 
 def round_peaks(dog: np.ndarray, lvl: np.ndarray, ys: np.ndarray, xs: np.ndarray, max_edge_ratio: float
@@ -113,9 +116,15 @@ def blob_centroids(lin: np.ndarray, centres: np.ndarray, spot: np.ndarray, ring:
     cover = mark_coverage(pixels[index] - base[:, None, None, :],
                           (spot[at].astype(pixels.dtype) - base)[:, None, None, :])
     mine = _centre_blobs(cover >= BLOB_COVERAGE)                                        # (N, S, S)
-    # a blob reaching the window's edge reaches past the largest mark: paint or shade in the spot's colour
-    own = np.flatnonzero(mine.any(axis=(1, 2)) & ~(mine[:, 0].any(axis=1) | mine[:, -1].any(axis=1)
-                                                    | mine[:, :, 0].any(axis=1) | mine[:, :, -1].any(axis=1)))
+    # a blob reaching the window's edge reaches past the largest mark: paint or shade in the spot's colour, or a mark
+    # joined to such an area through the blend between them: cut there at a higher coverage, where the blend is not
+    # the spot's colour (the second robot's dark mark beside its dark top plate)
+    for level in SEPARATING_COVERAGE if len(mine) else ():
+        joined = np.flatnonzero(_reaches_edge(mine))
+        if not len(joined):
+            break
+        mine[joined] = _centre_blobs(cover[joined] >= level)
+    own = np.flatnonzero(mine.any(axis=(1, 2)) & ~_reaches_edge(mine))
     if not len(own):
         return out, long_axis
     grown = np.pad(mine[own], ((0, 0), (1, 1), (1, 1)))                                 # with the blend 1 px around
@@ -135,6 +144,11 @@ def blob_centroids(lin: np.ndarray, centres: np.ndarray, spot: np.ndarray, ring:
     out[k] = centre[k] + np.stack([mean_u, mean_v], axis=1)
     long_axis[k] = half_length(np.stack([np.stack([uu, uv], axis=1), np.stack([uv, vv], axis=1)], axis=1))
     return out, long_axis
+
+
+def _reaches_edge(blob: np.ndarray) -> np.ndarray:
+    """Whether each window's blob (bool (N, S, S)) touches the window's edge, bool (N,)."""
+    return blob[:, 0].any(axis=1) | blob[:, -1].any(axis=1) | blob[:, :, 0].any(axis=1) | blob[:, :, -1].any(axis=1)
 
 
 def _centre_blobs(blob: np.ndarray) -> np.ndarray:
