@@ -24,7 +24,7 @@ ORDER = ("solvers", "solver_regression", "softposit", "solver_phases", "confiden
          "photoreal_fleet", "photoreal_fleet_long", "photoreal_fleet_paper_long", "photoreal_tracking",
          "photoreal_encoding", "photoreal_looks", "photoreal_looks_husky", "photoreal_looks_bodies_telephoto", "photoreal_looks_context",
          "photoreal_looks_halved", "photoreal_looks_dark_paint", "photoreal_looks_lit_share", "photoreal_looks_lightness", "photoreal_looks_clipped", "photoreal_looks_random_side", "photoreal_looks_edge", "photoreal_looks_stride",
-         "photoreal_looks_weighed_misfit",
+         "photoreal_looks_weighed_misfit", "photoreal_looks_separated_blob",
          "photoreal_looks_train_telephoto",
          "photoreal_fleet_looks",
          "photoreal_fleet_looks_paper", "wrong_frames", "mark_misses", "photoreal_fleet_husky", "photoreal_fleet_husky_looks", "photoreal_fleet_husky_long", "photoreal_fleet_pace", "photoreal_fleet_context", "photoreal_fleet_realtime", "photoreal_fleet_looks_long", "photoreal_fleet_clock",
