@@ -95,9 +95,10 @@ def blob_centroids(lin: np.ndarray, centres: np.ndarray, spot: np.ndarray, ring:
     ``centres`` (K, 2), with the blend 1 px around them. A disc seen at a grazing angle is an ellipse up to four
     times as long as wide whose response peaks near one end; a window's mean shift stalls inside such a strip (its
     centroid is its centre wherever the window lies wholly in it), up to 3-4 px from the mark's centre on a large
-    robot's side. A blob that reaches past ``max_radius`` of the centre (the largest mark, px), or none at the
-    centre, keeps the centre given: the spot's colour is then paint or shade beside it. Shapes: lin (H, W, 3), spot
-    and ring (K, 3)."""
+    robot's side. A blob that reaches past ``max_radius`` of the centre (the largest mark, px) is taken again at the
+    higher coverages of :data:`SEPARATING_COVERAGE` (a mark joined through a blend to an area of its colour); one that
+    still does, or none at the centre, keeps the centre given: the spot's colour is then paint or shade beside it.
+    Shapes: lin (H, W, 3), spot and ring (K, 3)."""
     h, w = lin.shape[:2]
     out = np.asarray(centres, float).copy()
     long_axis = np.zeros_like(out)
