@@ -143,7 +143,7 @@ def markdown(rows: list[dict], command: str, looks: list[str]) -> str:
     heads = [f"< {BINS[0]:g}"] + [f"{a:g}-{b:g}" for a, b in zip(BINS[:-1], BINS[1:])] + [f">= {BINS[-1]:g}"]
     lines = ["## How much of each mark a look leaves, and recall by it", "",
              f"Produced by `{command}`; {provenance()}, OpenCV {cv2.__version__}.", "",
-             __doc__.split("\n\n")[2].replace("\n", " "), "",
+             __doc__.split("\n\n")[3].replace("\n", " "), "",
              "Per look: the fully visible marks, the front-end's recall over all of them, the marks in each bin of "
              "Delta E*ab with the recall in it, and the recall over the marks of Delta E*ab 5 and more, and 10 and "
              "more.", ""]

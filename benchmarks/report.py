@@ -27,7 +27,7 @@ ORDER = ("solvers", "solver_regression", "softposit", "solver_phases", "confiden
          "photoreal_looks_weighed_misfit", "photoreal_looks_separated_blob",
          "photoreal_looks_train_telephoto",
          "photoreal_fleet_looks",
-         "photoreal_fleet_looks_paper", "wrong_frames", "mark_misses", "photoreal_fleet_husky", "photoreal_fleet_husky_looks", "photoreal_fleet_husky_long", "photoreal_fleet_pace", "photoreal_fleet_context", "photoreal_fleet_realtime", "photoreal_fleet_looks_long", "photoreal_fleet_clock",
+         "photoreal_fleet_looks_paper", "wrong_frames", "mark_misses", "mark_visibility", "photoreal_fleet_husky", "photoreal_fleet_husky_looks", "photoreal_fleet_husky_long", "photoreal_fleet_pace", "photoreal_fleet_context", "photoreal_fleet_realtime", "photoreal_fleet_looks_long", "photoreal_fleet_clock",
          "frontend_speed", "frame_cost")
 
 #: Titles that several section files share, told apart by what each measures (by file stem).
