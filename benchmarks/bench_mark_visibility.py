@@ -179,7 +179,8 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     looks = [lk.strip() for lk in args.looks.split(",") if lk.strip()]
     if args.random_looks > 0 or args.corner_looks > 0:
-        looks = ([f"{RANDOM}{s}" for s in range(args.random_looks)] + [f"{CORNER}{s}" for s in range(args.corner_looks)])
+        looks = ([f"{RANDOM}{s}" for s in range(args.random_looks)]
+                 + [f"{CORNER}{s}" for s in range(args.corner_looks)])
     if unknown := [lk for lk in looks if lk not in LOOKS and not lk.startswith((RANDOM, CORNER))]:
         parser.error(f"unknown look(s) {', '.join(unknown)}; known: {', '.join(LOOKS)}")
     if missing := [str(d) for d in args.datasets if not any((d / c / "raw").is_dir() for c in ("H1", "H2"))]:
