@@ -44,7 +44,7 @@ from unittest import mock
 import cv2
 import numpy as np
 
-from .bench_photoreal_looks import CORNER, RANDOM, _scale_of, look_of
+from .bench_photoreal_looks import _scale_of, add_dataset_arguments, chosen_looks, look_of
 from .report import provenance
 
 DEFAULT_OUT = Path(__file__).resolve().parent / "results" / "mark_misses.md"
@@ -145,20 +145,11 @@ def markdown(rows: list[dict], command: str, looks: list[str]) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from scenarios.looks import LOOKS
-
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("datasets", nargs="+", type=Path, help="Cycles dataset directories with raw/*.exr")
-    parser.add_argument("--looks", default=",".join(LOOKS), help="comma-separated look names (default: all)")
-    parser.add_argument("--random-looks", type=int, default=0, help="instead, this many random looks (random-<seed>)")
-    parser.add_argument("--corner-looks", type=int, default=0, help="instead, this many corner looks (corner-<seed>)")
-    parser.add_argument("--frames", type=int, default=None, help="the first N frames of each dataset (default: all)")
-    parser.add_argument("--jobs", type=int, default=2)
-    parser.add_argument("--out", type=Path, default=DEFAULT_OUT)
+    add_dataset_arguments(parser, DEFAULT_OUT)
     parser.add_argument("--misses", type=Path, default=None, help="also write every missed mark (JSON lines)")
     args = parser.parse_args(argv)
-    looks = [f"{RANDOM}{i}" for i in range(args.random_looks)] + [f"{CORNER}{i}" for i in range(args.corner_looks)]
-    looks = looks or [lk for lk in args.looks.split(",") if lk]
+    looks = chosen_looks(parser, args)
     jobs = [(d, lk, args.frames) for lk in looks for d in args.datasets]
     with ProcessPoolExecutor(max(1, args.jobs)) as pool:
         rows = list(pool.map(census, *zip(*jobs)))

@@ -28,7 +28,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from .bench_photoreal_looks import CORNER, RANDOM, _scale_of, look_of
+from .bench_photoreal_looks import _scale_of, add_dataset_arguments, chosen_looks, look_of
 from .report import provenance
 
 DEFAULT_OUT = Path(__file__).resolve().parent / "results" / "mark_visibility.md"
@@ -166,25 +166,10 @@ def markdown(rows: list[dict], command: str, looks: list[str]) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from scenarios.looks import LOOKS
-
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("datasets", nargs="+", type=Path, help="Cycles dataset directories with raw/*.exr")
-    parser.add_argument("--looks", default=",".join(LOOKS), help="comma-separated look names (default: all)")
-    parser.add_argument("--corner-looks", type=int, default=0, help="instead, this many corner looks (corner-<seed>)")
-    parser.add_argument("--random-looks", type=int, default=0, help="instead, this many random looks (random-<seed>)")
-    parser.add_argument("--frames", type=int, default=None, help="the first N frames of each dataset (default: all)")
-    parser.add_argument("--jobs", type=int, default=2)
-    parser.add_argument("--out", type=Path, default=DEFAULT_OUT)
+    add_dataset_arguments(parser, DEFAULT_OUT)
     args = parser.parse_args(argv)
-    looks = [lk.strip() for lk in args.looks.split(",") if lk.strip()]
-    if args.random_looks > 0 or args.corner_looks > 0:
-        looks = ([f"{RANDOM}{s}" for s in range(args.random_looks)]
-                 + [f"{CORNER}{s}" for s in range(args.corner_looks)])
-    if unknown := [lk for lk in looks if lk not in LOOKS and not lk.startswith((RANDOM, CORNER))]:
-        parser.error(f"unknown look(s) {', '.join(unknown)}; known: {', '.join(LOOKS)}")
-    if missing := [str(d) for d in args.datasets if not any((d / c / "raw").is_dir() for c in ("H1", "H2"))]:
-        parser.error(f"no raw/*.exr (render with the Cycles engine, keep_raw): {', '.join(missing)}")
+    looks = chosen_looks(parser, args)
     jobs = [(d, lk) for lk in looks for d in args.datasets]
     rows = []
     with ProcessPoolExecutor(max_workers=max(1, args.jobs)) as pool:

@@ -175,10 +175,11 @@ def markdown(rows: list[dict], command: str, looks: list[str], front_ends: tuple
     return "\n".join(lines) + "\n"
 
 
-def main(argv: list[str] | None = None) -> int:
+def add_dataset_arguments(parser: argparse.ArgumentParser, out: Path) -> None:
+    """The arguments every look benchmark takes: the Cycles datasets, the looks (named, random or corner), the
+    frames, the worker processes, and the results file (default ``out``)."""
     from scenarios.looks import LOOKS
 
-    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("datasets", nargs="+", type=Path, help="Cycles dataset directories with raw/*.exr")
     parser.add_argument("--looks", default=",".join(LOOKS), help="comma-separated look names (default: all)")
     parser.add_argument("--random-looks", type=int, default=0,
@@ -186,10 +187,31 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--corner-looks", type=int, default=0,
                         help="instead of the named looks, this many looks at the edges of the random ranges (seeds "
                              "0..N-1: corner-<seed>); with --random-looks, both")
-    parser.add_argument("--front-ends", default=",".join(FRONT_ENDS))
-    parser.add_argument("--jobs", type=int, default=2)
     parser.add_argument("--frames", type=int, default=None, help="the first N frames of each dataset (default: all)")
-    parser.add_argument("--out", type=Path, default=DEFAULT_OUT)
+    parser.add_argument("--jobs", type=int, default=2)
+    parser.add_argument("--out", type=Path, default=out)
+
+
+def chosen_looks(parser: argparse.ArgumentParser, args: argparse.Namespace) -> list[str]:
+    """The looks :func:`add_dataset_arguments`' arguments name; a parser error (exit 2) for an unknown look or a
+    dataset without its radiance."""
+    from scenarios.looks import LOOKS
+
+    looks = [lk.strip() for lk in args.looks.split(",") if lk.strip()]
+    if args.random_looks > 0 or args.corner_looks > 0:
+        looks = ([f"{RANDOM}{seed}" for seed in range(args.random_looks)]
+                 + [f"{CORNER}{seed}" for seed in range(args.corner_looks)])
+    if unknown := [lk for lk in looks if lk not in LOOKS and not lk.startswith((RANDOM, CORNER))]:
+        parser.error(f"unknown look(s) {', '.join(unknown)}; known: {', '.join(LOOKS)}")
+    if missing := [str(d) for d in args.datasets if not any((d / c / "raw").is_dir() for c in ("H1", "H2"))]:
+        parser.error(f"no raw/*.exr (render with the Cycles engine, keep_raw): {', '.join(missing)}")
+    return looks
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    add_dataset_arguments(parser, DEFAULT_OUT)
+    parser.add_argument("--front-ends", default=",".join(FRONT_ENDS))
     parser.add_argument("--pool-models", default=None, metavar="NAME",
                         help="report every target model under this one name (datasets of many robots, one each)")
     parser.add_argument("--scorer", type=Path, default=None,
@@ -202,19 +224,10 @@ def main(argv: list[str] | None = None) -> int:
         parser.error(f"--halve-from: a positive extent in pixels (inf: never), got {args.halve_from}")
     if args.scorer is not None and not args.scorer.is_file():
         parser.error(f"--scorer: no file {args.scorer}")
-    looks = [lk.strip() for lk in args.looks.split(",") if lk.strip()]
-    if args.random_looks > 0 or args.corner_looks > 0:
-        looks = ([f"{RANDOM}{seed}" for seed in range(args.random_looks)]
-                 + [f"{CORNER}{seed}" for seed in range(args.corner_looks)])
-    unknown = [lk for lk in looks if lk not in LOOKS and not lk.startswith((RANDOM, CORNER))]
-    if unknown:
-        parser.error(f"unknown look(s) {', '.join(unknown)}; known: {', '.join(LOOKS)}")
+    looks = chosen_looks(parser, args)
     front_ends = tuple(f.strip() for f in args.front_ends.split(",") if f.strip())
     if bad := [f for f in front_ends if f not in FRONT_ENDS]:
         parser.error(f"unknown front-end(s) {', '.join(bad)}; known: {', '.join(FRONT_ENDS)}")
-    missing = [str(d) for d in args.datasets if not any((d / c / "raw").is_dir() for c in ("H1", "H2"))]
-    if missing:
-        parser.error(f"no raw/*.exr (render with the Cycles engine, keep_raw): {', '.join(missing)}")
     jobs = [(d, lk) for lk in looks for d in args.datasets]
     rows = []
     with ProcessPoolExecutor(max_workers=max(1, args.jobs)) as pool:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import cv2
 import numpy as np
+import pytest
 
 from benchmarks.bench_mark_visibility import mark_contrast, mark_masks
 
@@ -54,3 +55,16 @@ def test_the_marks_around_a_mark_are_not_counted_in_its_ring():
 def test_a_mark_under_a_pixel_keeps_the_pixel_at_its_centre():
     masks = mark_masks(disc((10.2, 7.8), 0.3)[None], (20, 20))
     assert masks.sum() == 1 and masks[0, 8, 10]
+
+
+@pytest.mark.parametrize("args, says", [(["--looks", "camera,nope"], "unknown look(s) nope"),
+                                        (["--looks", "camera"], "no raw/*.exr")])
+def test_a_bad_look_or_a_dataset_without_its_radiance_is_one_line_and_exit_2(tmp_path, capsys, args, says):
+    from benchmarks.bench_mark_visibility import main
+
+    (tmp_path / "H1").mkdir()
+    with pytest.raises(SystemExit) as stop:
+        main([str(tmp_path), *args, "--out", str(tmp_path / "out.md")])
+    assert stop.value.code == 2
+    assert says in capsys.readouterr().err
+    assert not (tmp_path / "out.md").exists()
