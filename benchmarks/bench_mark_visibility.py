@@ -168,12 +168,16 @@ def markdown(rows: list[dict], command: str, looks: list[str]) -> str:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     add_dataset_arguments(parser, DEFAULT_OUT)
+    parser.add_argument("--pool-models", default=None, metavar="NAME",
+                        help="report every target model under this one name (datasets of many robots, one each)")
     args = parser.parse_args(argv)
     looks = chosen_looks(parser, args)
     jobs = [(d, lk) for lk in looks for d in args.datasets]
     rows = []
     with ProcessPoolExecutor(max_workers=max(1, args.jobs)) as pool:
         for row in pool.map(evaluate, *zip(*jobs), [args.frames] * len(jobs)):
+            if args.pool_models:
+                row["model"] = args.pool_models
             rows.append(row)
             print(f"{row['dataset']:40s} {row['look']:12s} {len(row['found'])} marks", flush=True)
     command = ".venv/bin/python -m benchmarks.bench_mark_visibility " + " ".join(argv if argv is not None

@@ -27,11 +27,12 @@ ORDER = ("solvers", "solver_regression", "softposit", "solver_phases", "confiden
          "photoreal_looks_weighed_misfit", "photoreal_looks_separated_blob",
          "photoreal_looks_train_telephoto",
          "photoreal_fleet_looks",
-         "photoreal_fleet_looks_paper", "wrong_frames", "mark_misses", "mark_visibility", "photoreal_fleet_husky", "photoreal_fleet_husky_looks", "photoreal_fleet_husky_long", "photoreal_fleet_pace", "photoreal_fleet_context", "photoreal_fleet_realtime", "photoreal_fleet_looks_long", "photoreal_fleet_clock",
+         "photoreal_fleet_looks_paper", "wrong_frames", "mark_misses", "mark_visibility", "mark_visibility_bodies", "photoreal_fleet_husky", "photoreal_fleet_husky_looks", "photoreal_fleet_husky_long", "photoreal_fleet_pace", "photoreal_fleet_context", "photoreal_fleet_realtime", "photoreal_fleet_looks_long", "photoreal_fleet_clock",
          "frontend_speed", "frame_cost")
 
 #: Titles that several section files share, told apart by what each measures (by file stem).
 TITLES = {
+    "mark_visibility_bodies": "How much of each mark a look leaves: twelve random robots at telephoto (held out)",
     "solver_regression": "Solver regression check: a fixed problem set against the committed figures",
     "softposit": "SoftPOSIT beside EvoPose and the oracle: telephoto boxes and the paper's scale",
     "solver_phases": "Where a solve's time goes: per phase, before and after",
