@@ -44,6 +44,7 @@ from unittest import mock
 import cv2
 import numpy as np
 
+from .bench_mark_visibility import mark_contrast, outlines_in
 from .bench_photoreal_looks import _scale_of, add_dataset_arguments, chosen_looks, look_of
 from .report import provenance
 
@@ -102,7 +103,9 @@ def census(directory: Path, look: str, frames: int | None) -> dict:
             encoded, _ = develop_exr(world, Path(directory) / cam / "raw" / f"{k:06d}.exr", k, cam, spec)
             image = cv2.imdecode(np.frombuffer(encoded, np.uint8), cv2.IMREAD_COLOR)
             marks = dataset.truth(k).cameras[cam].marks
-            whole = np.array([m.uv for m in marks if m.fully_visible], float).reshape(-1, 2)
+            fully = np.array([m.fully_visible for m in marks], bool)
+            whole = np.array([m.uv for m in marks], float).reshape(-1, 2)[fully]
+            contrast = None   # each fully visible mark's Delta E*ab, once a mark of the frame is missed
             prior = mark_prior(dataset.camera(cam, k), world.model.mark_radius, world.model.size, area.lo[:3],
                                area.hi[:3])
             match_px = 1.5 if prior.radius_px[1] < SMALL_SPOT_PX else 3.0
@@ -116,8 +119,12 @@ def census(directory: Path, look: str, frames: int | None) -> dict:
                 else:
                     cause = next((c for c, h in zip(CAUSES, hit[1:]) if h), CAUSES[-1])
                     counts[cause] += 1
+                    if contrast is None:
+                        outlines = outlines_in(dataset, cam, k, np.array([m.index for m in marks]))
+                        contrast = mark_contrast(image, outlines)[fully]
                     missed.append({"dataset": directory.name, "look": look, "camera": cam, "frame": k,
-                                   "uv": whole[j].round(1).tolist(), "cause": cause})
+                                   "uv": whole[j].round(1).tolist(), "cause": cause,
+                                   "delta_e": round(float(contrast[j]), 1)})
     return {"model": world.model.name, "scale": _scale_of(dataset.manifest.world), "look": look,
             "counts": dict(counts), "missed": missed}
 
@@ -147,7 +154,9 @@ def markdown(rows: list[dict], command: str, looks: list[str]) -> str:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     add_dataset_arguments(parser, DEFAULT_OUT)
-    parser.add_argument("--misses", type=Path, default=None, help="also write every missed mark (JSON lines)")
+    parser.add_argument("--misses", type=Path, default=None,
+                        help="also write every missed mark, with its Delta E*ab from its ring (JSON lines; "
+                             "benchmarks/bench_mark_visibility.py)")
     args = parser.parse_args(argv)
     looks = chosen_looks(parser, args)
     jobs = [(d, lk, args.frames) for lk in looks for d in args.datasets]

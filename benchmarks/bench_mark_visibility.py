@@ -9,13 +9,13 @@ face blown past white, a dark face at a stop and a half under, a 1 px blur over 
 is developed through each look as in ``benchmarks/bench_photoreal_looks.py`` and the front-end runs as the agents run
 it (:func:`vision.blobs.detect_contrast_marks`, the look estimated and undone); each fully visible mark is then
 measured in the developed image itself, from the truth alone (:func:`mark_contrast`): its disc's outline projected
-with the frame's target pose, the mean colour of the pixels inside it against the median of a ring around it (other
-marks left out), as the CIE 1976 colour difference (Delta E*ab, in L*a*b* of the sRGB image). Marks are counted in
-bins of that difference and the front-end's recall is given per bin: about 2.3 is a just noticeable difference
-beside a large patch (Sharma, *Digital Color Imaging Handbook*, 2003), more for a few pixels in texture and noise.
-The measure knows nothing of the front-end; a mark under the first bin's bound shows the look left next to nothing
-to find, and recall over the marks above a bound says what the front-end does with what the image holds.
-Matching as the looks benchmark: within 1.5 px at the paper's scale, 3 px at telephoto, one to one.
+with the frame's target pose, the mean colour of the pixels inside it against the median of a ring around it (the
+pixels of every mark in view left out), as the CIE 1976 colour difference (Delta E*ab, in L*a*b* of the sRGB image).
+Marks are counted in bins of that difference and the front-end's recall is given per bin: about 2.3 is a just
+noticeable difference beside a large patch (Sharma, *Digital Color Imaging Handbook*, 2003), more for a few pixels in
+texture and noise. The measure knows nothing of the front-end; a mark under the first bin's bound shows the look
+left next to nothing to find, and recall over the marks above a bound says what the front-end does with what the
+image holds. Matching as the looks benchmark: within 1.5 px at the paper's scale, 3 px at telephoto, one to one.
 """
 
 from __future__ import annotations
@@ -113,17 +113,19 @@ def evaluate(directory: Path, look: str, frames: int | None = None) -> dict:
         for k in range(dataset.frames if frames is None else min(frames, dataset.frames)):
             encoded, _ = develop_exr(world, Path(directory) / cam / "raw" / f"{k:06d}.exr", k, cam, spec)
             image = cv2.imdecode(np.frombuffer(encoded, np.uint8), cv2.IMREAD_COLOR)
-            marks = [m for m in dataset.truth(k).cameras[cam].marks if m.fully_visible]
-            if not marks:
+            seen = dataset.truth(k).cameras[cam].marks          # every mark whose centre the camera sees
+            whole = np.array([m.fully_visible for m in seen], bool)
+            if not whole.any():
                 continue
-            uv = np.array([m.uv for m in marks], float)
+            uv = np.array([m.uv for m in seen], float)[whole]
             prior = mark_prior(dataset.camera(cam, k), world.model.mark_radius, world.model.size, area.lo[:3],
                                area.hi[:3])
             det = detect_contrast_marks(image, world.model.palette, prior, body=world.model.body_colour)
             pairs, _ = match_to_truth(det.points, uv, 1.5 if prior.radius_px[1] < SMALL_SPOT_PX else 3.0)
-            hit = np.zeros(len(marks), bool)
+            hit = np.zeros(len(uv), bool)
             hit[[j for _, j in pairs]] = True
-            contrast += mark_contrast(image, outlines_in(dataset, cam, k, np.array([m.index for m in marks]))).tolist()
+            outlines = outlines_in(dataset, cam, k, np.array([m.index for m in seen]))
+            contrast += mark_contrast(image, outlines)[whole].tolist()   # the others' pixels kept out of each ring
             found += hit.tolist()
     return {"dataset": directory.name, "model": world.model.name, "scale": _scale_of(dataset.manifest.world),
             "look": look, "contrast": contrast, "found": found}
