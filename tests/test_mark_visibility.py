@@ -68,3 +68,20 @@ def test_a_bad_look_or_a_dataset_without_its_radiance_is_one_line_and_exit_2(tmp
     assert stop.value.code == 2
     assert says in capsys.readouterr().err
     assert not (tmp_path / "out.md").exists()
+
+
+def test_on_a_committed_camera_frame_each_marks_outline_is_centred_on_its_truth_and_stands_clear():
+    from benchmarks.bench_mark_visibility import outlines_in
+    from scenarios.dataset import open_dataset
+    from tests.fleet_procs import ROOT
+
+    dataset = open_dataset(ROOT / "tests" / "data" / "photoreal" / "telephoto")
+    marks = [m for m in dataset.truth(0).cameras["H1"].marks if m.fully_visible]
+    outlines = outlines_in(dataset, "H1", 0, np.array([m.index for m in marks]))
+    centres = outlines.mean(axis=1)   # a disc's outline's mean lies within a fraction of a pixel of its centre's image
+    assert np.abs(centres - np.array([m.uv for m in marks])).max() < 0.05
+    image = cv2.imread(str(dataset.image_path("H1", 0)), cv2.IMREAD_COLOR)
+    contrast = mark_contrast(image, outlines)
+    assert len(marks) >= 8 and np.all(contrast >= 10.0)   # the reference look: every telephoto mark plain
+    dim = cv2.GaussianBlur((image * 0.25).astype(np.uint8), (0, 0), 4.0)
+    assert np.median(mark_contrast(dim, outlines)) < 0.5 * np.median(contrast)
