@@ -172,6 +172,12 @@ def camera_pose(msgtype: str, message) -> np.ndarray:
         raise Rejected(err.reason, str(err).partition(": ")[2]) from None
 
 
+def header_stamp_ns(message) -> int:
+    """A stamped message's ``header.stamp`` in ns (the publisher's clock)."""
+    stamp = message.header.stamp
+    return int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
+
+
 # -- one topic, its newest valid message ----------------------------------------------------------------------------
 
 class TopicFeed(Generic[T]):
@@ -299,14 +305,15 @@ class TopicFeed(Generic[T]):
             self._lock.wait_for(lambda: self._newest is not None or self._closed, timeout)
             return self._newest
 
-    def newest_with_age(self, timeout: float = 0.0) -> tuple[T, float] | None:
-        """The newest valid value and its age in s (since its sample arrived), waiting up to ``timeout`` s for the
-        first; None if there is none yet."""
+    def newest_with_age(self, timeout: float = 0.0, after: int = 0) -> tuple[T, float, int] | None:
+        """The newest valid value, its age in s (since its sample arrived) and its number (:attr:`valid` when it
+        was kept), waiting up to ``timeout`` s for one numbered over ``after`` (0: the first); None if there is none
+        yet, else the newest even if not over ``after``."""
         with self._lock:
-            self._lock.wait_for(lambda: self._newest is not None or self._closed, timeout)
+            self._lock.wait_for(lambda: self.valid > after or self._closed, timeout)
             if self._newest is None:
                 return None
-            return self._newest, time.monotonic() - self._newest_at
+            return self._newest, time.monotonic() - self._newest_at, self.valid
 
     def describe(self) -> str:
         """What arrived, for an error line: ``3 received, 3 rejected (step 3; last: step: ...)``."""

@@ -79,7 +79,7 @@ def open_camera(config: AgentConfig, scenario: Scenario, bus: FleetBus | None = 
         return open_ros_camera(config, scenario, bus, extract, k_file, pose_file)
     return SourceCamera(open_reader(str(config.source)), scenario, config.vehicle, extract,
                         intrinsics=None if k_file is None else (lambda: k_file),
-                        world_from_camera=None if pose_file is None else (lambda: pose_file),
+                        world_from_camera=None if pose_file is None else (lambda _stamp: pose_file),
                         intrinsics_from=None if config.camera_info is None else f"--camera-info {config.camera_info}")
 
 

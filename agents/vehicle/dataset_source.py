@@ -60,17 +60,18 @@ class DatasetCamera(SourceCamera):
         reader = FileListReader(dataset.image_paths(camera_name), str(dataset.root / camera_name))
         super().__init__(reader, scenario, vehicle, extract,
                          intrinsics=None if intrinsics is None else (lambda: intrinsics),
-                         world_from_camera=None if world_from_camera is None else (lambda: world_from_camera),
+                         world_from_camera=None if world_from_camera is None else (lambda _stamp: world_from_camera),
                          intrinsics_from=intrinsics_from or f"dataset {dataset.root} camera {camera_name}")
         self.dataset, self.camera_name = dataset, camera_name
         # the fleet tick frame 0 was taken at (None: the first tick a frame is asked at), on ``clock``
         self.clock, self.first_tick = clock, first_tick
 
-    def camera(self, k: int) -> Camera:
+    def camera(self, k: int, image_stamp_ns: int | None = None) -> Camera:
         """The dataset's camera of frame ``k`` (intrinsics and pose), each replaced by the file given instead."""
         pose = self.dataset.world_from_camera(self.camera_name, k)
         k_cam = self.dataset.intrinsics(self.camera_name) if self.intrinsics is None else self.intrinsics()
-        world_from_camera = self._world_matrix(pose, k) if self.world_from_camera is None else self.world_from_camera()
+        world_from_camera = (self._world_matrix(pose, k) if self.world_from_camera is None
+                             else self.world_from_camera(None))
         return Camera(k_cam.fx, k_cam.fy, k_cam.cx, k_cam.cy, k_cam.width, k_cam.height, k_cam.distortion,
                       world_from_camera)
 

@@ -2,11 +2,14 @@
 the fleet bus's Zenoh session.
 
 - the image topic is a live source (:class:`TopicReader`): each tick of the fleet clock takes the newest valid frame,
-  the first one waited for up to :data:`~agents.vehicle.sources.FIRST_FRAME_TIMEOUT_S`;
+  the first one waited for up to :data:`~agents.vehicle.sources.FIRST_FRAME_TIMEOUT_S`, a new one (not the last
+  tick's again) up to half a frame period (none: the tick is skipped, counted ``ros2 no new image``);
 - the camera_info topic gives the intrinsics: its first valid ``sensor_msgs/msg/CameraInfo``, checked as a
   calibration file is (:func:`agents.problem.camera_info.camera_from_camera_info_message`), then the topic is left;
-- the pose topic gives ``world_from_camera``: the newest ``geometry_msgs/msg/PoseStamped`` when a frame is taken;
-  or, with ``--camera-frame``, ``map -> ... -> <frame>`` composed from ``/tf`` and ``/tf_static``
+- the pose topic gives ``world_from_camera``: the ``geometry_msgs/msg/PoseStamped`` at the image's header stamp
+  (:class:`StampedPose`, :mod:`agents.vehicle.pose_history`: the pose of that stamp, else interpolated, else the
+  nearest within 0.1 s; none: the tick is skipped, counted ``ros2 no pose``); or, with ``--camera-frame``,
+  ``map -> ... -> <frame>`` composed from the newest transforms of ``/tf`` and ``/tf_static``
   (:mod:`agents.bridges.ros_tf`).
 
 Staleness (``--source-max-age``, 1 s): an image or a pose whose sample *arrived* longer ago than that (measured on
@@ -36,12 +39,26 @@ from agents.problem.camera_info import camera_from_camera_info_message
 from vision.extract import FeatureExtractor
 from agents.transport.bus import FleetBus
 from agents.vehicle.config import AgentConfig
+from agents.vehicle.pose_history import MAX_POSE_GAP_S, PoseHistory
 from agents.vehicle.sources import (FIRST_FRAME_TIMEOUT_S, ROS_SCHEME, FrameSkipped, SourceCamera, SourceError,
                                     is_ros, open_reader)
 from agents.vehicle.team_views import MAX_DECODED_PIXELS
 
 
 STALE = "ros2 stale"
+#: A tick whose image has no camera pose near its stamp (:class:`StampedPose`).
+NO_POSE = "ros2 no pose"
+#: A tick without a new image since the last one's (:class:`TopicReader`): the camera is slower than the fleet's
+#: clock, or its frame is late. The same image is not estimated from twice (it would count as a new measurement).
+NO_NEW_IMAGE = "ros2 no new image"
+#: How long a tick waits for a new image when the newest is the last tick's, in frame periods (the image of this
+#: tick is due: a loaded publisher's or decoder's may come a little late).
+NEW_IMAGE_WAIT_SHARE = 0.5
+#: How long a frame waits for a pose at or after its image's stamp (s): a pose published with its image may arrive
+#: just after it.
+POSE_WAIT_S = 0.05
+#: The pose topic's type (imported here without agents.bridges: that room loads only when a topic is followed).
+POSE_STAMPED = "geometry_msgs/msg/PoseStamped"
 #: The agent's ROS 2 node name (namespace ``/<fleet>/<vehicle>``): it announces the subscriptions.
 AGENT_NODE = "evopose_agent"
 
@@ -63,17 +80,29 @@ class TopicReader:
     itself."""
 
     def __init__(self, feed, name: str, domain: int, first_timeout_s: float = FIRST_FRAME_TIMEOUT_S, *,
-                 max_age_s: float | None = None, on_stale: Callable[[str, str], None] | None = None) -> None:
+                 max_age_s: float | None = None, on_stale: Callable[[str, str], None] | None = None,
+                 new_image_wait_s: float = 0.0) -> None:
         self.feed, self.name, self.domain, self.first_timeout_s = feed, name, domain, first_timeout_s
-        self.max_age_s, self.on_stale = max_age_s, on_stale
+        self.max_age_s, self.on_stale, self.new_image_wait_s = max_age_s, on_stale, new_image_wait_s
+        self.stamp_ns: int | None = None   #: the header stamp of the frame last read
+        self._taken = 0   # the feed's number of the frame last read (0: none yet)
 
     def read(self) -> np.ndarray:
-        newest = self.feed.newest_with_age(self.first_timeout_s)
+        """The newest valid frame, one not read before (waited for up to ``new_image_wait_s``); its header stamp
+        (ns) is then :attr:`stamp_ns`."""
+        newest = self.feed.newest_with_age(self.first_timeout_s if not self._taken else self.new_image_wait_s,
+                                           after=self._taken)
         if newest is None:
             raise SourceError(f"--source {self.name}: no valid sensor_msgs/msg/Image or CompressedImage within "
                               f"{self.first_timeout_s:g} s on ROS domain {self.domain}: {self.feed.describe()}")
-        image, age_s = newest
+        (image, stamp_ns), age_s, number = newest
         check_age(self.feed, age_s, self.max_age_s, self.on_stale, "image")
+        if number == self._taken:   # the image of the last tick again: no new measurement (not used twice)
+            if self.on_stale is not None:
+                self.on_stale(self.feed.label, NO_NEW_IMAGE)
+            raise FrameSkipped(NO_NEW_IMAGE, f"no image on {self.feed.label} since the last frame's (waited "
+                                             f"{self.new_image_wait_s:g} s)")
+        self._taken, self.stamp_ns = number, stamp_ns
         return image
 
     def close(self) -> None:
@@ -81,32 +110,56 @@ class TopicReader:
 
 
 class TopicValue:
-    """A ROS 2 topic as a camera's intrinsics or pose: its first valid value (``keep_first``: CameraInfo, then the
-    topic is left) or its newest at each call (the pose: :class:`FrameSkipped` when it arrived more than
-    ``max_age_s`` ago), the first one waited for up to ``first_timeout_s``."""
+    """A ROS 2 topic's first valid value (the CameraInfo: the intrinsics; then the topic is left), waited for up to
+    ``first_timeout_s``."""
 
-    def __init__(self, feed, option: str, what: str, domain: int, *, keep_first: bool,
-                 first_timeout_s: float = FIRST_FRAME_TIMEOUT_S, max_age_s: float | None = None,
-                 on_stale: Callable[[str, str], None] | None = None) -> None:
+    def __init__(self, feed, option: str, what: str, domain: int, *,
+                 first_timeout_s: float = FIRST_FRAME_TIMEOUT_S) -> None:
         self.feed, self.option, self.what, self.domain = feed, option, what, domain
-        self.keep_first, self.first_timeout_s = keep_first, first_timeout_s
-        self.max_age_s, self.on_stale = max_age_s, on_stale
+        self.first_timeout_s = first_timeout_s
         self._kept = None
 
     def __call__(self):
-        if self._kept is not None:
-            return self._kept
+        if self._kept is None:
+            newest = self.feed.newest_with_age(self.first_timeout_s)
+            if newest is None:
+                raise SourceError(f"{self.option} {self.feed.label}: no valid {self.what} within "
+                                  f"{self.first_timeout_s:g} s on ROS domain {self.domain}: {self.feed.describe()}")
+            self._kept = newest[0]
+            self.feed.close()
+        return self._kept
+
+    def close(self) -> None:
+        self.feed.close()
+
+
+class StampedPose:
+    """A ``PoseStamped`` topic as a camera's pose at each image's header stamp (:class:`PoseHistory`, fed with every
+    valid pose by the topic's worker): :class:`FrameSkipped` when the newest pose arrived more than ``max_age_s``
+    ago, or when no pose lies near the image's stamp; the first pose waited for up to ``first_timeout_s``, a pose at
+    or after the image's stamp up to :data:`POSE_WAIT_S`. Without an image stamp (a file ``--source``): the newest."""
+
+    def __init__(self, feed, history: PoseHistory, domain: int, *, first_timeout_s: float = FIRST_FRAME_TIMEOUT_S,
+                 max_age_s: float | None = None, on_stale: Callable[[str, str], None] | None = None) -> None:
+        self.feed, self.history, self.domain = feed, history, domain
+        self.first_timeout_s, self.max_age_s, self.on_stale = first_timeout_s, max_age_s, on_stale
+
+    def __call__(self, image_stamp_ns: int | None = None) -> np.ndarray:
         newest = self.feed.newest_with_age(self.first_timeout_s)
         if newest is None:
-            raise SourceError(f"{self.option} {self.feed.label}: no valid {self.what} within "
+            raise SourceError(f"--camera-pose {self.feed.label}: no valid {POSE_STAMPED} within "
                               f"{self.first_timeout_s:g} s on ROS domain {self.domain}: {self.feed.describe()}")
-        value, age_s = newest
-        if not self.keep_first:
-            check_age(self.feed, age_s, self.max_age_s, self.on_stale, "pose")
-        if self.keep_first:
-            self._kept = value
-            self.feed.close()
-        return value
+        (_, world_from_camera), age_s, _ = newest
+        check_age(self.feed, age_s, self.max_age_s, self.on_stale, "pose")
+        if image_stamp_ns is None:
+            return world_from_camera
+        at = self.history.at(image_stamp_ns, POSE_WAIT_S)
+        if at is None:
+            if self.on_stale is not None:
+                self.on_stale(self.feed.label, NO_POSE)
+            raise FrameSkipped(NO_POSE, f"no pose of {self.feed.label} within {MAX_POSE_GAP_S:g} s of the image's "
+                                        f"stamp {image_stamp_ns} ns")
+        return at
 
     def close(self) -> None:
         self.feed.close()
@@ -123,7 +176,8 @@ class TfPose:
         self.first_timeout_s, self.max_age_s, self.on_stale = first_timeout_s, max_age_s, on_stale
         self._found = False
 
-    def __call__(self) -> np.ndarray:
+    def __call__(self, image_stamp_ns: int | None = None) -> np.ndarray:
+        """The newest chain's transform (the image's stamp is not looked up: the newest transforms are taken)."""
         try:
             matrix, arrived = self.tf.tree.lookup(self.frame, timeout=0.0 if self._found else self.first_timeout_s)
         except LookupError as err:
@@ -143,7 +197,8 @@ class TfPose:
         self.tf.close()
 
 
-def open_ros_inputs(config: AgentConfig, bus: FleetBus, size_of_camera: Callable[[], tuple[int, int] | None]):
+def open_ros_inputs(config: AgentConfig, bus: FleetBus, size_of_camera: Callable[[], tuple[int, int] | None],
+                    frame_period_s: float = 0.1):
     """The ROS 2 topics among ``config``'s inputs, followed on ``bus``'s session: ``(reader or None, intrinsics or
     None, world_from_camera or None, node)``; received and refused messages are counted in ``bus.counters``.
 
@@ -152,14 +207,14 @@ def open_ros_inputs(config: AgentConfig, bus: FleetBus, size_of_camera: Callable
     each token is undeclared when its topic is left, the node's with ``node.close()``.
 
     ``size_of_camera()`` is the camera's ``(width, height)`` when known: a frame of another size is refused (counted
-    ``ros2 size``), not fatal.
+    ``ros2 size``), not fatal. ``frame_period_s``: the fleet clock's (a tick waits up to half of it for a new image).
     """
     from agents.bridges import ros_msgs
     from agents.bridges.names import ros_name
     from agents.bridges.rmw_zenoh import DEFAULT_QOS, SENSOR_QOS, TF_QOS, Node, QoS
     from agents.bridges.ros2_node import Ros2Node
     from agents.bridges.ros_sources import (HEADER_BYTES, IMAGE_TYPES, SMALL_MESSAGE_BYTES, Rejected, TopicFeed,
-                                            camera_pose, decode_image, ros_topic)
+                                            camera_pose, decode_image, header_stamp_ns, ros_topic)
 
     domain, session, counters = config.ros_domain, bus.session, bus.counters
     node = Ros2Node(session, Node(AGENT_NODE, f"/{ros_name(config.fleet)}/{ros_name(config.vehicle)}"),
@@ -171,26 +226,27 @@ def open_ros_inputs(config: AgentConfig, bus: FleetBus, size_of_camera: Callable
     stale = dict(max_age_s=config.source_max_age_s, on_stale=counters.count_rejected)
     reader = intrinsics = pose = None
     if is_ros(config.source):
-        def image_of(msgtype: str, message) -> np.ndarray:
+        def image_of(msgtype: str, message) -> tuple[np.ndarray, int]:
             image = decode_image(msgtype, message, max_pixels=MAX_DECODED_PIXELS)
             size = size_of_camera()
             if size is not None and (image.shape[1], image.shape[0]) != size:
                 raise Rejected("size", f"{image.shape[1]}x{image.shape[0]}, the camera is {size[0]}x{size[1]}")
-            return image
+            return image, header_stamp_ns(message)
 
         feed = TopicFeed(session, domain, ros_topic(config.source), IMAGE_TYPES, image_of,
                          max_bytes=3 * MAX_DECODED_PIXELS + HEADER_BYTES, **common)
         # one type per subscription: image_transport's naming says which (a .../compressed topic is compressed)
         announce(feed, ros_msgs.COMPRESSED_IMAGE if feed.topic.endswith("/compressed") else ros_msgs.IMAGE,
                  SENSOR_QOS)
-        reader = TopicReader(feed, str(config.source), domain, **stale)
+        reader = TopicReader(feed, str(config.source), domain, new_image_wait_s=NEW_IMAGE_WAIT_SHARE * frame_period_s,
+                             **stale)
     if is_ros(config.camera_info):
         topic = ros_topic(config.camera_info)
         feed = TopicFeed(session, domain, topic, (ros_msgs.CAMERA_INFO,),
                          lambda _, message: camera_from_camera_info_message(message, ROS_SCHEME + topic),
                          max_bytes=SMALL_MESSAGE_BYTES, **common)
         announce(feed, ros_msgs.CAMERA_INFO, DEFAULT_QOS)
-        intrinsics = TopicValue(feed, "--camera-info", ros_msgs.CAMERA_INFO, domain, keep_first=True)
+        intrinsics = TopicValue(feed, "--camera-info", ros_msgs.CAMERA_INFO, domain)
     if is_ros(config.camera_pose) and config.camera_frame is not None:
         from agents.bridges.ros_tf import TfFeed
 
@@ -200,11 +256,15 @@ def open_ros_inputs(config: AgentConfig, bus: FleetBus, size_of_camera: Callable
         announce(tf.feeds[1], ros_msgs.TF_MESSAGE, QoS(depth=1))
         pose = TfPose(tf, config.camera_frame, domain, **stale)
     elif is_ros(config.camera_pose):
+        history = PoseHistory()
+        # every pose into the history (keep: none superseded before the worker comes to it)
         feed = TopicFeed(session, domain, ros_topic(config.camera_pose), (ros_msgs.POSE_STAMPED,),
-                         lambda msgtype, message: matrix_from_pose(camera_pose(msgtype, message)),
-                         max_bytes=SMALL_MESSAGE_BYTES, **common)
+                         lambda msgtype, message: (header_stamp_ns(message),
+                                                   matrix_from_pose(camera_pose(msgtype, message))),
+                         max_bytes=SMALL_MESSAGE_BYTES, keep=history.keep,
+                         sink=lambda value, _arrived: history.add(*value), **common)
         announce(feed, ros_msgs.POSE_STAMPED, DEFAULT_QOS)
-        pose = TopicValue(feed, "--camera-pose", ros_msgs.POSE_STAMPED, domain, keep_first=False, **stale)
+        pose = StampedPose(feed, history, domain, **stale)
     return reader, intrinsics, pose, node
 
 
@@ -242,7 +302,8 @@ def open_ros_camera(config: AgentConfig, scenario: Scenario, bus: FleetBus, extr
             return scene.width, scene.height
         return (taken[0].width, taken[0].height) if taken else None
 
-    reader, ros_intrinsics, ros_pose, node = open_ros_inputs(config, bus, size_of_camera)
+    reader, ros_intrinsics, ros_pose, node = open_ros_inputs(config, bus, size_of_camera,
+                                                             1.0 / (config.fps or scenario.spec.fps))
     closing = tuple(item for item in (ros_intrinsics, ros_pose, node) if item is not None)
     try:
         if reader is None:
@@ -258,12 +319,12 @@ def open_ros_camera(config: AgentConfig, scenario: Scenario, bus: FleetBus, extr
         return camera
 
     file_intrinsics = None if intrinsics is None else (lambda: intrinsics)
-    file_pose = None if world_from_camera is None else (lambda: world_from_camera)
+    file_pose = None if world_from_camera is None else (lambda _stamp: world_from_camera)
     return SourceCamera(reader, scenario, config.vehicle, extract,
                         intrinsics=file_intrinsics if ros_intrinsics is None else camera_info,
                         world_from_camera=ros_pose or file_pose, closing=closing,
                         intrinsics_from=None if config.camera_info is None else f"--camera-info {config.camera_info}")
 
 
-__all__ = ["AGENT_NODE", "STALE", "TfPose", "TopicReader", "TopicValue", "check_age", "check_ros_topics",
-           "open_ros_camera", "open_ros_inputs"]
+__all__ = ["AGENT_NODE", "NO_NEW_IMAGE", "NO_POSE", "STALE", "StampedPose", "TfPose", "TopicReader", "TopicValue",
+           "check_age", "check_ros_topics", "open_ros_camera", "open_ros_inputs"]

@@ -231,17 +231,19 @@ class SourceCamera:
     extracted.
 
     ``intrinsics`` and ``world_from_camera`` are asked when each frame is taken (after its image was read): a file's
-    are constant, a ROS topic's are its first valid CameraInfo and its newest pose. ``closing`` are further
-    inputs to close with the camera (the ROS topics followed).
+    are constant, a ROS topic's are its first valid CameraInfo and its pose at the image's header stamp
+    (``world_from_camera(image_stamp_ns)``: the reader's ``stamp_ns`` after the read, None for a file's frames).
+    ``closing`` are further inputs to close with the camera (the ROS topics followed).
 
-    A ROS input may raise :class:`FrameSkipped` (its newest image or pose is stale): the tick then gives a *skipped*
+    A ROS input may raise :class:`FrameSkipped` (its newest image or pose is stale, no pose near the image's
+    stamp): the tick then gives a *skipped*
     frame: no points (so no own view and no estimate from it), a black image (nothing stale is shared with
     team-mates) and the camera of the last frame taken; ``skipped`` counts them.
     """
 
     def __init__(self, reader, scenario: Scenario, vehicle: str, extract: FeatureExtractor, *,
                  intrinsics: Callable[[], Camera] | None = None,
-                 world_from_camera: Callable[[], np.ndarray] | None = None,
+                 world_from_camera: Callable[[int | None], np.ndarray] | None = None,
                  intrinsics_from: str | None = None, closing: tuple = ()) -> None:
         self.reader, self.scenario, self.extract = reader, scenario, extract
         self.vehicle = scenario.vehicle(vehicle).name
@@ -252,11 +254,13 @@ class SourceCamera:
         self.skipped = 0  # ticks without a usable frame (FrameSkipped)
         self._last_camera: Camera | None = None
 
-    def camera(self, k: int) -> Camera:
-        """The camera of the source's frame ``k``."""
+    def camera(self, k: int, image_stamp_ns: int | None = None) -> Camera:
+        """The camera of the source's frame ``k``, whose image is stamped ``image_stamp_ns`` (a ROS image's header
+        stamp: the pose is the one at that instant; None: a file's frame)."""
         scene = self.scenario.camera(self.vehicle, k % self.scenario.frames)
         k_cam = scene if self.intrinsics is None else self.intrinsics()
-        pose = scene.world_from_camera if self.world_from_camera is None else self.world_from_camera()
+        pose = (scene.world_from_camera if self.world_from_camera is None
+                else self.world_from_camera(image_stamp_ns))
         return Camera(k_cam.fx, k_cam.fy, k_cam.cx, k_cam.cy, k_cam.width, k_cam.height, k_cam.distortion, pose)
 
     def acquire(self, index: int, stamp_ns: int, near: np.ndarray | None = None) -> Frame:
@@ -266,7 +270,7 @@ class SourceCamera:
         try:
             image = self.reader.read()
             read_s = time.perf_counter() - t0
-            camera = self.camera(self.frames)
+            camera = self.camera(self.frames, getattr(self.reader, "stamp_ns", None))
         except FrameSkipped as skip:
             return self._skipped(index, stamp_ns, time.perf_counter() - t0, skip.detail)
         k, self.frames = self.frames, self.frames + 1
