@@ -12,8 +12,10 @@ from __future__ import annotations
 
 import struct
 import sys
+import threading
 import time
 import zlib
+from dataclasses import replace
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -32,7 +34,7 @@ from agents.bridges.ros_tf import TfTree, parse_transforms
 from agents.cli.main import main
 from agents.problem.camera_info import camera_from_camera_info_message
 from agents.problem.problem_file import ProblemFileError
-from agents.vehicle.pose_history import PoseHistory
+from agents.bridges.stamped import PoseHistory
 from agents.vehicle.ros_camera import StampedPose, TopicReader, TopicValue
 from agents.vehicle.sources import FrameSkipped, SourceCamera, SourceError
 from agents.vehicle.team_views import MAX_DECODED_PIXELS
@@ -409,13 +411,45 @@ def test_tf_composes_in_order_keeps_the_newest_and_counts_untrusted_transforms()
     assert np.allclose(matrix[:3, :3], [[0, -1, 0], [1, 0, 0], [0, 0, 1]], atol=1e-12)
     with pytest.raises(LookupError, match="no transform to 'nowhere'"):
         tree.lookup("nowhere")
-    tree.add([("b", "a", np.eye(4)), ("a", "b", np.eye(4))], 3.0)  # a loop
+    tree.add([("b", "a", 0, np.eye(4)), ("a", "b", 0, np.eye(4))], 3.0)  # a loop
     with pytest.raises(LookupError, match="over 32 links"):
         tree.lookup("a")
     small = TfTree(max_frames=2)
-    assert not small.add([("map", "a", np.eye(4)), ("map", "b", np.eye(4))], 0.0)
-    assert [r for r, _ in small.add([("map", "c", np.eye(4)), ("map", "a", np.eye(4) * 2)], 1.0)] == ["frames"]
+    assert not small.add([("map", "a", 0, np.eye(4)), ("map", "b", 0, np.eye(4))], 0.0)
+    assert [r for r, _ in small.add([("map", "c", 0, np.eye(4)), ("map", "a", 1, np.eye(4) * 2)], 1.0)] == ["frames"]
     assert len(small) == 2 and small.lookup("a")[0][0, 0] == 2  # a known frame is still updated
+
+
+def shifted(x: float) -> np.ndarray:
+    m = np.eye(4)
+    m[0, 3] = x
+    return m
+
+
+def test_a_tf_chain_at_an_images_stamp_takes_each_link_at_that_instant():
+    """tf2's lookupTransform at a time: the moving link (odom -> base, 1 m per 100 ms) at the image's stamp, exact
+    or interpolated; the static one (base -> cam) at every instant; a link whose stream stopped has no transform
+    there (not the newest); a transform just after the stamp is waited for."""
+    from agents.bridges.ros_tf import NoTransformAtStamp
+
+    ms = 1_000_000
+    tree = TfTree()
+    tree.add([("base", "cam", 0, shifted(0.5))], 0.0, static=True)
+    for k in range(4):
+        tree.add([("map", "odom", k * 100 * ms, np.eye(4)), ("odom", "base", k * 100 * ms, shifted(k))], 1.0)
+    assert tree.lookup_at("cam", 100 * ms)[0, 3] == 1.5 and tree.lookup("cam")[0][0, 3] == 3.5   # not the newest
+    assert tree.lookup_at("cam", 150 * ms)[0, 3] == pytest.approx(2.0)
+    with pytest.raises(NoTransformAtStamp, match="map -> odom within 0.1 s"):
+        tree.lookup_at("cam", 900 * ms)   # both streams stopped: the first link from map is named
+    late = threading.Timer(0.02, lambda: tree.add([("map", "odom", 400 * ms, np.eye(4)),
+                                                   ("odom", "base", 400 * ms, shifted(4.0))], 2.0))
+    late.start()
+    try:
+        assert tree.lookup_at("cam", 400 * ms, wait_s=2.0)[0, 3] == 4.5
+    finally:
+        late.join()
+    with pytest.raises(LookupError, match="no transform to 'nowhere'"):
+        tree.lookup_at("nowhere", 0)
 
 
 @settings(max_examples=100, deadline=None, derandomize=True)
@@ -426,7 +460,7 @@ def test_any_transform_fields_give_a_rigid_transform_or_a_rejection(values, pare
                                                        values[:3], values[3:])]))
     good, bad = parse_transforms(message)
     assert len(good) + len(bad) == 1
-    for _, _, matrix in good:
+    for _, _, _, matrix in good:
         assert np.all(np.isfinite(matrix)) and np.allclose(matrix[:3, :3] @ matrix[:3, :3].T, np.eye(3), atol=1e-9)
 
 
@@ -708,6 +742,10 @@ def test_an_agent_on_tf_skips_stale_images_and_poses(fleet, renderer_run, h1_fra
                     tf.publish(ros_msgs.serialize(mirror_tf("H1", frame.camera, stamp)))
                 if n < 2 or n >= 4:
                     images.publish(ros_msgs.serialize(image_message(frame.image, stamp)))
+                if n < 4:   # /tf runs ahead of the camera: the newest chain, 2 m off, is not the image's
+                    ahead = frame.camera.world_from_camera @ shifted(2.0)
+                    tf.publish(ros_msgs.serialize(mirror_tf("H1", replace(frame.camera, world_from_camera=ahead),
+                                                            stamp + round(0.2e9 / STALE_FPS))))
             code, records, stderr = finish(agent)
             # the camera info's token went when its topic was left; the others when the agent stopped
             assert graph.wait_for(lambda g: not agent_subscriptions(g) and AGENT not in

@@ -2,9 +2,12 @@
 
 A :class:`TfFeed` follows a ``tf2_msgs/msg/TFMessage`` topic (``/tf``) and its static sibling (``/tf_static``) in
 the rmw_zenoh format (:class:`~agents.bridges.ros_sources.TopicFeed`, a bounded queue: every message counts, each
-may carry other frames) and keeps, per child frame, the *newest* transform from its parent (:class:`TfTree`).
-``world_from_camera`` is then ``map -> ... -> <camera frame>`` composed from those newest transforms: tf2's
-``lookupTransform("map", frame, TimePointZero)``, without its interpolation in time.
+may carry other frames) and keeps, per child frame, the recent transforms from its parent by header stamp
+(:class:`TfTree`, :class:`~agents.bridges.stamped.StampedTransforms`; a ``/tf_static`` link: its one transform).
+``world_from_camera`` is then ``map -> ... -> <camera frame>`` composed from each link's transform at the image's
+header stamp (:meth:`TfTree.lookup_at`: tf2's ``lookupTransform("map", frame, stamp)``, each link at that instant,
+interpolated between its two transforms around it), or from the newest transforms (:meth:`TfTree.lookup`:
+``TimePointZero``).
 
 Everything received is untrusted: a transform with a non-finite field, a quaternion whose norm is not 1 within
 1e-3 (as a hint's), an empty or over-long frame id, or a child equal to its parent is counted by reason and
@@ -30,7 +33,8 @@ import zenoh
 from agents.bridges import ros_msgs
 from agents.bridges.names import MAP_FRAME
 from agents.bridges.ros_hints import QUATERNION_NORM_TOLERANCE
-from agents.bridges.ros_sources import SCHEME, TopicFeed
+from agents.bridges.ros_sources import SCHEME, TopicFeed, header_stamp_ns
+from agents.bridges.stamped import StampedTransforms
 
 #: Child frames kept (a tree of a few robots has tens); transforms of further new frames are dropped.
 MAX_FRAMES = 256
@@ -60,8 +64,8 @@ def matrix_from_transform(translation, quaternion) -> np.ndarray:
     return m
 
 
-def parse_transforms(message) -> tuple[list[tuple[str, str, np.ndarray]], list[tuple[str, str]]]:
-    """The transforms of a TFMessage: ``[(parent, child, parent_from_child)]`` of the valid ones and
+def parse_transforms(message) -> tuple[list[tuple[str, str, int, np.ndarray]], list[tuple[str, str]]]:
+    """The transforms of a TFMessage: ``[(parent, child, stamp_ns, parent_from_child)]`` of the valid ones and
     ``[(reason, detail)]`` of the others."""
     good, bad = [], []
     for t in message.transforms:
@@ -81,20 +85,25 @@ def parse_transforms(message) -> tuple[list[tuple[str, str, np.ndarray]], list[t
                                       "expected 1"))
             continue
         quaternion = (q.x / norm, q.y / norm, q.z / norm, q.w / norm)
-        good.append((parent, child, matrix_from_transform((tr.x, tr.y, tr.z), quaternion)))
+        good.append((parent, child, header_stamp_ns(t), matrix_from_transform((tr.x, tr.y, tr.z), quaternion)))
     return good, bad
 
 
-@dataclass(frozen=True)
+class NoTransformAtStamp(LookupError):
+    """A complete chain, but a link without a transform near the stamp looked up (its stream stopped or lags)."""
+
+
+@dataclass
 class Link:
     parent: str
-    parent_from_child: np.ndarray
-    arrived: float   #: time.monotonic() when its sample arrived
-    static: bool     #: from /tf_static: does not age
+    parent_from_child: np.ndarray   #: the newest transform
+    arrived: float   #: time.monotonic() when the newest's sample arrived
+    static: bool     #: from /tf_static: does not age, holds at every instant
+    stamped: StampedTransforms | None = None   #: a /tf link's recent transforms by stamp
 
 
 class TfTree:
-    """The newest transform to each child frame (at most ``max_frames`` of them); thread-safe."""
+    """The recent transforms to each child frame (at most ``max_frames`` of them); thread-safe."""
 
     def __init__(self, max_frames: int = MAX_FRAMES) -> None:
         self.max_frames = max_frames
@@ -106,19 +115,25 @@ class TfTree:
             return len(self._links)
 
     def add(self, transforms, arrived: float, *, static: bool = False) -> list[tuple[str, str]]:
-        """Keep each ``(parent, child, parent_from_child)``; the ``(reason, detail)`` of those dropped (new frames
-        beyond ``max_frames``)."""
+        """Keep each ``(parent, child, stamp_ns, parent_from_child)``; the ``(reason, detail)`` of those dropped
+        (new frames beyond ``max_frames``). A child given a new parent starts its history again."""
         dropped = []
         with self._changed:
-            for parent, child, matrix in transforms:
-                if child not in self._links and len(self._links) >= self.max_frames:
+            for parent, child, stamp_ns, matrix in transforms:
+                link = self._links.get(child)
+                if link is None and len(self._links) >= self.max_frames:
                     dropped.append(("frames", f"frame {child[:40]!r} is over the {self.max_frames} frames kept"))
                     continue
-                self._links[child] = Link(parent, matrix, arrived, static)
+                if link is None or link.parent != parent or link.static != static:
+                    link = self._links[child] = Link(parent, matrix, arrived, static,
+                                                     None if static else StampedTransforms())
+                link.parent_from_child, link.arrived = matrix, arrived
+                if link.stamped is not None:
+                    link.stamped.add(stamp_ns, matrix)
             self._changed.notify_all()
         return dropped
 
-    def _lookup(self, root: str, frame: str) -> tuple[np.ndarray, float | None]:
+    def _chain(self, root: str, frame: str) -> list[tuple[str, Link]]:
         chain, at = [], normalize(frame)
         while at != root:
             link = self._links.get(at)
@@ -126,12 +141,20 @@ class TfTree:
                 raise LookupError(f"no transform to {at!r}, so no chain {root} -> {frame}")
             if len(chain) >= MAX_DEPTH:
                 raise LookupError(f"the chain {root} -> {frame} is over {MAX_DEPTH} links (a loop?)")
-            chain.append(link)
+            chain.append((at, link))
             at = link.parent
+        return chain
+
+    def _lookup(self, root: str, frame: str, stamp_ns: int | None = None) -> tuple[np.ndarray, float | None]:
+        chain = self._chain(root, frame)
         matrix = np.eye(4)
-        for link in reversed(chain):
-            matrix = matrix @ link.parent_from_child
-        dynamic = [link.arrived for link in chain if not link.static]
+        for child, link in reversed(chain):
+            step = link.parent_from_child if stamp_ns is None or link.stamped is None else link.stamped.at(stamp_ns)
+            if step is None:
+                raise NoTransformAtStamp(f"no transform {link.parent} -> {child} within "
+                                         f"{link.stamped.max_gap_ns / 1e9:g} s of stamp {stamp_ns} ns")
+            matrix = matrix @ step
+        dynamic = [link.arrived for _, link in chain if not link.static]
         return matrix, (min(dynamic) if dynamic else None)
 
     def lookup(self, frame: str, root: str = MAP_FRAME, timeout: float = 0.0) -> tuple[np.ndarray, float | None]:
@@ -149,7 +172,7 @@ class TfTree:
             def found() -> bool:
                 nonlocal error
                 try:
-                    self._lookup(root, frame)
+                    self._chain(root, frame)
                 except LookupError as err:
                     error = err
                     return False
@@ -158,6 +181,30 @@ class TfTree:
             if not self._changed.wait_for(found, timeout):
                 raise error or LookupError(f"no chain {root} -> {frame}")
             return self._lookup(root, frame)
+
+    def lookup_at(self, frame: str, stamp_ns: int, root: str = MAP_FRAME, wait_s: float = 0.0) -> np.ndarray:
+        """``root_from_frame`` (4, 4) at ``stamp_ns``: each dynamic link's transform at that instant
+        (:meth:`StampedTransforms.at`), each static one as it is; waits up to ``wait_s`` for every dynamic link of
+        the chain to have a transform at or after the stamp.
+
+        Raises
+        ------
+        NoTransformAtStamp
+            A link without a transform within the gap of the stamp.
+        LookupError
+            No complete chain.
+        """
+        def caught_up() -> bool:
+            try:
+                chain = self._chain(root, frame)
+            except LookupError:
+                return True   # no waiting for a chain: the lookup says why
+            return all(link.stamped is None or (link.stamped.stamps and link.stamped.stamps[-1] >= stamp_ns)
+                       for _, link in chain)
+
+        with self._changed:
+            self._changed.wait_for(caught_up, wait_s)
+            return self._lookup(root, frame, stamp_ns)[0]
 
 
 class TfFeed:
@@ -196,5 +243,5 @@ class TfFeed:
             feed.close()
 
 
-__all__ = ["Link", "MAX_DEPTH", "MAX_FRAMES", "TfFeed", "TfTree", "matrix_from_transform", "normalize",
-           "parse_transforms"]
+__all__ = ["Link", "MAX_DEPTH", "MAX_FRAMES", "NoTransformAtStamp", "TfFeed", "TfTree", "matrix_from_transform",
+           "normalize", "parse_transforms"]

@@ -7,9 +7,9 @@ the fleet bus's Zenoh session.
 - the camera_info topic gives the intrinsics: its first valid ``sensor_msgs/msg/CameraInfo``, checked as a
   calibration file is (:func:`agents.problem.camera_info.camera_from_camera_info_message`), then the topic is left;
 - the pose topic gives ``world_from_camera``: the ``geometry_msgs/msg/PoseStamped`` at the image's header stamp
-  (:class:`StampedPose`, :mod:`agents.vehicle.pose_history`: the pose of that stamp, else interpolated, else the
+  (:class:`StampedPose`, :mod:`agents.bridges.stamped`: the pose of that stamp, else interpolated, else the
   nearest within 0.1 s; none: the tick is skipped, counted ``ros2 no pose``); or, with ``--camera-frame``,
-  ``map -> ... -> <frame>`` composed from the newest transforms of ``/tf`` and ``/tf_static``
+  ``map -> ... -> <frame>`` composed from ``/tf`` and ``/tf_static``, each link at the image's stamp the same way
   (:mod:`agents.bridges.ros_tf`).
 
 Staleness (``--source-max-age``, 1 s): an image or a pose whose sample *arrived* longer ago than that (measured on
@@ -39,7 +39,6 @@ from agents.problem.camera_info import camera_from_camera_info_message
 from vision.extract import FeatureExtractor
 from agents.transport.bus import FleetBus
 from agents.vehicle.config import AgentConfig
-from agents.vehicle.pose_history import MAX_POSE_GAP_S, PoseHistory
 from agents.vehicle.sources import (FIRST_FRAME_TIMEOUT_S, ROS_SCHEME, FrameSkipped, SourceCamera, SourceError,
                                     is_ros, open_reader)
 from agents.vehicle.team_views import MAX_DECODED_PIXELS
@@ -134,12 +133,13 @@ class TopicValue:
 
 
 class StampedPose:
-    """A ``PoseStamped`` topic as a camera's pose at each image's header stamp (:class:`PoseHistory`, fed with every
-    valid pose by the topic's worker): :class:`FrameSkipped` when the newest pose arrived more than ``max_age_s``
-    ago, or when no pose lies near the image's stamp; the first pose waited for up to ``first_timeout_s``, a pose at
-    or after the image's stamp up to :data:`POSE_WAIT_S`. Without an image stamp (a file ``--source``): the newest."""
+    """A ``PoseStamped`` topic as a camera's pose at each image's header stamp (``history``, an
+    :class:`agents.bridges.stamped.PoseHistory` fed with every valid pose by the topic's worker):
+    :class:`FrameSkipped` when the newest pose arrived more than ``max_age_s`` ago, or when no pose lies near the
+    image's stamp; the first pose waited for up to ``first_timeout_s``, a pose at or after the image's stamp up to
+    :data:`POSE_WAIT_S`. Without an image stamp (a file ``--source``): the newest."""
 
-    def __init__(self, feed, history: PoseHistory, domain: int, *, first_timeout_s: float = FIRST_FRAME_TIMEOUT_S,
+    def __init__(self, feed, history, domain: int, *, first_timeout_s: float = FIRST_FRAME_TIMEOUT_S,
                  max_age_s: float | None = None, on_stale: Callable[[str, str], None] | None = None) -> None:
         self.feed, self.history, self.domain = feed, history, domain
         self.first_timeout_s, self.max_age_s, self.on_stale = first_timeout_s, max_age_s, on_stale
@@ -157,8 +157,8 @@ class StampedPose:
         if at is None:
             if self.on_stale is not None:
                 self.on_stale(self.feed.label, NO_POSE)
-            raise FrameSkipped(NO_POSE, f"no pose of {self.feed.label} within {MAX_POSE_GAP_S:g} s of the image's "
-                                        f"stamp {image_stamp_ns} ns")
+            raise FrameSkipped(NO_POSE, f"no pose of {self.feed.label} within {self.history.max_gap_s:g} s of the "
+                                        f"image's stamp {image_stamp_ns} ns")
         return at
 
     def close(self) -> None:
@@ -166,9 +166,12 @@ class StampedPose:
 
 
 class TfPose:
-    """``world_from_camera`` from ``/tf``: ``map -> ... -> frame`` composed from the newest transforms at each call
-    (the first complete chain waited for up to ``first_timeout_s``); :class:`FrameSkipped` when its oldest dynamic
-    link arrived more than ``max_age_s`` ago, or when the chain broke (counted ``ros2 tf chain``)."""
+    """``world_from_camera`` from ``/tf``: ``map -> ... -> frame`` with each link at the image's header stamp
+    (:meth:`agents.bridges.ros_tf.TfTree.lookup_at`; a link's transform just after the stamp waited for up to
+    :data:`POSE_WAIT_S`; without a stamp: the newest transforms). The first complete chain is waited for up to
+    ``first_timeout_s``; :class:`FrameSkipped` when the chain's oldest dynamic link arrived more than ``max_age_s``
+    ago, when the chain broke (counted ``ros2 tf chain``), or when a link has no transform near the image's stamp
+    (``ros2 no pose``)."""
 
     def __init__(self, tf, frame: str, domain: int, *, first_timeout_s: float = FIRST_FRAME_TIMEOUT_S,
                  max_age_s: float | None = None, on_stale: Callable[[str, str], None] | None = None) -> None:
@@ -177,9 +180,19 @@ class TfPose:
         self._found = False
 
     def __call__(self, image_stamp_ns: int | None = None) -> np.ndarray:
-        """The newest chain's transform (the image's stamp is not looked up: the newest transforms are taken)."""
+        from agents.bridges.ros_tf import NoTransformAtStamp
+
         try:
             matrix, arrived = self.tf.tree.lookup(self.frame, timeout=0.0 if self._found else self.first_timeout_s)
+            self._found = True
+            check_age(self, 0.0 if arrived is None else time.monotonic() - arrived, self.max_age_s, self.on_stale,
+                      f"transform chain map -> {self.frame}")
+            if image_stamp_ns is not None:
+                matrix = self.tf.tree.lookup_at(self.frame, image_stamp_ns, wait_s=POSE_WAIT_S)
+        except NoTransformAtStamp as err:
+            if self.on_stale is not None:
+                self.on_stale(self.label, NO_POSE)
+            raise FrameSkipped(NO_POSE, str(err)) from None
         except LookupError as err:
             if not self._found:
                 raise SourceError(f"--camera-pose {self.label}: no transform chain map -> {self.frame} within "
@@ -188,9 +201,6 @@ class TfPose:
             if self.on_stale is not None:
                 self.on_stale(self.label, "ros2 tf chain")
             raise FrameSkipped("ros2 tf chain", str(err)) from None
-        self._found = True
-        check_age(self, 0.0 if arrived is None else time.monotonic() - arrived, self.max_age_s, self.on_stale,
-                  f"transform chain map -> {self.frame}")
         return matrix
 
     def close(self) -> None:
@@ -215,6 +225,7 @@ def open_ros_inputs(config: AgentConfig, bus: FleetBus, size_of_camera: Callable
     from agents.bridges.ros2_node import Ros2Node
     from agents.bridges.ros_sources import (HEADER_BYTES, IMAGE_TYPES, SMALL_MESSAGE_BYTES, Rejected, TopicFeed,
                                             camera_pose, decode_image, header_stamp_ns, ros_topic)
+    from agents.bridges.stamped import PoseHistory
 
     domain, session, counters = config.ros_domain, bus.session, bus.counters
     node = Ros2Node(session, Node(AGENT_NODE, f"/{ros_name(config.fleet)}/{ros_name(config.vehicle)}"),

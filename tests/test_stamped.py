@@ -1,4 +1,4 @@
-"""A camera's pose at its image's header stamp (agents/vehicle/pose_history.py), tested by its effect."""
+"""A pose at its image's header stamp (agents/bridges/stamped.py), tested by its effect."""
 
 import threading
 import time
@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from agents.vehicle.pose_history import KEEP, MAX_POSE_GAP_S, PoseHistory
+from agents.bridges.stamped import KEEP, MAX_POSE_GAP_S, PoseHistory, StampedTransforms
 
 MS = 1_000_000
 
@@ -49,10 +49,10 @@ def test_poses_out_of_order_and_a_stray_stamp_do_not_move_an_images_pose():
 
 
 def test_the_history_is_bounded():
-    history = PoseHistory()
+    stream = StampedTransforms()
     for k in range(10 * KEEP):
-        history.add(k * MS, pose(k, 0.0))
-    assert len(history._stamps) == KEEP and history._stamps[0] == (9 * KEEP) * MS
+        stream.add(k * MS, pose(k, 0.0))
+    assert len(stream) == KEEP and stream.stamps[0] == (9 * KEEP) * MS
 
 
 def test_a_pose_published_just_after_its_image_is_waited_for():
