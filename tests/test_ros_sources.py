@@ -295,6 +295,10 @@ def test_the_staleness_rule_counts_and_skips_an_old_image_or_pose():
     with pytest.raises(FrameSkipped) as err:   # an image a second after every pose: none at its instant
         pose(7 + 10**9)
     assert err.value.reason == "ros2 no pose" and stale[-1] == ("ros2:/cam", "ros2 no pose")
+    # unstamped (0: tf2's "the latest"), an image or the poses: the newest pose
+    assert np.array_equal(pose(0), np.eye(4))
+    unstamped = StampedPose(FakeFeed((0, 2 * np.eye(4)), 0.1), PoseHistory(), 0, max_age_s=1.0)
+    assert np.array_equal(unstamped(7 + 10**9), 2 * np.eye(4))
     info = TopicValue(FakeFeed("intrinsics", 100.0), "--camera-info", "info", 0)
     assert info() == "intrinsics"  # the CameraInfo is taken once: it does not go stale
     with pytest.raises(SourceError, match="within 0 s on ROS domain 0: nothing received"):

@@ -137,7 +137,8 @@ class StampedPose:
     :class:`agents.bridges.stamped.PoseHistory` fed with every valid pose by the topic's worker):
     :class:`FrameSkipped` when the newest pose arrived more than ``max_age_s`` ago, or when no pose lies near the
     image's stamp; the first pose waited for up to ``first_timeout_s``, a pose at or after the image's stamp up to
-    :data:`POSE_WAIT_S`. Without an image stamp (a file ``--source``): the newest."""
+    :data:`POSE_WAIT_S`. Without an image stamp (a file ``--source``), or either stamped 0 (unstamped: tf2 reads
+    time 0 as "the latest"): the newest."""
 
     def __init__(self, feed, history, domain: int, *, first_timeout_s: float = FIRST_FRAME_TIMEOUT_S,
                  max_age_s: float | None = None, on_stale: Callable[[str, str], None] | None = None) -> None:
@@ -149,9 +150,9 @@ class StampedPose:
         if newest is None:
             raise SourceError(f"--camera-pose {self.feed.label}: no valid {POSE_STAMPED} within "
                               f"{self.first_timeout_s:g} s on ROS domain {self.domain}: {self.feed.describe()}")
-        (_, world_from_camera), age_s, _ = newest
+        (pose_stamp_ns, world_from_camera), age_s, _ = newest
         check_age(self.feed, age_s, self.max_age_s, self.on_stale, "pose")
-        if image_stamp_ns is None:
+        if not image_stamp_ns or not pose_stamp_ns:   # no stamp (0: "the latest", as tf2 reads time 0): the newest
             return world_from_camera
         at = self.history.at(image_stamp_ns, POSE_WAIT_S)
         if at is None:
@@ -168,7 +169,7 @@ class StampedPose:
 class TfPose:
     """``world_from_camera`` from ``/tf``: ``map -> ... -> frame`` with each link at the image's header stamp
     (:meth:`agents.bridges.ros_tf.TfTree.lookup_at`; a link's transform just after the stamp waited for up to
-    :data:`POSE_WAIT_S`; without a stamp: the newest transforms). The first complete chain is waited for up to
+    :data:`POSE_WAIT_S`; without a stamp or stamped 0: the newest transforms). The first complete chain is waited for up to
     ``first_timeout_s``; :class:`FrameSkipped` when the chain's oldest dynamic link arrived more than ``max_age_s``
     ago, when the chain broke (counted ``ros2 tf chain``), or when a link has no transform near the image's stamp
     (``ros2 no pose``)."""
@@ -187,7 +188,7 @@ class TfPose:
             self._found = True
             check_age(self, 0.0 if arrived is None else time.monotonic() - arrived, self.max_age_s, self.on_stale,
                       f"transform chain map -> {self.frame}")
-            if image_stamp_ns is not None:
+            if image_stamp_ns:   # an image stamped 0: the newest chain (tf2's time 0)
                 matrix = self.tf.tree.lookup_at(self.frame, image_stamp_ns, wait_s=POSE_WAIT_S)
         except NoTransformAtStamp as err:
             if self.on_stale is not None:
