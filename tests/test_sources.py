@@ -3,7 +3,9 @@ the renderer; the ROS camera_info reader; one line and exit 2 for every bad inpu
 
 from __future__ import annotations
 
+import queue
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -15,7 +17,7 @@ import yaml
 from agents.cli.main import main
 from agents.problem.camera_info import read_camera_file, read_camera_info, read_camera_pose
 from agents.problem.problem_file import ProblemFileError
-from agents.vehicle.sources import CaptureReader, LatestFrameReader, SourceEnded, open_reader
+from agents.vehicle.sources import CaptureReader, FrameSkipped, LatestFrameReader, SourceEnded, open_reader
 from scenarios.render import render_frame
 from scenarios.world import load_scenario
 from tests.fleet_procs import Proc, free_port, release_when_warm
@@ -156,20 +158,55 @@ def test_a_directory_plays_its_images_in_name_order(h1_media):
 
 
 def test_a_live_reader_returns_the_newest_frame_and_ends_with_its_device(h1_media):
-    """The device path's reader, on a video file read as fast as it decodes: each read gives the newest frame
-    (never an older one than the previous read), and the end of the stream ends the source."""
+    """The device path's reader, on a video file read as fast as it decodes: each read gives the newest frame, never
+    one read before (a tick without a new one is skipped), and the end of the stream ends the source."""
     folder, images, video, _ = h1_media
     reader = LatestFrameReader(cv2.VideoCapture(str(folder / "seq" / "h1_%02d.png")), "seq")
     try:
-        seen = []
+        seen, skipped = [], 0
         while True:
             try:
                 image = reader.read()
             except SourceEnded:
                 break
+            except FrameSkipped as skip:
+                assert skip.reason == "no new image"
+                skipped += 1
+                continue
             seen.append(next(k for k, im in enumerate(images) if np.array_equal(im, image)))
             time.sleep(0.05)
-        assert seen == sorted(seen) and reader.frames_read == FRAMES
+        assert seen == sorted(set(seen)) and reader.frames_read == FRAMES
+    finally:
+        reader.close()
+
+
+class QueuedCapture:
+    """A device whose frames come when the test puts them (None: the device stops)."""
+
+    def __init__(self) -> None:
+        self.frames: queue.Queue = queue.Queue()
+
+    def read(self):
+        frame = self.frames.get()
+        return (frame is not None), frame
+
+    def release(self) -> None:
+        self.frames.put(None)
+
+
+def test_a_live_reader_never_gives_one_frame_twice():
+    """A camera slower than the fleet's clock: a tick without a new frame waits up to new_frame_wait_s, then is
+    skipped; the frame that comes later is the next tick's."""
+    capture = QueuedCapture()
+    reader = LatestFrameReader(capture, "slow", first_timeout_s=5.0, new_frame_wait_s=0.05)
+    a, b = np.zeros((2, 2, 3), np.uint8), np.ones((2, 2, 3), np.uint8)
+    try:
+        capture.frames.put(a)
+        assert reader.read() is a
+        with pytest.raises(FrameSkipped, match="no new image: no frame from slow since the last tick's"):
+            reader.read()
+        threading.Timer(0.01, capture.frames.put, (b,)).start()   # a frame just after the tick: waited for
+        assert reader.read() is b
     finally:
         reader.close()
 

@@ -17,7 +17,7 @@ from agents.transport.bus import FleetBus
 from agents.vehicle.config import AgentConfig
 from agents.vehicle.dataset_source import dataset_location, open_dataset_camera
 from agents.vehicle.frames import SimulatedCamera, fleet_clock
-from agents.vehicle.sources import SourceCamera, is_ros, open_reader
+from agents.vehicle.sources import NEW_IMAGE_WAIT_SHARE, SourceCamera, is_ros, open_reader
 
 
 def _mark_scorer(config: AgentConfig):
@@ -77,7 +77,8 @@ def open_camera(config: AgentConfig, scenario: Scenario, bus: FleetBus | None = 
         return SimulatedCamera(scenario, config.vehicle, extract)
     if ros_inputs:
         return open_ros_camera(config, scenario, bus, extract, k_file, pose_file)
-    return SourceCamera(open_reader(str(config.source)), scenario, config.vehicle, extract,
+    return SourceCamera(open_reader(str(config.source), NEW_IMAGE_WAIT_SHARE / (config.fps or scenario.spec.fps)),
+                        scenario, config.vehicle, extract,
                         intrinsics=None if k_file is None else (lambda: k_file),
                         world_from_camera=None if pose_file is None else (lambda _stamp: pose_file),
                         intrinsics_from=None if config.camera_info is None else f"--camera-info {config.camera_info}")

@@ -39,20 +39,17 @@ from agents.problem.camera_info import camera_from_camera_info_message
 from vision.extract import FeatureExtractor
 from agents.transport.bus import FleetBus
 from agents.vehicle.config import AgentConfig
-from agents.vehicle.sources import (FIRST_FRAME_TIMEOUT_S, ROS_SCHEME, FrameSkipped, SourceCamera, SourceError,
-                                    is_ros, open_reader)
+from agents.vehicle.sources import (FIRST_FRAME_TIMEOUT_S, NEW_IMAGE_WAIT_SHARE, ROS_SCHEME, FrameSkipped,
+                                    SourceCamera, SourceError, is_ros, open_reader)
+from agents.vehicle.sources import NO_NEW_IMAGE as SOURCE_NO_NEW_IMAGE
 from agents.vehicle.team_views import MAX_DECODED_PIXELS
 
 
 STALE = "ros2 stale"
 #: A tick whose image has no camera pose near its stamp (:class:`StampedPose`).
 NO_POSE = "ros2 no pose"
-#: A tick without a new image since the last one's (:class:`TopicReader`): the camera is slower than the fleet's
-#: clock, or its frame is late. The same image is not estimated from twice (it would count as a new measurement).
-NO_NEW_IMAGE = "ros2 no new image"
-#: How long a tick waits for a new image when the newest is the last tick's, in frame periods (the image of this
-#: tick is due: a loaded publisher's or decoder's may come a little late).
-NEW_IMAGE_WAIT_SHARE = 0.5
+#: A tick without a new image since the last one's (:class:`TopicReader`; :data:`sources.NO_NEW_IMAGE`).
+NO_NEW_IMAGE = "ros2 " + SOURCE_NO_NEW_IMAGE
 #: How long a frame waits for a pose at or after its image's stamp (s): a pose published with its image may arrive
 #: just after it.
 POSE_WAIT_S = 0.05
@@ -169,10 +166,10 @@ class StampedPose:
 class TfPose:
     """``world_from_camera`` from ``/tf``: ``map -> ... -> frame`` with each link at the image's header stamp
     (:meth:`agents.bridges.ros_tf.TfTree.lookup_at`; a link's transform just after the stamp waited for up to
-    :data:`POSE_WAIT_S`; without a stamp or stamped 0: the newest transforms). The first complete chain is waited for up to
-    ``first_timeout_s``; :class:`FrameSkipped` when the chain's oldest dynamic link arrived more than ``max_age_s``
-    ago, when the chain broke (counted ``ros2 tf chain``), or when a link has no transform near the image's stamp
-    (``ros2 no pose``)."""
+    :data:`POSE_WAIT_S`; without a stamp or stamped 0: the newest transforms). The first complete chain is waited
+    for up to ``first_timeout_s``; :class:`FrameSkipped` when the chain's oldest dynamic link arrived more than
+    ``max_age_s`` ago, when the chain broke (counted ``ros2 tf chain``), or when a link has no transform near the
+    image's stamp (``ros2 no pose``)."""
 
     def __init__(self, tf, frame: str, domain: int, *, first_timeout_s: float = FIRST_FRAME_TIMEOUT_S,
                  max_age_s: float | None = None, on_stale: Callable[[str, str], None] | None = None) -> None:
@@ -319,7 +316,7 @@ def open_ros_camera(config: AgentConfig, scenario: Scenario, bus: FleetBus, extr
     closing = tuple(item for item in (ros_intrinsics, ros_pose, node) if item is not None)
     try:
         if reader is None:
-            reader = open_reader(str(config.source))
+            reader = open_reader(str(config.source), NEW_IMAGE_WAIT_SHARE / (config.fps or scenario.spec.fps))
     except BaseException:
         for item in closing:
             item.close()

@@ -69,9 +69,18 @@ class SourceEnded(Exception):
     """A file source has no more frames: the vehicle stops and reports its summary."""
 
 
+#: A live camera's tick without a new image since the last tick's (the same image is not estimated from twice: it
+#: would count as a new measurement).
+NO_NEW_IMAGE = "no new image"
+#: How long a live camera's tick waits for a new image when the newest is the last tick's, in frame periods (the
+#: image of this tick is due: a loaded publisher's or decoder's may come a little late).
+NEW_IMAGE_WAIT_SHARE = 0.5
+
+
 class FrameSkipped(Exception):
-    """A live input has nothing usable at this tick (a ROS image or camera pose older than ``--source-max-age``):
-    the frame is taken without points, so no estimate is made from it; ``reason`` names its counter."""
+    """A live input has nothing usable at this tick (a ROS image or camera pose older than ``--source-max-age``, no
+    new image since the last tick's): the frame is taken without points, so no estimate is made from it; ``reason``
+    names its counter."""
 
     def __init__(self, reason: str, detail: str) -> None:
         super().__init__(f"{reason}: {detail}")
@@ -136,12 +145,17 @@ class FileListReader:
 
 class LatestFrameReader:
     """A live camera: a thread reads it continuously and keeps only the newest frame, which :meth:`read` returns
-    (a slow frame loop never works through a backlog). Ends when the device stops delivering."""
+    (a slow frame loop never works through a backlog), never the same frame twice: a tick without a new one (a
+    camera slower than the fleet's clock) waits up to ``new_frame_wait_s`` for it, then is skipped
+    (:class:`FrameSkipped` ``no new image``). Ends when the device stops delivering."""
 
-    def __init__(self, capture: cv2.VideoCapture, name: str, first_timeout_s: float = FIRST_FRAME_TIMEOUT_S) -> None:
+    def __init__(self, capture: cv2.VideoCapture, name: str, first_timeout_s: float = FIRST_FRAME_TIMEOUT_S,
+                 new_frame_wait_s: float = 0.0) -> None:
         self.capture, self.name, self.first_timeout_s = capture, name, first_timeout_s
+        self.new_frame_wait_s = new_frame_wait_s
         self._latest: np.ndarray | None = None
         self._count = 0  # frames read from the device so far
+        self._taken = 0  # the count at the frame last returned
         self._ended = False
         self._fresh = threading.Condition()
         self._stop = threading.Event()
@@ -166,12 +180,18 @@ class LatestFrameReader:
         return self._count
 
     def read(self) -> np.ndarray:
-        """The newest frame (waiting for the first one); :class:`SourceEnded` once the device stopped."""
+        """The newest frame not returned before (waiting for the first one); :class:`SourceEnded` once the device
+        stopped, :class:`FrameSkipped` when no new frame came within ``new_frame_wait_s``."""
         with self._fresh:
-            if not self._fresh.wait_for(lambda: self._latest is not None or self._ended, self.first_timeout_s):
-                raise SourceError(f"--source {self.name}: no frame within {self.first_timeout_s:g} s")
+            wait_s = self.new_frame_wait_s if self._taken else self.first_timeout_s
+            if not self._fresh.wait_for(lambda: self._count > self._taken or self._ended, wait_s):
+                if not self._taken:
+                    raise SourceError(f"--source {self.name}: no frame within {self.first_timeout_s:g} s")
+                raise FrameSkipped(NO_NEW_IMAGE, f"no frame from {self.name} since the last tick's (waited "
+                                                 f"{wait_s:g} s)")
             if self._ended:
                 raise SourceEnded(self.name)
+            self._taken = self._count
             return self._latest
 
     def close(self) -> None:
@@ -187,8 +207,9 @@ def _device(source: str) -> int | str | None:
     return source if source.startswith("/dev/video") else None
 
 
-def open_reader(source: str) -> CaptureReader | FileListReader | LatestFrameReader:
-    """A reader of ``source`` (see the module's docstring); :class:`SourceError` when it cannot be opened."""
+def open_reader(source: str, new_frame_wait_s: float = 0.0) -> CaptureReader | FileListReader | LatestFrameReader:
+    """A reader of ``source`` (see the module's docstring); :class:`SourceError` when it cannot be opened.
+    ``new_frame_wait_s``: how long a device's tick waits for a new frame (:class:`LatestFrameReader`)."""
     device = _device(source)
     if device is not None:
         if isinstance(device, str) and not os.path.exists(device):
@@ -197,7 +218,7 @@ def open_reader(source: str) -> CaptureReader | FileListReader | LatestFrameRead
             capture = cv2.VideoCapture(device, cv2.CAP_V4L2)
         if not capture.isOpened():
             raise SourceError(f"--source {source}: the V4L2 device does not open (busy, not a camera, or no access)")
-        return LatestFrameReader(capture, source)
+        return LatestFrameReader(capture, source, new_frame_wait_s=new_frame_wait_s)
     path = Path(source)
     if path.is_dir():
         files = sorted(p for p in path.iterdir() if p.is_file() and p.suffix.lower() in IMAGE_SUFFIXES)
@@ -309,5 +330,5 @@ def is_ros(spec: object) -> bool:
     return spec is not None and str(spec).startswith(ROS_SCHEME)
 
 
-__all__ = ["CaptureReader", "FileListReader", "FrameSkipped", "LatestFrameReader", "SourceCamera", "SourceEnded",
-           "SourceError", "is_ros", "open_reader", "quiet_native_stderr"]
+__all__ = ["CaptureReader", "FileListReader", "FrameSkipped", "LatestFrameReader", "NEW_IMAGE_WAIT_SHARE",
+           "NO_NEW_IMAGE", "SourceCamera", "SourceEnded", "SourceError", "is_ros", "open_reader", "quiet_native_stderr"]
