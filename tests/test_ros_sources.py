@@ -109,6 +109,53 @@ def test_raw_images_decode_to_bgr_or_grey(encoding):
     assert np.array_equal(decoded, source)
 
 
+def packed(encoding: str, bgr: np.ndarray) -> np.ndarray:
+    """A BGR image as a camera sends it in ``encoding``: 4 channels, a Bayer mosaic (named by its top-left 2 x 2
+    block), or YUV 4:2:2 (UYVY or YUYV), each pair of pixels sharing the first one's chroma."""
+    if encoding in ("bgra8", "rgba8"):
+        return cv2.cvtColor(bgr, cv2.COLOR_BGR2BGRA if encoding == "bgra8" else cv2.COLOR_BGR2RGBA)
+    if encoding.startswith("bayer_"):
+        channel = {"b": 0, "g": 1, "r": 2}
+        mosaic = np.zeros(bgr.shape[:2], np.uint8)
+        for k, colour in enumerate(encoding[6:10]):
+            dy, dx = divmod(k, 2)
+            mosaic[dy::2, dx::2] = bgr[dy::2, dx::2, channel[colour]]
+        return mosaic
+    # a camera's YUV: BT.601 video range (Y 16-235), which OpenCV's 4:2:2 conversions undo
+    b, g, r = (bgr[..., k].astype(float) / 255.0 for k in range(3))
+    yuv = np.stack([16 + 65.481 * r + 128.553 * g + 24.966 * b, 128 - 37.797 * r - 74.203 * g + 112.0 * b,
+                    128 + 112.0 * r - 93.786 * g - 18.214 * b], axis=-1)
+    yuv = np.clip(np.round(yuv), 0, 255).astype(np.uint8)
+    y, u, v = yuv[..., 0], yuv[:, 0::2, 1], yuv[:, 0::2, 2]
+    out = np.zeros(bgr.shape[:2] + (2,), np.uint8)
+    out[..., 1 if encoding == "yuv422" else 0] = y
+    out[:, 0::2, 0 if encoding == "yuv422" else 1], out[:, 1::2, 0 if encoding == "yuv422" else 1] = u, v
+    return out
+
+
+@pytest.mark.parametrize("encoding", ["bgra8", "rgba8", "bayer_rggb8", "bayer_bggr8", "bayer_gbrg8", "bayer_grbg8",
+                                      "yuv422", "yuv422_yuy2"])
+def test_camera_encodings_decode_to_the_colours_sent(encoding):
+    """What drivers publish besides 8-bit BGR/RGB: 4 channels (simulators), a Bayer mosaic (machine-vision cameras'
+    raw image), YUV 4:2:2 (USB cameras). A flat colour comes back as sent (within the YUV rounding); a wrong
+    Bayer pattern or chroma order would swap the channels."""
+    colour = (40, 120, 220)   # B, G, R all different: any swap shows
+    flat = np.full((6, 8, 3), colour, np.uint8)
+    pixels = packed(encoding, flat)
+    frame = SimpleNamespace(height=6, width=8, channels=1 if pixels.ndim == 2 else pixels.shape[2],
+                            data=pixels.tobytes())
+    message = ros_msgs.image(frame, STAMP_NS, OPTICAL)
+    message.encoding = encoding
+    decoded = decode_image(ros_msgs.IMAGE, roundtrip(message), max_pixels=48)
+    assert decoded.shape == (6, 8, 3) and np.abs(decoded.astype(int) - colour).max() <= 2, (encoding, decoded[2, 3])
+    odd = SimpleNamespace(height=1, width=7, channels=frame.channels, data=bytes(7 * frame.channels))
+    message = ros_msgs.image(odd, STAMP_NS, OPTICAL)
+    message.encoding = encoding
+    if encoding.startswith("bayer") or encoding.startswith("yuv"):   # no 2 x 2 block, an odd width: refused
+        with pytest.raises(Rejected, match="Bayer mosaic needs 2 x 2 blocks"):
+            decode_image(ros_msgs.IMAGE, roundtrip(message), max_pixels=48)
+
+
 def test_a_padded_step_is_cut_to_the_row():
     message = image_message(IMAGE, STAMP_NS)
     padded = np.zeros((6, 8 * 3 + 8), np.uint8)
@@ -177,7 +224,8 @@ def test_each_hostile_image_is_refused_with_its_reason(msgtype, message, reason)
 @example(width=7, height=3, step=21, encoding="rgb8", size=None)
 @example(width=7, height=3, step=9, encoding="mono8", size=None)
 @given(width=st.integers(-2, 40), height=st.integers(-2, 40), step=st.integers(-1, 130),
-       encoding=st.sampled_from(["bgr8", "rgb8", "mono8", "rgba8", "", "bgr8\x00"]),
+       encoding=st.sampled_from(["bgr8", "rgb8", "mono8", "rgba8", "bayer_rggb8", "yuv422_yuy2", "mono16", "",
+                                 "bgr8\x00"]),
        size=st.one_of(st.none(), st.integers(0, 2000)))  # None: height x step, as a sane publisher sends
 def test_any_raw_image_fields_give_an_image_of_their_size_or_a_rejection(width, height, step, encoding, size):
     """Whatever a publisher puts in the fields (uint32 on the wire), the decoder returns the frame they describe or

@@ -44,7 +44,15 @@ SCHEME = "ros2:"
 #: The image types an image topic may carry.
 IMAGE_TYPES = (ros_msgs.IMAGE, ros_msgs.COMPRESSED_IMAGE)
 #: Bytes per pixel of the raw encodings taken (8 bits per channel).
-CHANNELS = {"rgb8": 3, "bgr8": 3, "mono8": 1}
+#: The ``Image`` encodings taken (sensor_msgs/image_encodings.hpp): bytes per pixel, and OpenCV's conversion to BGR
+#: (None: taken as is; ``mono8`` stays grey). Bayer mosaics are named by their top-left 2 x 2 block (``rggb``: red
+#: first), as OpenCV's ``COLOR_BayerRGGB2BGR`` is; ``yuv422`` is UYVY and ``yuv422_yuy2`` YUYV, 2 bytes a pixel.
+ENCODINGS: dict[str, tuple[int, int | None]] = {
+    "bgr8": (3, None), "rgb8": (3, cv2.COLOR_RGB2BGR), "mono8": (1, None),
+    "bgra8": (4, cv2.COLOR_BGRA2BGR), "rgba8": (4, cv2.COLOR_RGBA2BGR),
+    "bayer_rggb8": (1, cv2.COLOR_BayerRGGB2BGR), "bayer_bggr8": (1, cv2.COLOR_BayerBGGR2BGR),
+    "bayer_gbrg8": (1, cv2.COLOR_BayerGBRG2BGR), "bayer_grbg8": (1, cv2.COLOR_BayerGRBG2BGR),
+    "yuv422": (2, cv2.COLOR_YUV2BGR_UYVY), "yuv422_yuy2": (2, cv2.COLOR_YUV2BGR_YUY2)}
 #: CDR bytes of a message other than its image data (header, strings): a payload larger than the image data
 #: the pixel budget allows plus this is refused before it is read.
 HEADER_BYTES = 64 * 1024
@@ -88,11 +96,14 @@ def ros_topic(uri: str) -> str:
 
 def _raw_image(message, max_pixels: int) -> np.ndarray:
     encoding, width, height, step = str(message.encoding), int(message.width), int(message.height), int(message.step)
-    channels = CHANNELS.get(encoding)
-    if channels is None:
-        raise Rejected("encoding", f"encoding {encoding!r}, expected one of {', '.join(CHANNELS)}")
+    if encoding not in ENCODINGS:
+        raise Rejected("encoding", f"encoding {encoding!r}, expected one of {', '.join(ENCODINGS)}")
+    channels, conversion = ENCODINGS[encoding]
     if width <= 0 or height <= 0:
         raise Rejected("size", f"{width}x{height}, expected a width and a height > 0")
+    if (encoding.startswith("bayer") and min(width, height) < 2) or (channels == 2 and width % 2):
+        raise Rejected("size", f"{width}x{height} {encoding}: a Bayer mosaic needs 2 x 2 blocks, YUV 4:2:2 an even "
+                               "width")
     if width * height > max_pixels:
         raise Rejected("pixels", f"{width}x{height} is over the budget of {max_pixels} pixels")
     if step < width * channels:
@@ -101,10 +112,8 @@ def _raw_image(message, max_pixels: int) -> np.ndarray:
     if data.size != height * step:
         raise Rejected("length", f"{data.size} data bytes, expected height x step = {height * step}")
     rows = data.reshape(height, step)[:, :width * channels]
-    if channels == 1:
-        return np.ascontiguousarray(rows)
-    image = rows.reshape(height, width, 3)
-    return cv2.cvtColor(image, cv2.COLOR_RGB2BGR) if encoding == "rgb8" else np.ascontiguousarray(image)
+    image = np.ascontiguousarray(rows if channels == 1 else rows.reshape(height, width, channels))
+    return image if conversion is None else cv2.cvtColor(image, conversion)
 
 
 def _compressed_image(message, max_pixels: int) -> np.ndarray:
@@ -139,8 +148,8 @@ def _compressed_image(message, max_pixels: int) -> np.ndarray:
 
 
 def decode_image(msgtype: str, message, *, max_pixels: int) -> np.ndarray:
-    """The pixels of an ``Image`` (``rgb8``, ``bgr8``, ``mono8``) or a JPEG/PNG ``CompressedImage``: uint8, BGR
-    (H, W, 3) or grey (H, W).
+    """The pixels of an ``Image`` (an encoding of :data:`ENCODINGS`: 8-bit colour, grey, Bayer or YUV 4:2:2) or a
+    JPEG/PNG ``CompressedImage``: uint8, BGR (H, W, 3) or grey (H, W).
 
     Raises
     ------
@@ -338,5 +347,5 @@ class TopicFeed(Generic[T]):
         self._worker.join(2.0)
 
 
-__all__ = ["CHANNELS", "HEADER_BYTES", "IMAGE_TYPES", "Rejected", "SCHEME", "SMALL_MESSAGE_BYTES", "TopicFeed",
+__all__ = ["ENCODINGS", "HEADER_BYTES", "IMAGE_TYPES", "Rejected", "SCHEME", "SMALL_MESSAGE_BYTES", "TopicFeed",
            "camera_pose", "decode_image", "is_ros_uri", "ros_topic"]
