@@ -199,7 +199,7 @@ def hostile(change: dict, base=None):
     (ros_msgs.IMAGE, hostile({"height": 7}), "length"),
     (ros_msgs.IMAGE, hostile({"width": 100_000, "height": 100_000, "step": 300_000}), "pixels"),
     (ros_msgs.IMAGE, hostile({"width": 0}), "size"),
-    (ros_msgs.IMAGE, hostile({"encoding": "bayer_rggb8"}), "encoding"),
+    (ros_msgs.IMAGE, hostile({"encoding": "bayer_rggb16"}), "encoding"),
     (ros_msgs.IMAGE, hostile({"encoding": "16UC1"}), "encoding"),
     (ros_msgs.COMPRESSED_IMAGE, hostile({"format": "h264"}, compressed_message(IMAGE, STAMP_NS)), "format"),
     (ros_msgs.COMPRESSED_IMAGE, hostile({"format": "png; compressedDepth"}, compressed_message(IMAGE, STAMP_NS)),
@@ -590,7 +590,7 @@ def test_a_feed_counts_hostile_samples_and_keeps_the_newest_valid_frame(fleet):
             assert wait(lambda: images.matched)
             sent = [ros_msgs.serialize(hostile({"step": 20})),                           # step
                     b"\x00\x01\x00\x00garbage",                                          # cdr
-                    ros_msgs.serialize(hostile({"encoding": "yuv422"})),                 # encoding
+                    ros_msgs.serialize(hostile({"encoding": "nv21"})),                   # encoding
                     ros_msgs.serialize(image_message(np.zeros((40, 40, 3), np.uint8), STAMP_NS)),  # oversized
                     ros_msgs.serialize(hostile({"width": 10, "height": 10, "step": 30}))]  # pixels
             for data in sent:
