@@ -780,7 +780,7 @@ def test_an_agent_on_tf_skips_stale_images_and_poses(fleet, renderer_run, h1_fra
             assert {e.zid for e in subscriptions} == {agent_node.zid} and len({e.entity_id for e in subscriptions}) == 4
             assert all(e.key.split("/")[5] == "MS" and e.type_hash == ros_msgs.type_hash(e.msgtype)
                        for e in subscriptions)
-            images = node.publisher(STALE_TOPIC, ros_msgs.IMAGE, ros_msgs.type_hash(ros_msgs.IMAGE), SENSOR_QOS)
+            images = node.publisher(STALE_TOPIC, ros_msgs.IMAGE, ros_msgs.type_hash(ros_msgs.IMAGE), LOSSLESS_QOS)
             infos = node.publisher(STALE_INFO, ros_msgs.CAMERA_INFO, ros_msgs.type_hash(ros_msgs.CAMERA_INFO))
             tf = node.publisher("/tf", ros_msgs.TF_MESSAGE, ros_msgs.type_hash(ros_msgs.TF_MESSAGE), TF_QOS)
             assert wait(lambda: images.matched and infos.matched and tf.matched, FOLLOW_WAIT_S), agent.stderr_now()
