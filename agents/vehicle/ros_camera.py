@@ -71,9 +71,9 @@ def check_age(feed, age_s: float, max_age_s: float | None, on_stale: Callable[[s
 
 
 class TopicReader:
-    """A ROS 2 image topic as a live source: each read gives the newest valid frame (the first one waited for up to
-    ``first_timeout_s``), or :class:`FrameSkipped` when it arrived more than ``max_age_s`` ago; never ends by
-    itself."""
+    """A ROS 2 image topic as a live source: each read gives the newest valid frame not read before (the first one
+    waited for up to ``first_timeout_s``, a new one up to ``new_image_wait_s``), or :class:`FrameSkipped` when it
+    arrived more than ``max_age_s`` ago or none new came; never ends by itself."""
 
     def __init__(self, feed, name: str, domain: int, first_timeout_s: float = FIRST_FRAME_TIMEOUT_S, *,
                  max_age_s: float | None = None, on_stale: Callable[[str, str], None] | None = None,
