@@ -43,7 +43,6 @@ T = TypeVar("T")
 SCHEME = "ros2:"
 #: The image types an image topic may carry.
 IMAGE_TYPES = (ros_msgs.IMAGE, ros_msgs.COMPRESSED_IMAGE)
-#: Bytes per pixel of the raw encodings taken (8 bits per channel).
 #: The ``Image`` encodings taken (sensor_msgs/image_encodings.hpp): bytes per pixel, and OpenCV's conversion to BGR
 #: (None: taken as is; ``mono8`` stays grey). Bayer mosaics are named by their top-left 2 x 2 block (``rggb``: red
 #: first), as OpenCV's ``COLOR_BayerRGGB2BGR`` is; ``yuv422`` is UYVY and ``yuv422_yuy2`` YUYV, 2 bytes a pixel.
@@ -53,6 +52,8 @@ ENCODINGS: dict[str, tuple[int, int | None]] = {
     "bayer_rggb8": (1, cv2.COLOR_BayerRGGB2BGR), "bayer_bggr8": (1, cv2.COLOR_BayerBGGR2BGR),
     "bayer_gbrg8": (1, cv2.COLOR_BayerGBRG2BGR), "bayer_grbg8": (1, cv2.COLOR_BayerGRBG2BGR),
     "yuv422": (2, cv2.COLOR_YUV2BGR_UYVY), "yuv422_yuy2": (2, cv2.COLOR_YUV2BGR_YUY2)}
+#: The most bytes a pixel of a taken encoding has (4: ``bgra8``, ``rgba8``).
+MAX_BYTES_PER_PIXEL = max(size for size, _ in ENCODINGS.values())
 #: CDR bytes of a message other than its image data (header, strings): a payload larger than the image data
 #: the pixel budget allows plus this is refused before it is read.
 HEADER_BYTES = 64 * 1024
@@ -347,5 +348,6 @@ class TopicFeed(Generic[T]):
         self._worker.join(2.0)
 
 
-__all__ = ["ENCODINGS", "HEADER_BYTES", "IMAGE_TYPES", "Rejected", "SCHEME", "SMALL_MESSAGE_BYTES", "TopicFeed",
-           "camera_pose", "decode_image", "is_ros_uri", "ros_topic"]
+__all__ = ["ENCODINGS", "HEADER_BYTES", "IMAGE_TYPES", "MAX_BYTES_PER_PIXEL", "Rejected", "SCHEME",
+           "SMALL_MESSAGE_BYTES", "TopicFeed", "camera_pose", "decode_image", "header_stamp_ns", "is_ros_uri",
+           "ros_topic"]

@@ -53,8 +53,6 @@ NO_NEW_IMAGE = "ros2 " + SOURCE_NO_NEW_IMAGE
 #: How long a frame waits for a pose at or after its image's stamp (s): a pose published with its image may arrive
 #: just after it.
 POSE_WAIT_S = 0.05
-#: The pose topic's type (imported here without agents.bridges: that room loads only when a topic is followed).
-POSE_STAMPED = "geometry_msgs/msg/PoseStamped"
 #: The agent's ROS 2 node name (namespace ``/<fleet>/<vehicle>``): it announces the subscriptions.
 AGENT_NODE = "evopose_agent"
 
@@ -137,15 +135,15 @@ class StampedPose:
     :data:`POSE_WAIT_S`. Without an image stamp (a file ``--source``), or either stamped 0 (unstamped: tf2 reads
     time 0 as "the latest"): the newest."""
 
-    def __init__(self, feed, history, domain: int, *, first_timeout_s: float = FIRST_FRAME_TIMEOUT_S,
+    def __init__(self, feed, history, what: str, domain: int, *, first_timeout_s: float = FIRST_FRAME_TIMEOUT_S,
                  max_age_s: float | None = None, on_stale: Callable[[str, str], None] | None = None) -> None:
-        self.feed, self.history, self.domain = feed, history, domain
+        self.feed, self.history, self.what, self.domain = feed, history, what, domain
         self.first_timeout_s, self.max_age_s, self.on_stale = first_timeout_s, max_age_s, on_stale
 
     def __call__(self, image_stamp_ns: int | None = None) -> np.ndarray:
         newest = self.feed.newest_with_age(self.first_timeout_s)
         if newest is None:
-            raise SourceError(f"--camera-pose {self.feed.label}: no valid {POSE_STAMPED} within "
+            raise SourceError(f"--camera-pose {self.feed.label}: no valid {self.what} within "
                               f"{self.first_timeout_s:g} s on ROS domain {self.domain}: {self.feed.describe()}")
         (pose_stamp_ns, world_from_camera), age_s, _ = newest
         check_age(self.feed, age_s, self.max_age_s, self.on_stale, "pose")
@@ -206,7 +204,7 @@ class TfPose:
 
 
 def open_ros_inputs(config: AgentConfig, bus: FleetBus, size_of_camera: Callable[[], tuple[int, int] | None],
-                    frame_period_s: float = 0.1):
+                    frame_period_s: float):
     """The ROS 2 topics among ``config``'s inputs, followed on ``bus``'s session: ``(reader or None, intrinsics or
     None, world_from_camera or None, node)``; received and refused messages are counted in ``bus.counters``.
 
@@ -221,8 +219,9 @@ def open_ros_inputs(config: AgentConfig, bus: FleetBus, size_of_camera: Callable
     from agents.bridges.names import ros_name
     from agents.bridges.rmw_zenoh import DEFAULT_QOS, SENSOR_QOS, TF_QOS, Node, QoS
     from agents.bridges.ros2_node import Ros2Node
-    from agents.bridges.ros_sources import (HEADER_BYTES, IMAGE_TYPES, SMALL_MESSAGE_BYTES, Rejected, TopicFeed,
-                                            camera_pose, decode_image, header_stamp_ns, ros_topic)
+    from agents.bridges.ros_sources import (HEADER_BYTES, IMAGE_TYPES, MAX_BYTES_PER_PIXEL, SMALL_MESSAGE_BYTES,
+                                            Rejected, TopicFeed, camera_pose, decode_image, header_stamp_ns,
+                                            ros_topic)
     from agents.bridges.stamped import PoseHistory
 
     domain, session, counters = config.ros_domain, bus.session, bus.counters
@@ -243,7 +242,7 @@ def open_ros_inputs(config: AgentConfig, bus: FleetBus, size_of_camera: Callable
             return image, header_stamp_ns(message)
 
         feed = TopicFeed(session, domain, ros_topic(config.source), IMAGE_TYPES, image_of,
-                         max_bytes=3 * MAX_DECODED_PIXELS + HEADER_BYTES, **common)
+                         max_bytes=MAX_BYTES_PER_PIXEL * MAX_DECODED_PIXELS + HEADER_BYTES, **common)
         # one type per subscription: image_transport's naming says which (a .../compressed topic is compressed)
         announce(feed, ros_msgs.COMPRESSED_IMAGE if feed.topic.endswith("/compressed") else ros_msgs.IMAGE,
                  SENSOR_QOS)
@@ -273,7 +272,7 @@ def open_ros_inputs(config: AgentConfig, bus: FleetBus, size_of_camera: Callable
                          max_bytes=SMALL_MESSAGE_BYTES, keep=history.keep,
                          sink=lambda value, _arrived: history.add(*value), **common)
         announce(feed, ros_msgs.POSE_STAMPED, DEFAULT_QOS)
-        pose = StampedPose(feed, history, domain, **stale)
+        pose = StampedPose(feed, history, ros_msgs.POSE_STAMPED, domain, **stale)
     return reader, intrinsics, pose, node
 
 

@@ -256,10 +256,10 @@ class SourceCamera:
     (``world_from_camera(image_stamp_ns)``: the reader's ``stamp_ns`` after the read, None for a file's frames).
     ``closing`` are further inputs to close with the camera (the ROS topics followed).
 
-    A ROS input may raise :class:`FrameSkipped` (its newest image or pose is stale, no pose near the image's
-    stamp): the tick then gives a *skipped*
-    frame: no points (so no own view and no estimate from it), a black image (nothing stale is shared with
-    team-mates) and the camera of the last frame taken; ``skipped`` counts them.
+    A live input may raise :class:`FrameSkipped` (a ROS image or pose is stale, no pose lies near the image's
+    stamp, no new frame came since the last tick's): the tick then gives a *skipped* frame: no points (so no own
+    view and no estimate from it), a black image (nothing stale is shared with team-mates) and the camera of the
+    last frame taken; ``skipped`` counts them.
     """
 
     def __init__(self, reader, scenario: Scenario, vehicle: str, extract: FeatureExtractor, *,
