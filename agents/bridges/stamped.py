@@ -85,8 +85,15 @@ class PoseHistory:
 
     def __init__(self, keep: int = KEEP, max_gap_s: float = MAX_POSE_GAP_S) -> None:
         self._poses = StampedTransforms(keep, max_gap_s)
-        self.keep, self.max_gap_s = self._poses.keep, max_gap_s
         self._lock = threading.Condition()
+
+    @property
+    def keep(self) -> int:
+        return self._poses.keep
+
+    @property
+    def max_gap_s(self) -> float:
+        return self._poses.max_gap_ns / 1e9
 
     def add(self, stamp_ns: int, world_from_camera: np.ndarray) -> None:
         with self._lock:
