@@ -6,8 +6,8 @@ import cv2
 import numpy as np
 import pytest
 
-from vision.camera_look import (DEAD_BAND, Look, LookTracker, chroma_of, estimate_look, neutral_chroma,
-                                 to_reference_look)
+from vision.camera_look import DEAD_BAND, Look, chroma_of, estimate_look, neutral_chroma, to_reference_look
+from vision.look_tracker import LookTracker
 
 DATA = Path(__file__).parent / "data" / "photoreal"
 PIONEER_BODY = (40, 40, 150)
@@ -38,6 +38,28 @@ def test_reference_look_frames_are_left_as_they_are(name):
         look = estimate_look(frame, PIONEER_BODY)
         assert look.is_reference, look
         assert to_reference_look(frame, look) is frame
+
+
+def test_another_robots_reference_look_frames_read_as_the_pioneers_do():
+    """The second robot's pale yellow paint keeps more of its chroma in the reference look than the Pioneer's deep red
+    does: measured against a gain constant over paints its frames read a saturation 1.26-1.32 (the Pioneer's 1.07-1.16
+    at telephoto), at the dead band's edge, and a washed-out look of it was undone by less than the Pioneer's. Against
+    :func:`reference_body_chroma` the two read alike."""
+    from scenarios.target import load_model
+    from vision.camera_look import REFERENCE_BODY_GAIN, REFERENCE_PAINT_CHROMA, reference_body_chroma
+
+    def median_saturation(name: str, body: tuple[int, int, int]) -> float:
+        looks = [estimate_look(frame, body, 500.0) for frame in _frames(name)]
+        assert all(look.body_pixels > 0 for look in looks)
+        return float(np.median([look.saturation for look in looks]))
+
+    pioneer = median_saturation("telephoto", PIONEER_BODY)
+    husky = median_saturation("husky-telephoto", load_model("husky").body_colour)
+    assert abs(np.log(husky / pioneer)) < 0.08, (husky, pioneer)
+    # the reference paint's own: the constant it was measured as; a paler paint keeps a larger share of its chroma
+    assert reference_body_chroma(REFERENCE_PAINT_CHROMA) == REFERENCE_BODY_GAIN * REFERENCE_PAINT_CHROMA
+    kept = [reference_body_chroma(c) / c for c in (0.3, 0.6, 0.9, 1.2)]
+    assert kept == sorted(kept, reverse=True)
 
 
 def test_undoing_a_look_maps_each_pixels_chroma_over_luma_as_defined():

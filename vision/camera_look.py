@@ -16,10 +16,10 @@ where a camera's colour processing is nearly linear per pixel: the chroma over l
 - a saturation setting or a chroma-compressing tone curve scales ``q - neutral``; a hue error turns it.
 
 The target's body, the largest patch of one paint the model names, gives the scale and the turn: its chroma
-relative to the neutral, against what the reference look makes of that paint (:data:`REFERENCE_BODY_GAIN`,
-:data:`REFERENCE_BODY_TURN_DEG`: Cycles' sunlit and shaded faces with their gloss keep ~0.6 of the paint file's
-chroma, turned ~9 deg, at both scales). :func:`to_reference_look` then maps every pixel back,
-``q' = R(-turn) (q - neutral) / gain + neutral - shift``, a linear map of (Cr, Cb) per pixel given Y, so the
+relative to the neutral, against what the reference look makes of that paint (:func:`reference_body_chroma`,
+:data:`REFERENCE_BODY_TURN_DEG`: Cycles' sunlit and shaded faces with their gloss keep ~0.6 of the Pioneer's paint's
+chroma, turned ~6 deg, at both scales; a paler paint keeps more of its own, a deeper one less).
+:func:`to_reference_look` then maps every pixel back, ``q' = R(-turn) (q - neutral) / gain + neutral - shift``, a linear map of (Cr, Cb) per pixel given Y, so the
 encoder's 4:2:0 chroma blocks keep their shape (:mod:`vision.spot_colour` models them), with only what lies
 beyond the reference look's own spread over scenes undone (:data:`DEAD_BAND`, :func:`beyond_band`): the
 reference look is not re-coloured.
@@ -48,6 +48,15 @@ NEUTRAL_SHARE = 0.4
 #: Measured with :func:`body_chroma` on the reference look's Cycles frames of the Pioneer (tests/data/photoreal:
 #: paper 0.56-0.65, telephoto 0.68-0.74; turn +2 to +8 deg): within the dead band of both.
 REFERENCE_BODY_GAIN, REFERENCE_BODY_TURN_DEG = 0.64, 6.0
+#: The paint they were measured on (the Pioneer's body, BGR). Another paint's body reads in the reference look as
+#: :func:`reference_body_chroma` says: as its chroma to the power REFERENCE_CHROMA_POWER, not in proportion. A pale
+#: paint's sunlit face keeps nearly all its file's chroma, a deep one's 0.6-0.7 (the Pioneer's 0.74): with the gain
+#: constant over paints, the reference look's frames of twelve random robots read a saturation of 1.1-1.4 times the
+#: Pioneer's, some at the cap (SATURATION_RANGE), and through a washed-out look such a robot's was undone by far less
+#: than the Pioneer's. Fitted on the telephoto training frames of those robots and the Pioneer
+#: (``benchmarks/bench_reference_chroma.py``; BENCHMARKS.md, "What the reference look makes of a body's paint"): the
+#: spread of their log readings about the Pioneer's 0.24 -> 0.10, on the development robots 0.20 -> 0.17.
+REFERENCE_PAINT_BGR, REFERENCE_CHROMA_POWER = (40, 40, 150), 0.65
 #: The neutral of the reference look's frames (the ground's own slight blue: tests/data/photoreal, all frames
 #: within 0.01 of it).
 REFERENCE_NEUTRAL = (0.033, -0.064)
@@ -131,6 +140,10 @@ def chroma_of(bgr: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     q = np.subtract(ycc[..., 1:], np.float32(128.0), dtype=np.float32)
     q /= np.maximum(y, 1.0)[..., None]
     return y, q
+
+
+#: The chroma of :data:`REFERENCE_PAINT_BGR` (the size of its ``q``).
+REFERENCE_PAINT_CHROMA = float(np.hypot(*chroma_of(np.array(REFERENCE_PAINT_BGR, np.uint8))[1]))
 
 
 def neutral_chroma(q: np.ndarray, usable: np.ndarray) -> tuple[np.ndarray, float]:
@@ -244,12 +257,24 @@ def _patch_at_full(q: np.ndarray, usable: np.ndarray, stride: int, patch: np.nda
     return rel[mask], r[mask]
 
 
-def estimate_look(bgr: np.ndarray, body_bgr: tuple[int, int, int] | None, extent_px: float | None = None) -> Look:
-    """The :class:`Look` of a camera image (BGR uint8 (H, W, 3)) of a target whose body is painted ``body_bgr`` (the
-    model file's colour; None: the neutral only); ``extent_px``, the target's largest extent in pixels if known."""
+def reference_body_chroma(paint_chroma: float) -> float:
+    """What the reference look makes of a body painted with chroma ``paint_chroma`` (the size of the model file's
+    colour's ``q``): its 90th percentile chroma relative to the neutral, :data:`REFERENCE_BODY_GAIN` times the
+    chroma for :data:`REFERENCE_PAINT_BGR`'s, growing as the chroma to the power :data:`REFERENCE_CHROMA_POWER` from
+    there: a pale paint's sunlit face keeps most of its chroma, a deep one's loses more (to the sky's light and the
+    gloss)."""
+    return REFERENCE_BODY_GAIN * REFERENCE_PAINT_CHROMA * (max(paint_chroma, 1e-9) / REFERENCE_PAINT_CHROMA) ** \
+        REFERENCE_CHROMA_POWER
+
+
+def body_reading(bgr: np.ndarray, body_bgr: tuple[int, int, int] | None, extent_px: float | None = None
+                 ) -> tuple[Look, np.ndarray | None, int]:
+    """What :func:`estimate_look` measures in a camera image (BGR uint8 (H, W, 3)) of a target painted ``body_bgr``:
+    the :class:`Look` of its neutral alone, and the body's chroma relative to that neutral (2,) with its pixel count
+    (:func:`body_chroma`; None, 0: no body found, no body paint given, or not a colour image)."""
     bgr = np.asarray(bgr)
     if bgr.dtype != np.uint8 or bgr.ndim != 3 or bgr.shape[2] != 3 or min(bgr.shape[:2]) < 2:
-        return Look()   # not a colour image: nothing to measure (the front-end says what is wrong with it)
+        return Look(), None, 0   # not a colour image: nothing to measure (the front-end says what is wrong with it)
     y, q = chroma_of(bgr)
     usable = (y >= LUMA_RANGE[0]) & (y <= LUMA_RANGE[1])
     neutral, spread = neutral_chroma(q, usable)
@@ -259,10 +284,10 @@ def estimate_look(bgr: np.ndarray, body_bgr: tuple[int, int, int] | None, extent
         neutral = reference   # no grey in the picture: a scene of one colour
     look = Look(neutral=(float(neutral[0]), float(neutral[1])))
     if body_bgr is None:
-        return look
+        return look, None, 0
     _, paint_q = chroma_of(np.array(body_bgr, np.uint8))
     if float(np.hypot(*paint_q)) < MIN_PAINT_CHROMA:
-        return look if shift <= MAX_NEUTRAL_SHIFT else Look()
+        return (look if shift <= MAX_NEUTRAL_SHIFT else Look()), None, 0
     # where the target is large its patch is found on a quarter of the pixels (LOOK_STRIDE_FROM_EXTENT_PX)
     stride = LOOK_STRIDE if (min(bgr.shape[:2]) >= LOOK_STRIDE_FROM_PX and extent_px is not None
                              and extent_px >= LOOK_STRIDE_FROM_EXTENT_PX) else 1
@@ -272,9 +297,19 @@ def estimate_look(bgr: np.ndarray, body_bgr: tuple[int, int, int] | None, extent
         # a paint (a close-up), and the reference neutral is kept
         neutral, look = reference, Look()
         seen, n = body_chroma(q, usable, neutral, spread, paint_q, extent_px, stride)
+    return look, seen, n
+
+
+def estimate_look(bgr: np.ndarray, body_bgr: tuple[int, int, int] | None, extent_px: float | None = None) -> Look:
+    """The :class:`Look` of a camera image (BGR uint8 (H, W, 3)) of a target whose body is painted ``body_bgr`` (the
+    model file's colour; None: the neutral only); ``extent_px``, the target's largest extent in pixels if known:
+    the body's chroma read (:func:`body_reading`) against what the reference look makes of its paint
+    (:func:`reference_body_chroma`, and :data:`REFERENCE_BODY_TURN_DEG`)."""
+    look, seen, n = body_reading(bgr, body_bgr, extent_px)
     if seen is None:
         return look
-    gain = float(np.hypot(*seen)) / (REFERENCE_BODY_GAIN * float(np.hypot(*paint_q)))
+    _, paint_q = chroma_of(np.array(body_bgr, np.uint8))
+    gain = float(np.hypot(*seen)) / reference_body_chroma(float(np.hypot(*paint_q)))
     turn = float(np.arctan2(seen[1], seen[0]) - np.arctan2(paint_q[1], paint_q[0])) \
         - np.radians(REFERENCE_BODY_TURN_DEG)
     turn = float(wrap_angle(turn))
@@ -375,49 +410,5 @@ def to_reference_look(bgr: np.ndarray, look: Look) -> np.ndarray:
     return cv2.cvtColor(out, cv2.COLOR_YCrCb2BGR)
 
 
-class LookTracker:
-    """A camera's look over a sequence: the median of the last ``window`` frames' estimates that found the body
-    (a camera keeps its look; one frame's body may show one face only). State: the recent estimates, one writer
-    (the vehicle's frame loop). :meth:`update` takes a frame's estimate and returns the tracked look.
-
-    Once ``window`` estimates are in, a new one is :meth:`due` every ``every`` frames only (the look changes as
-    slowly as a camera's exposure and white balance; an estimate costs a quarter of the front-end's time)."""
-
-    def __init__(self, window: int = 9, every: int = 1) -> None:
-        if window < 1 or every < 1:
-            raise ValueError(f"window and every must be at least 1, got {window} and {every}")
-        self.window, self.every = window, every
-        self._recent: list[Look] = []
-        self._frames = 0
-
-    def due(self) -> bool:
-        """Whether this frame's look should be estimated (:meth:`update`), else :meth:`current` is the look."""
-        return len(self._recent) < self.window or self._frames % self.every == 0
-
-    @property
-    def latest(self) -> Look:
-        """The tracked look so far (the reference look before any estimate), without counting a frame."""
-        return self._tracked() if self._recent else Look()
-
-    def current(self) -> Look:
-        """The tracked look without a new estimate (counts the frame)."""
-        self._frames += 1
-        return self._tracked() if self._recent else Look()
-
-    def update(self, look: Look) -> Look:
-        self._frames += 1
-        if look.body_pixels > 0:
-            self._recent = [*self._recent[-(self.window - 1):], look] if self.window > 1 else [look]
-        return self._tracked() if self._recent else look
-
-    def _tracked(self) -> Look:
-        neutral = np.median([lk.neutral for lk in self._recent], axis=0)
-        return Look(neutral=(float(neutral[0]), float(neutral[1])),
-                    saturation=float(np.median([lk.saturation for lk in self._recent])),
-                    turn_rad=float(np.median([lk.turn_rad for lk in self._recent])),
-                    body_pixels=int(np.median([lk.body_pixels for lk in self._recent])))
-
-
-__all__ = ["Look", "LookTracker", "beyond_band", "body_chroma", "chroma_of", "estimate_look", "hued_like_body",
-           "neutral_chroma", "spread_about",
-           "to_reference_look"]
+__all__ = ["Look", "beyond_band", "body_chroma", "body_reading", "chroma_of", "estimate_look", "hued_like_body",
+           "neutral_chroma", "reference_body_chroma", "spread_about", "to_reference_look"]

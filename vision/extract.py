@@ -27,7 +27,8 @@ import numpy as np
 from evopose import Bounds, Camera
 from vision.blobs import MarkPrior, crop_margin, detect_contrast_marks, mark_prior
 from vision.mark_context import resolve_scorers
-from vision.camera_look import LookTracker, estimate_look
+from vision.camera_look import estimate_look
+from vision.look_tracker import LookTracker
 from vision.label_chroma import LabelChromaGate, spot_chroma
 from vision.features import MarkDetections, colour_ranges, detect_colour_marks, detect_corners, x_junctions
 from vision.front_end_pace import FrontEndPace, detect_halved, largest_mark_px
@@ -77,7 +78,7 @@ def resolve_features(kind: str, camera_images: bool) -> str:
 
 
 #: Once a camera's look is tracked (nine estimates), it is estimated again every this many frames
-#: (:class:`vision.camera_look.LookTracker`).
+#: (:class:`vision.look_tracker.LookTracker`).
 LOOK_EVERY = 4
 #: A window around the expected target (:mod:`vision.window`) that gives fewer marks than this is searched no further:
 #: the whole image is, in the same frame (fewer than four points leave a pose from one view undetermined).
