@@ -19,10 +19,10 @@ The target's body, the largest patch of one paint the model names, gives the sca
 relative to the neutral, against what the reference look makes of that paint (:func:`reference_body_chroma`,
 :data:`REFERENCE_BODY_TURN_DEG`: Cycles' sunlit and shaded faces with their gloss keep ~0.6 of the Pioneer's paint's
 chroma, turned ~6 deg, at both scales; a paler paint keeps more of its own, a deeper one less).
-:func:`to_reference_look` then maps every pixel back, ``q' = R(-turn) (q - neutral) / gain + neutral - shift``, a linear map of (Cr, Cb) per pixel given Y, so the
-encoder's 4:2:0 chroma blocks keep their shape (:mod:`vision.spot_colour` models them), with only what lies
-beyond the reference look's own spread over scenes undone (:data:`DEAD_BAND`, :func:`beyond_band`): the
-reference look is not re-coloured.
+:func:`to_reference_look` then maps every pixel back, ``q' = R(-turn) (q - neutral) / gain + neutral - shift``,
+a linear map of (Cr, Cb) per pixel given Y, so the encoder's 4:2:0 chroma blocks keep their shape
+(:mod:`vision.spot_colour` models them), with only what lies beyond the reference look's own spread over scenes
+undone (:data:`DEAD_BAND`, :func:`beyond_band`): the reference look is not re-coloured.
 
 Images are OpenCV BGR ``uint8`` (H, W, 3).
 """
