@@ -90,8 +90,9 @@ def feature_extractor(kind: str, target: TargetModel, area: Bounds | None = None
     """The :class:`FeatureExtractor` of ``kind`` (one of :data:`FEATURE_KINDS`) for ``target``: ``marks`` and
     ``contrast`` label each mark with its colour's index in the model's palette (the order of
     :meth:`scenarios.target.TargetModel.colour_labels`), except where a camera's 2-4 px marks keep too little of
-    their colour for a label (``contrast``: :class:`vision.label_chroma.LabelChromaGate`, labels None); ``area`` is the operating area (world x, y, z bounds of
-    the target) from which ``contrast`` derives the marks' size in each camera's image. ``scorer``: which spots
+    their colour for a label (``contrast``: :class:`vision.label_chroma.LabelChromaGate`, labels None); ``area`` is
+    the operating area (world x, y, z bounds of the target) from which ``contrast`` derives the marks' size in each
+    camera's image. ``scorer``: which spots
     ``contrast`` keeps as marks (:func:`vision.blobs.detect_contrast_marks`: None or ``"shipped"`` the shipped
     scorers, ``"bars"`` the hand-set bars, or a small-spot scorer or context model replacing the shipped one of its
     kind); ValueError when a scorer was fitted on other features than the front-end computes. ``period_s``: the
