@@ -40,7 +40,7 @@ from .options import SearchOptions
 from .problem import Bounds, Model, PoseProblem, View
 from .refine import TRACK_SCHEDULE
 from .search import EvoPose, Told
-from .solver import Solution, solution_of, track
+from .solver import Solution, solution_of, track, turned_rivals
 from .estimator_state import Estimate, EstimatorState, SearchInProgress, generator, random_key
 from .trust import assess, confirms
 
@@ -255,9 +255,14 @@ class Cooperation:
 
     def _solution_at(self, pose: np.ndarray, problem: PoseProblem, rivals: np.ndarray | None = None) -> Solution:
         """A stand-in previous solution at ``pose`` (a team-mate's best) for :func:`track`, with its confidence
-        judged on ``problem`` against ``rivals`` (K, 6): the other candidates and the own search's basins."""
+        judged on ``problem`` against ``rivals`` (K, 6): the other candidates and the own search's basins, and its
+        half-turned twins (:func:`evopose.solver.turned_rivals`)."""
         objective = PoseObjective(problem, self.options.fitness, self.options.tau)
         fitness = float(objective(pose[None])[0])
+        # a near-symmetric body's half-turned twins are a candidate's first rivals: a team-mate's best, taken before
+        # any search of the own, was otherwise judged against nothing (a wrong twin sure, never searched past)
+        twins = turned_rivals(objective, pose)
+        rivals = twins if rivals is None or not len(rivals) else np.concatenate([rivals, twins])
         confidence = assess(objective, pose, rivals, self.options.confidence)
         return Solution(pose=np.array(pose), fitness=fitness, view_terms=objective.view_terms(pose[None])[0],
                         view_weights=objective.weights.copy(), generations=0, evaluations=0, seconds=0.0,

@@ -13,7 +13,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from geometry import matrix_from_pose
+from geometry import matrix_from_pose, pose_from_matrix
 
 from .fitness import Match, PoseObjective
 from .local import LocalSearch
@@ -250,6 +250,23 @@ def shifted_rivals(objective: PoseObjective, pose: np.ndarray) -> np.ndarray:
     moved = np.tile(np.asarray(pose, float), (len(shifts), 1))
     moved[:, :3] += shifts @ rotation.T
     polished, _ = refine(objective, moved, None, POLISH_SCHEDULE)
+    return polished
+
+
+def turned_rivals(objective: PoseObjective, pose: np.ndarray) -> np.ndarray:
+    """``pose`` (6,) turned half round about each of the target's axes through its marks' centroid, kept in the box
+    and polished, shape (3, 6): a near-symmetric body's twins, the first rivals of a pose whose basin was judged
+    against no search of its own (a team-mate's best: :meth:`evopose.cooperative.Cooperation.estimate`)."""
+    world_from_target = matrix_from_pose(np.asarray(pose, float))
+    rotation, centre = world_from_target[:3, :3], objective.problem.model.points.mean(axis=0)
+    turned = []
+    for axis in np.eye(3):
+        half_turn = 2.0 * np.outer(axis, axis) - np.eye(3)   # rotation by pi about the axis
+        matrix = np.eye(4)
+        matrix[:3, :3] = rotation @ half_turn
+        matrix[:3, 3] = world_from_target[:3, 3] + rotation @ centre - matrix[:3, :3] @ centre
+        turned.append(pose_from_matrix(matrix))
+    polished, _ = refine(objective, objective.problem.bounds.project(np.array(turned)), None, POLISH_SCHEDULE)
     return polished
 
 
