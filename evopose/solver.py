@@ -27,7 +27,7 @@ from .robust_fit import robust_fit
 from .search import EvoPose
 from .trust import (MAX_CONFIDENT_ROTATION_SIGMA, Confidence, assess, checked_in_time, converged, imprecise,
                     track_confidence)
-from .uncertainty import TrackReference, covariance, rotation_sigma
+from .uncertainty import TrackReference, rotation_sigma
 from .weights import rule_weights
 
 #: Final polish of the best pose: hard nearest-neighbour steps (accepted only when the fitness drops).
