@@ -194,8 +194,9 @@ def solution_of(problem: PoseProblem, options: SearchOptions, run: Run, seconds:
     mismatch = objective.mismatch(fitness)
     match = Match(None if mismatch is None else float(mismatch), state.best_match.unmatched)
     rivals, checked = _rivals(state, objective, options, deadline)
-    if checked and options.refine_steps:  # repeated structure: the best moved by the model's own spacing
-        rivals = np.concatenate([rivals, shifted_rivals(objective, pose)])
+    if checked and options.refine_steps:  # repeated structure (the best moved by the model's own spacing) and a
+        # near-symmetric body (the best turned half round): basins the population need not hold
+        rivals = np.concatenate([rivals, shifted_rivals(objective, pose), turned_rivals(objective, pose)])
     checked = checked and in_time
     # matches judged on every view with its own weight: a view the step rule dropped still counts against a pose
     # (a wrong basin that fits one view and gave up the other must not look sure)
@@ -255,8 +256,9 @@ def shifted_rivals(objective: PoseObjective, pose: np.ndarray) -> np.ndarray:
 
 def turned_rivals(objective: PoseObjective, pose: np.ndarray) -> np.ndarray:
     """``pose`` (6,) turned half round about each of the target's axes through its marks' centroid, kept in the box
-    and polished, shape (3, 6): a near-symmetric body's twins, the first rivals of a pose whose basin was judged
-    against no search of its own (a team-mate's best: :meth:`evopose.cooperative.Cooperation.estimate`)."""
+    and polished, shape (3, 6): a near-symmetric body's twins (the Pioneer's box turned half round fits untyped points
+    about as well), which a search's population need not hold and a team-mate's best, taken before any search of the
+    vehicle's own (:meth:`evopose.cooperative.Cooperation.estimate`), has none to be judged against without."""
     world_from_target = matrix_from_pose(np.asarray(pose, float))
     rotation, centre = world_from_target[:3, :3], objective.problem.model.points.mean(axis=0)
     turned = []
