@@ -194,10 +194,10 @@ def solution_of(problem: PoseProblem, options: SearchOptions, run: Run, seconds:
     mismatch = objective.mismatch(fitness)
     match = Match(None if mismatch is None else float(mismatch), state.best_match.unmatched)
     rivals, checked = _rivals(state, objective, options, deadline)
+    checked = checked and in_time   # past the budget's grace no verdict is sure: no more rivals are polished
     if checked and options.refine_steps:  # repeated structure (the best moved by the model's own spacing) and a
         # near-symmetric body (the best turned half round): basins the population need not hold
         rivals = np.concatenate([rivals, shifted_rivals(objective, pose), turned_rivals(objective, pose)])
-    checked = checked and in_time
     # matches judged on every view with its own weight: a view the step rule dropped still counts against a pose
     # (a wrong basin that fits one view and gave up the other must not look sure)
     confidence = assess(objective, pose, rivals, options.confidence,
