@@ -260,7 +260,7 @@ class Cooperation:
         objective = PoseObjective(problem, self.options.fitness, self.options.tau)
         fitness = float(objective(pose[None])[0])
         # a near-symmetric body's half-turned twins are a candidate's first rivals: a team-mate's best, taken before
-        # any search of the own, was otherwise judged against nothing (a wrong twin sure, never searched past)
+        # any search of the own, has no other basin to be judged against, and a wrong twin would be sure
         twins = turned_rivals(objective, pose)
         rivals = twins if rivals is None or not len(rivals) else np.concatenate([rivals, twins])
         confidence = assess(objective, pose, rivals, self.options.confidence)

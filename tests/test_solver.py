@@ -366,3 +366,18 @@ def test_solutions_carry_a_covariance_and_a_verdict():
         assert solution.confident == confident, (kind, solution.confidence.reason)
         if not confident:
             assert solution.confidence.reason == "few matches"
+
+
+def test_a_best_whose_half_turned_twin_fits_as_well_is_not_confident():
+    """A paper-scale Pioneer with its marks' colours (bench_confidence's seeded problem 46 of "paper H1 colours"):
+    the search ends in a wrong basin that no other basin of its population rivals, and was confident there; its half
+    turns about the target's axes (`turned_rivals`), polished, fit about as well, so it is not."""
+    from benchmarks.bench_confidence import make
+    from evopose.solver import turned_rivals
+    from geometry import rotation_error
+
+    sp = make("paper H1 colours", 7, 46)
+    solution = solve(sp.problem, seed=46)
+    assert not in_true_basin(sp, solution.pose) and not solution.confident
+    twins = turned_rivals(PoseObjective(sp.problem), solution.pose)   # each about half a turn from the best
+    assert twins.shape == (3, 6) and np.all(np.degrees(rotation_error(twins, solution.pose)) > 90.0)

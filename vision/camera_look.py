@@ -50,10 +50,10 @@ NEUTRAL_SHARE = 0.4
 REFERENCE_BODY_GAIN, REFERENCE_BODY_TURN_DEG = 0.64, 6.0
 #: The paint they were measured on (the Pioneer's body, BGR). Another paint's body reads in the reference look as
 #: :func:`reference_body_chroma` says: as its chroma to the power REFERENCE_CHROMA_POWER, not in proportion. A pale
-#: paint's sunlit face keeps nearly all its file's chroma, a deep one's 0.6-0.7 (the Pioneer's 0.74): with the gain
-#: constant over paints, the reference look's frames of twelve random robots read a saturation of 0.8-1.4 times the
-#: Pioneer's, some at the cap (SATURATION_RANGE), and through a washed-out look such a robot's was undone by far less
-#: than the Pioneer's. Fitted on the telephoto training frames of those robots and the Pioneer
+#: paint's sunlit face keeps nearly all its file's chroma, a deep one's 0.6-0.7 (the Pioneer's 0.74): a gain
+#: constant over paints reads the reference look's frames of twelve random robots at 0.8-1.4 times the Pioneer's
+#: saturation, some at the cap (SATURATION_RANGE), and undoes a washed-out look of such a robot by far less than the
+#: same look of the Pioneer. Fitted on the telephoto training frames of those robots and the Pioneer
 #: (``benchmarks/bench_reference_chroma.py``; BENCHMARKS.md, "What the reference look makes of a body's paint"): the
 #: spread of their log readings about the Pioneer's 0.24 -> 0.10, on the development robots 0.20 -> 0.17.
 REFERENCE_PAINT_BGR, REFERENCE_CHROMA_POWER = (40, 40, 150), 0.65
