@@ -218,7 +218,8 @@ def evolve(optimiser: AskTell, state: Any, evaluator: Evaluator, *,
            hint_source: Callable[[], np.ndarray | None] | None = None,
            on_generation: Callable[[Any], None] | None = None, deadline: float | None = None,
            elapsed_before: float = 0.0, until_generation: int | None = None, time_budget: float | None = None,
-           rng: np.random.Generator | None = None, clock: Callable[[], float] = time.perf_counter) -> Run:
+           rng: np.random.Generator | None = None, clock: Callable[[], float] = time.perf_counter,
+           pause: Callable[[Any], bool] | None = None) -> Run:
     """Run generations until the optimiser's ``tell`` gives a stop reason, or until ``deadline``.
 
     Parameters
@@ -248,6 +249,9 @@ def evolve(optimiser: AskTell, state: Any, evaluator: Evaluator, *,
         optimiser holds none), advanced by this run.
     clock : callable () -> float
         The clock ``deadline`` is an instant of, and the run's seconds are measured on (``time.perf_counter``).
+    pause : callable (state) -> bool, optional
+        Also return (unfinished) after a generation whose state this says to pause at (a verdict on the best:
+        :meth:`evopose.search.EvoPose.ready`); resumed, the search goes on as if never paused.
     """
     t0 = clock() - elapsed_before
     # inside a generation, evaluation stops at the search's time budget (a slice's ``deadline`` is a pause between
@@ -273,5 +277,6 @@ def evolve(optimiser: AskTell, state: Any, evaluator: Evaluator, *,
         if on_generation is not None:
             on_generation(state)
         if (told.stop_reason is not None or (deadline is not None and clock() >= deadline)
-                or (until_generation is not None and told.generation >= until_generation)):
+                or (until_generation is not None and told.generation >= until_generation)
+                or (pause is not None and pause(state))):
             return Run(state, told, evaluator, clock() - t0)

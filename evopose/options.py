@@ -62,6 +62,11 @@ class SearchOptions:
         (:meth:`evopose.search.EvoPose.settled`): at least ``settled_starts`` starts (times the same factor), the
         best basin's match close and reached from ``settled_supporters`` independent starts, and the best unimproved
         since ``1 / settled_ratio`` of the starts. 0 supporters: never.
+    judged_supporters : int
+        :func:`evopose.solver.solve` judges its best once, the first generation its basin has been reached from this
+        many independent starts (and matches acceptably): a verdict that more starts would not change ends the
+        search there ("judged": :func:`evopose.solver.settles_search`), any other lets it run on by the rules above.
+        0: never (a search in slices, :mod:`evopose.cooperative`, is never paused).
     patience : int
         Stop ("stalled") when the best has not improved for this many generations after ``min_starts``.
     min_generations : int
@@ -105,6 +110,7 @@ class SearchOptions:
     settled_starts: int = 128
     settled_supporters: int = 5
     settled_ratio: float = 2.0
+    judged_supporters: int = 3
     patience: int = 6
     min_generations: int = 1
     view_reject: float | None = 0.8

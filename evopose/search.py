@@ -78,6 +78,8 @@ class EvoPoseState:
         Starts told when the best fitness last dropped (:meth:`EvoPose.settled`).
     best_match : Match
         How well the best individual matches (judged when it changed; unknown before).
+    judged : bool
+        The search's best was judged (:meth:`EvoPose.ready`, once a search) and the search went on.
     """
 
     population: np.ndarray
@@ -94,6 +96,7 @@ class EvoPoseState:
     improved_at: int = 0
     improved_starts: int = 0
     best_match: Match = Match()
+    judged: bool = False
 
     def __post_init__(self) -> None:
         for name in ("population", "fitness", "origin", "pending_hints", "pending_initial"):
@@ -388,6 +391,17 @@ class EvoPose:
                     and o.is_close(state.best_match) and o.is_acceptable(state.best_match)
                     and state.starts >= o.settled_starts * self.start_factor
                     and state.starts >= o.settled_ratio * state.improved_starts)
+
+    def ready(self, state: EvoPoseState) -> bool:
+        """Whether the best is ready for a verdict (:func:`evopose.solver.solve` pauses the search for one): its
+        basin reached from ``judged_supporters`` independent starts and matching acceptably, not judged before."""
+        o = self.options
+        return bool(o.judged_supporters and not state.judged and state.generation >= o.min_generations
+                    and len(state.best_supporters) >= o.judged_supporters and o.is_acceptable(state.best_match))
+
+    def judged(self, state: EvoPoseState) -> EvoPoseState:
+        """The state of a search whose best was judged and that goes on (:meth:`ready` is not asked again)."""
+        return replace(state, judged=True)
 
     def _basin_matrix(self, pop: np.ndarray, R_all: np.ndarray) -> np.ndarray:
         """Which poses of ``pop`` (K, 6) share a basin, pairwise, shape (K, K) (rotations ``R_all`` (K, 3, 3)):
