@@ -62,11 +62,13 @@ class SearchOptions:
         (:meth:`evopose.search.EvoPose.settled`): at least ``settled_starts`` starts (times the same factor), the
         best basin's match close and reached from ``settled_supporters`` independent starts, and the best unimproved
         since ``1 / settled_ratio`` of the starts. 0 supporters: never.
-    judged_supporters : int
-        :func:`evopose.solver.solve` judges its best once, the first generation its basin has been reached from this
-        many independent starts (and matches acceptably): a verdict that more starts would not change ends the
-        search there ("judged": :func:`evopose.solver.settles_search`), any other lets it run on by the rules above.
-        0: never (a search in slices, :mod:`evopose.cooperative`, is never paused).
+    judged_supporters, judged_starts : int
+        :func:`evopose.solver.solve` judges its best once, the first generation its basin has been reached from
+        ``judged_supporters`` independent starts (and matches acceptably) while at most ``judged_starts`` were made (a
+        common basin: the first two generations' 96 + 51): a confident verdict ends the search there ("judged":
+        :func:`evopose.solver.settles_search`), any other lets it run on by the rules above. A rarer best is judged
+        only where the rules stop: a verdict weighs the rivals the search has found, and a rugged landscape hides
+        them longer. 0 supporters: never (a search in slices, :mod:`evopose.cooperative`, is never paused).
     patience : int
         Stop ("stalled") when the best has not improved for this many generations after ``min_starts``.
     min_generations : int
@@ -111,6 +113,7 @@ class SearchOptions:
     settled_supporters: int = 5
     settled_ratio: float = 2.0
     judged_supporters: int = 3
+    judged_starts: int = 150
     patience: int = 6
     min_generations: int = 1
     view_reject: float | None = 0.8

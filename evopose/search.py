@@ -394,10 +394,12 @@ class EvoPose:
 
     def ready(self, state: EvoPoseState) -> bool:
         """Whether the best is ready for a verdict (:func:`evopose.solver.solve` pauses the search for one): its
-        basin reached from ``judged_supporters`` independent starts and matching acceptably, not judged before."""
+        basin reached from ``judged_supporters`` independent starts among at most ``judged_starts`` (a common basin)
+        and matching acceptably, not judged before."""
         o = self.options
         return bool(o.judged_supporters and not state.judged and state.generation >= o.min_generations
-                    and len(state.best_supporters) >= o.judged_supporters and o.is_acceptable(state.best_match))
+                    and state.starts <= o.judged_starts and len(state.best_supporters) >= o.judged_supporters
+                    and o.is_acceptable(state.best_match))
 
     def judged(self, state: EvoPoseState) -> EvoPoseState:
         """The state of a search whose best was judged and that goes on (:meth:`ready` is not asked again)."""

@@ -25,8 +25,8 @@ from .problem import PoseProblem, View
 from .refine import TRACK_HARD_SCHEDULE, TRACK_SCHEDULE, annealing, refine
 from .robust_fit import robust_fit
 from .search import EvoPose
-from .trust import (MAX_CONFIDENT_ROTATION_SIGMA, OWN_REASONS, Confidence, assess, checked_in_time, converged,
-                    imprecise, track_confidence)
+from .trust import (MAX_CONFIDENT_ROTATION_SIGMA, Confidence, assess, checked_in_time, converged, imprecise,
+                    track_confidence)
 from .uncertainty import TrackReference, rotation_sigma
 from .weights import rule_weights
 
@@ -154,42 +154,34 @@ def solve(problem: PoseProblem, options: SearchOptions | None = None,
     options = options or SearchOptions()
     evo = EvoPose(problem, options)
     state, evaluator, rng = evo.start(initial), Evaluator.for_search(problem, options), _rng(seed)
-    while True:  # paused once for a verdict on a best reached from a few starts (EvoPose.ready): it may end the search
+    while True:  # paused once for a verdict on a common best basin (EvoPose.ready): it may end the search
         run = evolve(evo, state, evaluator, hint_source=hint_source, on_generation=on_generation, rng=rng,
                      time_budget=options.time_budget, elapsed_before=time.perf_counter() - t0, pause=evo.ready)
         if run.finished:
             return solution_of(problem, options, run, time.perf_counter() - t0)
         judged = solution_of(problem, options, run, time.perf_counter() - t0, stop_reason="judged")
-        if settles_search(judged, options.is_close(run.state.best_match)):
+        if settles_search(judged):
             return judged
         state, evaluator = evo.judged(run.state), run.evaluator
 
 
-def settles_search(judged: Solution, close: bool) -> bool:
-    """Whether the verdict ``judged`` on a search's best, taken once its basin was reached from a few independent
-    starts (:meth:`evopose.search.EvoPose.ready`), ends the search ("judged"):
+def settles_search(judged: Solution) -> bool:
+    """Whether the verdict ``judged`` on a search's best, taken while its basin is a common one (reached from a few of
+    the first starts: :meth:`evopose.search.EvoPose.ready`), ends the search ("judged"): it is confident, and precise
+    where its views can make it so. One weighted view far from a small target knows its range only to a metre
+    whatever the search does; a confident, imprecise pose of two is a floor not yet found (two assignments compete
+    where a later start finds a floor 1 % lower, the covariance a thousandth as wide: tests/test_uncertainty.py's
+    two-camera problem).
 
-    * confident, and precise where its views can make it so: one weighted view far from a small target knows its
-      range only to a metre whatever the search does, but a confident, imprecise pose of two is a floor not yet
-      found (two assignments compete where a later start finds a floor 1 % lower, the covariance a thousandth as
-      wide: tests/test_uncertainty.py's two-camera problem);
-    * or unsure for a reason of the pose's own (:data:`evopose.trust.OWN_REASONS`: its pairs, its fit, its
-      covariance), which more starts change only by finding a better basin, while its match is ``close``
-      (:meth:`evopose.options.SearchOptions.is_close`; a poor match may be a wrong basin, and the rules search on:
-      a box's wrong basin of few matches, reached from 6 and 8 of the first 96 starts, was left for the right one
-      after 7 and 44 generations).
-
-    Anything else lets the search run on by its rules (an ambiguous best: a rival within the margin). Chosen on
-    bench_confidence's problems of seed 101, each search's verdict replayed at every generation: as many answers
-    confident, right, good and accurate as the searches run to their rules, at 0.89 of the CPU time; BENCHMARKS.md,
-    "A search judged once its best is reached from three starts"."""
+    An unsure verdict lets the search run on by its rules, whatever the reason: an ambiguous best (a rival within
+    the margin) may be beaten, and so may one of few matches or a loose fit (the paper's scale and the boxes: a
+    wrong basin reached from 5-7 of the first 96 starts, left for the right one a few generations later). Chosen on
+    bench_confidence's problems of seed 101, each search's verdict replayed at every generation (BENCHMARKS.md,
+    "A search judged while its best is a common basin")."""
     confidence = judged.confidence
-    if confidence is None:
+    if confidence is None or not confidence.confident:
         return False
-    if confidence.confident:
-        weighted_views = int(np.count_nonzero(judged.view_weights > 0))
-        return weighted_views < 2 or judged.precise
-    return confidence.reason in OWN_REASONS and close
+    return int(np.count_nonzero(judged.view_weights > 0)) < 2 or judged.precise
 
 
 def published(objective: PoseObjective, basin: np.ndarray, verdict: Confidence) -> tuple[np.ndarray, Confidence]:

@@ -33,15 +33,12 @@ from .covariance import CovarianceEstimate, covariance, deviation, mutual_matche
 from .fitness import POINT_NOISE_PX, PoseObjective
 from .uncertainty import TrackReference, mahalanobis, rotation_sigma, same_image, shared_pairs, sum_of_squares
 
-__all__ = ["CONFIRM_SIGMAS", "GOOD_REASONS", "MAX_CONFIDENT_ROTATION_SIGMA", "OWN_REASONS", "Confidence",
+__all__ = ["CONFIRM_SIGMAS", "GOOD_REASONS", "MAX_CONFIDENT_ROTATION_SIGMA", "Confidence",
            "ConfidenceRules", "Judged", "Published", "Standing", "Trust", "TrustLevel", "assess", "confirms", "converged",
            "imprecise", "checked_in_time", "judge", "settled", "track_confidence"]
 
 #: Stop reasons of a search that mean "the pose is good" (as opposed to a budget running out).
 GOOD_REASONS = ("good_fitness", "consensus", "stalled", "judged")
-#: Why a pose is not confident that is the pose's own (its pairs, its fit, its covariance), not a rival's: a search's
-#: further starts change it only by finding a better basin (:func:`evopose.solver.settles_search`).
-OWN_REASONS = ("no covariance", "few matches", "unmatched marks", "loose fit", "unbounded rotation")
 #: A confirming search's confident pose within this many sigmas (its covariance) of the tracked one confirms it.
 CONFIRM_SIGMAS = 4.0
 #: No pose is confident whose published covariance (:func:`evopose.solver.published`) leaves its rotation unknown
