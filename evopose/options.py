@@ -68,7 +68,8 @@ class SearchOptions:
         common basin: the first two generations' 96 + 51): a confident verdict ends the search there ("judged":
         :func:`evopose.solver.settles_search`), any other lets it run on by the rules above. A rarer best is judged
         only where the rules stop: a verdict weighs the rivals the search has found, and a rugged landscape hides
-        them longer. 0 supporters: never (a search in slices, :mod:`evopose.cooperative`, is never paused).
+        them longer. 0 supporters, or ``consensus`` 0: never (a search in slices, :mod:`evopose.cooperative`, is never
+        paused).
     patience : int
         Stop ("stalled") when the best has not improved for this many generations after ``min_starts``.
     min_generations : int

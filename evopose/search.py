@@ -397,7 +397,8 @@ class EvoPose:
         basin reached from ``judged_supporters`` independent starts among at most ``judged_starts`` (a common basin)
         and matching acceptably, not judged before."""
         o = self.options
-        return bool(o.judged_supporters and not state.judged and state.generation >= o.min_generations
+        return bool(o.consensus and o.judged_supporters  # a consensus stop: never when ``consensus`` is 0
+                    and not state.judged and state.generation >= o.min_generations
                     and state.starts <= o.judged_starts and len(state.best_supporters) >= o.judged_supporters
                     and o.is_acceptable(state.best_match))
 

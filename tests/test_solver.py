@@ -156,6 +156,42 @@ def test_a_settled_search_stops_before_min_starts_and_only_when_settled():
     assert fast.confident == full.confident
 
 
+def test_a_search_is_judged_once_while_its_best_is_a_common_basin():
+    """EvoPose.ready: the best basin reached from ``judged_supporters`` starts among at most ``judged_starts``,
+    matching acceptably, never twice, and never when the pause or the consensus stops are off."""
+    sp = make_problem("box", np.random.default_rng(31), noise=1.0, clutter=0.2, missing=0.1)
+    evo = EvoPose(sp.problem, SearchOptions())
+    o = evo.options
+    ready = EvoPoseState(population=np.zeros((1, 6)), fitness=np.zeros(1), origin=np.zeros(1, int), generation=1,
+                         starts=96, best_supporters=frozenset(range(o.judged_supporters)), best_match=Match(0.4, 0.3))
+    assert evo.ready(ready)
+    for not_ready in (replace(ready, best_supporters=frozenset(range(o.judged_supporters - 1))),
+                      replace(ready, starts=o.judged_starts + 1),  # a rarer basin: judged where the rules stop
+                      replace(ready, best_match=Match(0.6, 0.6)),  # not acceptable
+                      evo.judged(ready)):  # judged before
+        assert not evo.ready(not_ready)
+    for never in (SearchOptions(judged_supporters=0), SearchOptions(consensus=0)):
+        assert not EvoPose(sp.problem, never).ready(ready)
+
+
+@pytest.mark.parametrize("seed, ends", [(53, True), (44, False)])
+def test_a_confident_verdict_on_a_common_basin_ends_the_search_and_an_unsure_one_changes_nothing(seed, ends):
+    """solve pauses once for a verdict on a common best basin: a confident one ends the search there, on the pose the
+    search run to its stop rules publishes; an unsure one (few matches) lets it run on exactly as without the pause."""
+    sp = make_problem("box", np.random.default_rng(seed), noise=1.0, clutter=0.2, missing=0.1)
+    judged, full = solve(sp.problem, seed=0), solve(sp.problem, SearchOptions(judged_supporters=0), seed=0)
+    if ends:
+        assert judged.stop_reason == "judged" and judged.confident and judged.converged and full.confident
+        assert judged.generations == 1 < full.generations and judged.evaluations < full.evaluations / 2
+        np.testing.assert_allclose(judged.pose, full.pose, atol=1e-5)
+        _assert_solved(sp, judged)
+    else:
+        assert not judged.confident and judged.confidence.reason == "few matches"
+        assert (judged.stop_reason, judged.generations, judged.history) == (full.stop_reason, full.generations,
+                                                                            full.history)
+        np.testing.assert_array_equal(judged.pose, full.pose)
+
+
 def test_ask_tell_state_is_immutable():
     """Only EvoPose makes states, and every call returns a new one: the old state stays as it was."""
     sp = make_problem("box", np.random.default_rng(12), noise=1.0, clutter=0.1, missing=0.0)
