@@ -62,8 +62,8 @@ class Solution:
         columns of every refinement step): the budget to compare with other optimisers.
     seconds : float
     converged : bool
-        The search stopped because it judged the pose good (consensus, stall or threshold, not a budget running
-        out), its match is good and no distinct pose it found fits about as well (runner-up margin at least
+        The search stopped because it judged the pose good (consensus, stall, threshold or a confident verdict on a
+        common basin, not a budget running out), its match is good and no distinct pose it found fits about as well (runner-up margin at least
         :attr:`evopose.trust.ConfidenceRules.converged_margin`). For :func:`track`: the fit held.
         Unlike ``confident``, a statement about the search, not calibrated against the truth.
     stop_reason : str
