@@ -159,8 +159,8 @@ def solve(problem: PoseProblem, options: SearchOptions | None = None,
                      time_budget=options.time_budget, elapsed_before=time.perf_counter() - t0, pause=evo.ready)
         if run.finished:
             return solution_of(problem, options, run, time.perf_counter() - t0)
-        judged = solution_of(problem, options, run, time.perf_counter() - t0, stop_reason="judged")
-        if settles_search(judged):
+        judged = solution_of(problem, options, run, time.perf_counter() - t0, stop_reason="judged", confident_only=True)
+        if judged is not None and settles_search(judged):
             return judged
         state, evaluator = evo.judged(run.state), run.evaluator
 
@@ -203,10 +203,12 @@ def published(objective: PoseObjective, basin: np.ndarray, verdict: Confidence) 
 
 
 def solution_of(problem: PoseProblem, options: SearchOptions, run: Run, seconds: float,
-                stop_reason: str | None = None) -> Solution:
+                stop_reason: str | None = None, *, confident_only: bool = False) -> Solution | None:
     """The :class:`Solution` of a global search's run (:func:`evopose.loop.evolve` of :class:`EvoPose`): its best
     pose polished; ``converged`` only when the run stopped for a good reason (an unfinished run, stopped at a
-    deadline, is not converged). ``stop_reason``: the run's own when None (a paused run's verdict: "judged")."""
+    deadline, is not converged). ``stop_reason``: the run's own when None (a paused run's verdict: "judged").
+    ``confident_only``: None when the verdict is unsure before the published pose is fitted (that fit and its
+    covariance only ever take confidence away: a paused search that runs on needs neither)."""
     t0 = time.perf_counter()
     stop_reason = stop_reason or run.told.stop_reason
     state, objective = run.state, run.evaluator.objective
@@ -231,6 +233,8 @@ def solution_of(problem: PoseProblem, options: SearchOptions, run: Run, seconds:
     confidence = assess(objective, pose, rivals, options.confidence,
                         matches_on=objective.with_weights(objective.base_weights))
     confidence = checked_in_time(confidence, checked)  # the other basins not polished in time: not sure
+    if confident_only and not confidence.confident:
+        return None
     if options.refine_steps and in_time:
         pose, confidence = published(objective, pose, confidence)
         fitness = float(objective(pose[None])[0])

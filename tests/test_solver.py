@@ -236,8 +236,9 @@ def test_a_user_written_ask_tell_loop_reaches_solve_s_result(kind, seed, n_views
                                       evaluations=evaluator.evaluations)
         stop_reason = told.stop_reason
         if stop_reason is None and evo.ready(state):  # solve's one verdict on a common best basin
-            judged = solution_of(sp.problem, options, Run(state, told, evaluator, 0.0), 0.0, stop_reason="judged")
-            stop_reason = "judged" if settles_search(judged) else None
+            judged = solution_of(sp.problem, options, Run(state, told, evaluator, 0.0), 0.0, stop_reason="judged",
+                                 confident_only=True)
+            stop_reason = "judged" if judged is not None and settles_search(judged) else None
             state = evo.judged(state)
     pose, fit = refine(evaluator.objective, state.best_pose[None], [state.best_fitness], POLISH_SCHEDULE)
     pose = robust_pose(evaluator.objective, pose[0])[None]  # the published pose: false points within tau let go
