@@ -1,7 +1,7 @@
 """What the compiled kernels are, without compiling anything: their constants and the types they are called with.
 
 The kernels (:mod:`evopose.projection`, :mod:`evopose.kernels`, :mod:`evopose.refine_kernel`,
-:mod:`evopose.align_kernel`) are numba functions;
+:mod:`evopose.align_kernel`, :mod:`evopose.robust_kernel`) are numba functions;
 an agent runs them from a module compiled ahead of time (:mod:`evopose.kernel_build`) when one is built and current,
 else through numba's JIT, and :mod:`evopose.kernel_backend` makes that choice (docs/design.md §2, "Compiled kernels").
 This module holds what both sides share and imports neither numba nor a kernel, so that the choice costs nothing:
@@ -46,6 +46,9 @@ EXPORTS: dict[str, tuple[str, str, tuple[str, ...]]] = {
     "nearest_sorted": ("evopose.kernels", f"Tuple(({_F1}, {_I1}, {_B1}))", (_F2, _F2, _I1, "b1")),
     "align_positions": ("evopose.align_kernel", "none",
                         (_F2, _F2, _F2, "b1", _F1, _F2, _F2, _F1, _F2, _F1, "i8")),
+    "robust_irls": ("evopose.robust_kernel", "i8",
+                    (_F1, _F1, _F1, _B1, _B1, _F2, _F2, "b1", _F2, _F3, _F1, _F1, _F2, _F1, _F2, _I1, _F1, "b1", "i8",
+                     "f8", "f8")),
     "refine_population": ("evopose.refine_kernel", "none",
                           (_F2, _F1, _F1, _F1, _B1, _B1, _F2, _F2, "b1", _F2, _F3, _F1, _F1, _F2, _F2, _F1, _F2, _I1,
                            "i8", _I1, _F1, "f8", "f8")),
@@ -63,9 +66,10 @@ WRITTEN: dict[str, tuple[int, ...]] = {
     "align_positions": (0,),
     "nearest_row": (8, 9, 10, 11),
     "refine_population": (0, 1),
+    "robust_irls": (0,),
 }
 
 #: The project's files whose text is the compiled code (relative to the repository root), this one included: its
 #: constants are compiled in. A built module carries a key made from them (:func:`evopose.kernel_backend.build_key`).
 SOURCES = ("geometry/__init__.py", "evopose/kernel_abi.py", "evopose/kernel_build.py", "evopose/projection.py",
-           "evopose/kernels.py", "evopose/refine_kernel.py", "evopose/align_kernel.py")
+           "evopose/kernels.py", "evopose/refine_kernel.py", "evopose/align_kernel.py", "evopose/robust_kernel.py")

@@ -153,6 +153,7 @@ chamfer_matches = _kernel("chamfer_matches")
 nearest_row = _kernel("nearest_row")
 nearest_sorted = _kernel("nearest_sorted")
 refine_population = _kernel("refine_population")
+robust_irls = _kernel("robust_irls")
 align_positions = _kernel("align_positions")
 
 __all__ = ["BACKEND", "build_key", "call", "implementation", "load_aot", "load_jit", "machine", *EXPORTS]

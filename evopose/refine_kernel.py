@@ -120,7 +120,7 @@ def _add_pair(u, v, J, m, qx, qy, w, H, g):  # pragma: no cover - compiled
 
 
 @nb.njit(cache=True, fastmath=_FASTMATH, nogil=True)
-def _to_bounds(s, lo, hi, periodic):  # pragma: no cover - compiled
+def to_bounds(s, lo, hi, periodic):  # pragma: no cover - compiled
     """As :meth:`evopose.problem.Bounds.project` for one pose."""
     for d in range(6):
         if d >= 3:  # angles: the turn nearest the middle of the box
@@ -147,7 +147,7 @@ def fitness_one(s, model, normals, use_normals, intr, cfw, weights, taus, pts, p
 
 
 @nb.njit(cache=True, fastmath=_FASTMATH, nogil=True)
-def _solve_in_place(A, rhs):  # pragma: no cover - compiled
+def solve_in_place(A, rhs):  # pragma: no cover - compiled
     """x with A x = rhs for a small square A (n, n), by Gaussian elimination with partial pivoting, as LAPACK's
     gesv; A and rhs are overwritten, rhs becomes x. A zero pivot gives 0 for its unknown. Written out, not
     np.linalg.solve: numba's solve loads LAPACK through scipy.linalg at its first call (~130 ms and ~85 modules per
@@ -206,7 +206,7 @@ def _bounded_step(H, g, s, lo, hi, periodic, step_free, lam, A, clamp):  # pragm
                         rhs[i] -= H[i, j] * clamp[j]
             else:
                 A[i, i] = 1.0
-        solved = _solve_in_place(A, rhs)
+        solved = solve_in_place(A, rhs)
         again = False
         for d in range(6):
             if held[d]:
@@ -299,7 +299,7 @@ def refine_population(poses, fitness, lo, hi, periodic, free, model, normals, us
             delta = _bounded_step(H, g, s, lo, hi, periodic, step_free, lam, A, clamp)
             for d in range(6):
                 s_try[d] = s[d] + delta[d]
-            _to_bounds(s_try, lo, hi, periodic)
+            to_bounds(s_try, lo, hi, periodic)
             if kinds[step] != 1:
                 for d in range(6):
                     s[d] = s_try[d]

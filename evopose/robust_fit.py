@@ -26,17 +26,19 @@ matching (:func:`evopose.covariance.mutual_matches`, re-matched at every step as
    and loses precision on clean points; least squares does not.
 
 Each stage takes Gauss-Newton steps on the free parameters (eq. (3): fixed ones never move), projected back into
-the search box, each taken only when it lowers the stage's loss with the pairs matched anew (:func:`robust_cost`;
-else half the step, a quarter, or the stage stops). It is a local step: it keeps the basin the search found
-(:func:`evopose.solver.published`).
+the search box, each taken only when it lowers the stage's loss with the pairs matched anew (the loss summed over the
+pairs, plus its ceiling for each visible mark without one, per view times its eq. (4) weight; else half the step, a
+quarter, or the stage stops): compiled, :func:`evopose.robust_kernel.robust_irls`. It is a local step: it keeps the
+basin the search found (:func:`evopose.solver.published`).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from .covariance import Matches, mutual_matches, projection_jacobian
+from .covariance import Matches, mutual_matches
 from .fitness import PoseObjective
+from .kernel_backend import robust_irls
 
 #: Tukey's cut-off in residual sigmas: a pair 3 sigma from its mark no longer weighs.
 TUKEY_C = 3.0
@@ -53,12 +55,6 @@ MAX_ITERATIONS, SETTLED_STEP = 10, 1e-6
 SETTLED_WHOLE_STEP = 1e-4
 
 
-def tukey_weights(distance: np.ndarray, cutoff: float) -> np.ndarray:
-    """Tukey's biweight of residual distances ``distance`` (m,) pixels at cut-off ``cutoff`` pixels, (m,)."""
-    d = np.asarray(distance, float) / cutoff
-    return np.where(d < 1.0, (1.0 - d * d) ** 2, 0.0)
-
-
 def residual_scale(distance: np.ndarray, n_free: float = 0, floor: float = MIN_SCALE_PX) -> float:
     """Per-axis sigma (pixels) of pairs whose residual distances are ``distance`` (m,) at a pose fitted to them
     over ``n_free`` parameters: the median radius over that of a 2-D Gaussian, times ``sqrt(2m / (2m - n_free))``
@@ -67,19 +63,6 @@ def residual_scale(distance: np.ndarray, n_free: float = 0, floor: float = MIN_S
     if 2 * m <= n_free:
         return floor
     return max(float(np.median(distance)) / MEDIAN_RADIUS_PER_SIGMA * np.sqrt(2 * m / (2 * m - n_free)), floor)
-
-
-def loss_and_weight(distance: np.ndarray, cutoff: float, kind: str) -> tuple[np.ndarray, np.ndarray]:
-    """Per pair (``distance`` (m,) pixels) the loss ``rho`` and the IRLS weight ``rho'(d) / d`` at ``cutoff``
-    pixels, both (m,). ``kind`` "tukey": the biweight, ``rho = c^2 / 6 (1 - (1 - (d / c)^2)^3)`` up to
-    ``c^2 / 6``; "trimmed": ``d^2 / 2`` up to ``c^2 / 2`` (least squares on the pairs within ``c``)."""
-    d = np.asarray(distance, float)
-    if kind == "tukey":
-        weight = tukey_weights(d, cutoff)
-        u = np.minimum(d / cutoff, 1.0)
-        return cutoff ** 2 / 6.0 * (1.0 - (1.0 - u * u) ** 3), weight
-    inside = d < cutoff
-    return np.where(inside, 0.5 * d * d, 0.5 * cutoff ** 2), inside.astype(float)
 
 
 def cutoff_sigmas(dof: float) -> float:
@@ -116,64 +99,6 @@ def view_cutoffs(matches: Matches, n_free: int, taus: np.ndarray | None = None) 
     return cutoffs if taus is None else np.minimum(cutoffs, np.asarray(taus, float))
 
 
-def robust_cost(matches: Matches, cutoffs: np.ndarray, kind: str) -> float:
-    """The loss (:func:`loss_and_weight`, view ``k`` at ``cutoffs[k]``) summed over a pose's mutual pairs
-    ``matches``, plus the loss's ceiling for each visible mark without a pair (a pose does not gain by leaving the
-    marks), per view times its eq. (4) weight."""
-    distance = np.linalg.norm(matches.residuals, axis=1)
-    total = 0.0
-    for k, w in enumerate(matches.weights):
-        mine = matches.view == k
-        rho = loss_and_weight(distance[mine], cutoffs[k], kind)[0]
-        ceiling = float(loss_and_weight(np.array([np.inf]), cutoffs[k], kind)[0][0])
-        total += w * (float(rho.sum()) + ceiling * (matches.n_visible[k] - int(mine.sum())))
-    return total
-
-
-def _reweighted(objective: PoseObjective, pose: np.ndarray, matches: Matches, kind: str, cutoffs: np.ndarray,
-                iterations: int) -> tuple[np.ndarray, Matches]:
-    """IRLS of ``kind`` at ``cutoffs`` (V,) pixels from ``pose`` (6,) and its pairs ``matches``: Gauss-Newton steps
-    on the free parameters, re-matched each time, each taken (or its half, or its quarter) only when it lowers
-    :func:`robust_cost`. Returns the pose and its pairs."""
-    bounds = objective.problem.bounds
-    free = bounds.free
-    n_free = int(np.count_nonzero(free))
-    current = np.asarray(pose, float).reshape(6).copy()
-    cost = robust_cost(matches, cutoffs, kind)
-    for _ in range(iterations):
-        distance = np.linalg.norm(matches.residuals, axis=1)
-        weight = np.zeros(len(distance))
-        for k in range(len(cutoffs)):
-            mine = matches.view == k
-            weight[mine] = loss_and_weight(distance[mine], cutoffs[k], kind)[1] * matches.weights[k]
-        if 2 * int(np.count_nonzero(weight > 0)) < n_free:
-            break
-        jac = projection_jacobian(objective, current, matches)[:, :, free]          # (m, 2, n_free)
-        normal = np.einsum("m,mai,maj->ij", weight, jac, jac)
-        gradient = np.einsum("m,mai,ma->i", weight, jac, matches.residuals)
-        try:
-            step = -np.linalg.solve(normal + 1e-9 * np.trace(normal) / n_free * np.eye(n_free), gradient)
-        except np.linalg.LinAlgError:
-            break
-        if not np.all(np.isfinite(step)):
-            break
-        for fraction in (1.0, 0.5, 0.25):
-            moved = current.copy()
-            moved[free] += fraction * step
-            moved = bounds.project(moved)
-            moved_matches = mutual_matches(objective, moved)
-            moved_cost = robust_cost(moved_matches, cutoffs, kind)
-            if moved_cost <= cost:
-                break
-        else:
-            break
-        current, matches, cost = moved, moved_matches, moved_cost
-        moved_by = float(np.max(np.abs(fraction * step)))
-        if moved_by < SETTLED_STEP or (fraction == 1.0 and moved_by < SETTLED_WHOLE_STEP):
-            break
-    return current, matches
-
-
 def robust_fit(objective: PoseObjective, pose: np.ndarray,
                iterations: int = MAX_ITERATIONS) -> tuple[np.ndarray, Matches]:
     """The pose (6,) near ``pose`` (6,) fitted to its mutual pairs under ``objective`` (its views, eq. (4)
@@ -190,8 +115,27 @@ def robust_fit(objective: PoseObjective, pose: np.ndarray,
     # longer weighs, more with few pairs: cutoff_sigmas); at the pose it settles on, the true pairs agree more
     # tightly, and least squares keeps those within the cut-off of their new scale
     taus = objective.taus
-    core, matches = _reweighted(objective, start, matches, "tukey", view_cutoffs(matches, n_free, taus), iterations)
-    return _reweighted(objective, core, matches, "trimmed", view_cutoffs(matches, n_free, taus), iterations)
+    core = _irls(objective, start, matches, True, view_cutoffs(matches, n_free, taus), iterations)
+    matches = mutual_matches(objective, core)
+    fitted = _irls(objective, core, matches, False, view_cutoffs(matches, n_free, taus), iterations)
+    return fitted, mutual_matches(objective, fitted)
+
+
+def _irls(objective: PoseObjective, pose: np.ndarray, matches: Matches, tukey: bool, cutoffs: np.ndarray,
+          iterations: int) -> np.ndarray:
+    """One stage of IRLS (the biweight with ``tukey``, else the trimmed square) at ``cutoffs`` (V,) pixels from
+    ``pose`` (6,), whose pairs ``matches`` give eq. (4)'s normalised view weights: the compiled
+    :func:`evopose.robust_kernel.robust_irls`. Returns the pose (6,)."""
+    bounds, packed = objective.problem.bounds, objective.packed
+    fitted = np.array(pose, dtype=float).reshape(6)
+    taken = robust_irls(fitted, bounds.lo, bounds.hi, bounds.periodic, bounds.free, packed.model, packed.normals,
+                        packed.use_normals, packed.intr, packed.cfw, np.array(matches.weights, dtype=float),
+                        np.array(objective.taus, dtype=float), packed.pts, packed.pz, packed.mz, packed.offsets,
+                        np.array(cutoffs, dtype=float), tukey, iterations, SETTLED_STEP, SETTLED_WHOLE_STEP)
+    # per weighted view, the first matching and each step's pose, Jacobian (counted as the 12 probes of the central
+    # differences it replaced, so that budgets compare across versions) and its try re-matched
+    objective.counter.add(int(np.count_nonzero(matches.weights > 0)) * (14 * int(taken) + 1))
+    return fitted
 
 
 def robust_pose(objective: PoseObjective, pose: np.ndarray, iterations: int = MAX_ITERATIONS) -> np.ndarray:
@@ -199,5 +143,4 @@ def robust_pose(objective: PoseObjective, pose: np.ndarray, iterations: int = MA
     return robust_fit(objective, pose, iterations)[0]
 
 
-__all__ = ["MIN_SCALE_PX", "TUKEY_C", "cutoff_sigmas", "loss_and_weight", "residual_scale", "robust_cost",
-           "robust_fit", "robust_pose", "tukey_weights", "view_cutoffs"]
+__all__ = ["MIN_SCALE_PX", "TUKEY_C", "cutoff_sigmas", "residual_scale", "robust_fit", "robust_pose", "view_cutoffs"]

@@ -245,9 +245,9 @@ def test_the_refinements_own_solve_matches_lapack_and_gives_a_zero_for_a_zero_pi
     """The damped Gauss-Newton step's 6 x 6 solve (written out in the kernel: numba's np.linalg.solve loads LAPACK
     through scipy.linalg) gives LAPACK's answer on the systems a step meets: a damped normal matrix, rows of held
     parameters set to the identity, a badly scaled one (metres against radians); a zero pivot gives 0, not NaN."""
-    from evopose.refine_kernel import _solve_in_place
+    from evopose.refine_kernel import solve_in_place
 
-    solve = getattr(_solve_in_place, "py_func", _solve_in_place)   # the code the kernel compiles, run as Python
+    solve = getattr(solve_in_place, "py_func", solve_in_place)   # the code the kernel compiles, run as Python
     rng = np.random.default_rng(3)
     for case in range(200):
         J = rng.normal(size=(40, 6)) * np.array([1.0, 1.0, 1e-2, 50.0, 50.0, 50.0])   # position and angle scales

@@ -11,7 +11,8 @@ from benchmarks.problems import make_problem, pose_errors
 from evopose.fitness import PoseObjective
 from evopose.problem import PoseProblem
 from evopose.refine import refine
-from evopose.robust_fit import residual_scale, robust_pose, tukey_weights
+from evopose.robust_fit import residual_scale, robust_pose
+from evopose.robust_kernel import loss_and_weight
 from evopose.solver import POLISH_SCHEDULE
 
 
@@ -100,9 +101,14 @@ def test_a_pose_with_too_few_pairs_is_returned_as_it_was():
 
 def test_the_biweight_and_the_scale():
     d = np.array([0.0, 0.5, 1.0, 1.5, 3.0])
-    w = tukey_weights(d, 1.5)
+    biweight = getattr(loss_and_weight, "py_func", loss_and_weight)  # the code the kernel compiles, run as Python
+    rho, w = np.array([biweight(x, 1.5, True) for x in d]).T
     np.testing.assert_allclose(w[[0, 3, 4]], [1.0, 0.0, 0.0])
     assert np.all(np.diff(w) <= 0) and 0 < w[2] < w[1] < 1
+    np.testing.assert_allclose(rho[[0, 3, 4]], [0.0, 1.5 ** 2 / 6, 1.5 ** 2 / 6])  # the loss stops at its ceiling
+    trimmed = np.array([getattr(loss_and_weight, "py_func", loss_and_weight)(x, 1.5, False) for x in d])
+    np.testing.assert_allclose(trimmed[:, 1], [1.0, 1.0, 1.0, 0.0, 0.0])
+    np.testing.assert_allclose(trimmed[:, 0], [0.0, 0.125, 0.5, 1.125, 1.125])
     # a 2-D Gaussian of sigma 1 has median radius sqrt(2 ln 2)
     radii = np.linalg.norm(np.random.default_rng(0).normal(size=(20000, 2)), axis=1)
     assert residual_scale(radii) == pytest.approx(1.0, abs=0.02)
@@ -137,13 +143,14 @@ def test_a_whole_step_under_the_settled_bar_ends_a_stage_and_leaves_the_pose_whe
     import evopose.robust_fit as rf
 
     calls = {"n": 0}
-    matched = rf.mutual_matches
+    irls = rf.robust_irls
 
-    def counted(objective, pose):
-        calls["n"] += 1
-        return matched(objective, pose)
+    def counted(*args):   # the steps the compiled stages take (each a re-match of every mark)
+        taken = irls(*args)
+        calls["n"] += int(taken)
+        return taken
 
-    monkeypatch.setattr(rf, "mutual_matches", counted)
+    monkeypatch.setattr(rf, "robust_irls", counted)
     quick, full, quick_calls, full_calls = [], [], 0, 0
     for seed in SEEDS:
         sp, problem = biased_problem(seed)
