@@ -67,6 +67,9 @@ class ViewTerms:
         Whether point ``i`` may be mark ``j`` (the same colour, or untyped).
     area : float
         ``A_k``, pixels^2: the points' bounding box, at least one mark spacing's square per point.
+    offsets : array (P_k, M_k, 2)
+        ``p_i - m_j``, pixels, and ``distance2`` (P_k, M_k) their squares summed: the pose is fixed, so every EM
+        iteration reads them (made once).
     """
 
     marks: np.ndarray
@@ -74,6 +77,8 @@ class ViewTerms:
     points: np.ndarray
     same_label: np.ndarray
     area: float
+    offsets: np.ndarray
+    distance2: np.ndarray
 
 
 def view_terms(objective: PoseObjective, pose: np.ndarray, k: int, free: np.ndarray) -> ViewTerms | None:
@@ -95,14 +100,13 @@ def view_terms(objective: PoseObjective, pose: np.ndarray, k: int, free: np.ndar
     pts = np.asarray(view.points, float)
     extent = np.ptp(pts, axis=0) if len(pts) > 1 else np.zeros(2)
     area = max(float(np.prod(np.maximum(extent, objective.taus[k]))), len(pts) * objective.taus[k] ** 2)
-    return ViewTerms(marks, jac, pts, same, area)
+    offsets = pts[:, None, :] - marks[None, :, :]
+    return ViewTerms(marks, jac, pts, same, area, offsets, np.sum(offsets ** 2, axis=-1))
 
 
 def _responsibilities(t: ViewTerms, sigma2: float, false_share: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``r`` (P_k, M_k) over the marks, ``r0`` (P_k,) for a false point, and ``log L_i`` (P_k,)."""
-    diff = t.points[:, None, :] - t.marks[None, :, :]  # (P, M, 2)
-    d2 = np.sum(diff ** 2, axis=-1)
-    log_mark = np.where(t.same_label, -0.5 * d2 / sigma2, -np.inf) - np.log(2 * np.pi * sigma2) \
+    log_mark = np.where(t.same_label, -0.5 * t.distance2 / sigma2, -np.inf) - np.log(2 * np.pi * sigma2) \
         + np.log((1 - false_share) / t.marks.shape[0])
     log_false = np.full(len(t.points), np.log(false_share / t.area))
     top = np.maximum(log_mark.max(axis=1, initial=-np.inf), log_false)
@@ -150,8 +154,7 @@ def mixture_information(stats: list[tuple], sigma2: float, n_free: int) -> np.nd
     info = np.zeros((n_free, n_free))
     for _, w, t, r, _, _ in stats:
         jtj = np.einsum("mai,maj->mij", t.jacobian, t.jacobian)                     # (M, n, n)
-        diff = t.points[:, None, :] - t.marks[None, :, :]                          # (P, M, 2)
-        g = np.einsum("mai,pma->pmi", t.jacobian, diff) / sigma2                   # (P, M, n)
+        g = np.einsum("mai,pma->pmi", t.jacobian, t.offsets) / sigma2              # (P, M, n)
         complete = np.einsum("pm,mij->ij", r, jtj) / sigma2
         mean = np.einsum("pm,pmi->pi", r, g)                                       # (P, n)
         second = np.einsum("pm,pmi,pmj->ij", r, g, g)
@@ -209,8 +212,7 @@ def mixture_fit(objective: PoseObjective, pose: np.ndarray, sigma: float, shares
         wsum = sum(w * r.sum() for _, w, _, r, _, _ in stats)
         if 2 * wsum <= n_free:
             return None
-        ss = sum(w * np.einsum("pm,pm->", r, np.sum((t.points[:, None] - t.marks[None]) ** 2, axis=-1))
-                 for _, w, t, r, _, _ in stats)
+        ss = sum(w * np.einsum("pm,pm->", r, t.distance2) for _, w, t, r, _, _ in stats)
         new = float(np.clip(ss / (2 * wsum), MIN_SIGMA_PX ** 2, tau2))
         settled = abs(new - sigma2) < SETTLED_RATIO * sigma2
         sigma2 = new
