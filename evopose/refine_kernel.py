@@ -226,6 +226,19 @@ def _bounded_step(H, g, s, lo, hi, periodic, step_free, lam, A, clamp):  # pragm
 
 
 @nb.njit(cache=True, fastmath=_FASTMATH, nogil=True)
+def typed_views(mz, pz, offsets):  # pragma: no cover - compiled
+    """Per view, once: whether its points are typed (:func:`evopose.kernels.is_typed`), bool (V,); and the most image
+    points of one view (at least 1), the size of the per-view scratch arrays."""
+    V = offsets.shape[0] - 1
+    P_max = 1
+    typed = np.empty(V, np.bool_)
+    for k in range(V):
+        P_max = max(P_max, offsets[k + 1] - offsets[k])
+        typed[k] = is_typed(mz[k], pz[offsets[k]:offsets[k + 1]])
+    return typed, P_max
+
+
+@nb.njit(cache=True, fastmath=_FASTMATH, nogil=True)
 def refine_population(poses, fitness, lo, hi, periodic, free, model, normals, use_normals, intr, cfw,
                       weights, taus, sigmas, pts, pz, mz, offsets, mode, kinds, scales, outlier,
                       damping):  # pragma: no cover - compiled
@@ -241,11 +254,7 @@ def refine_population(poses, fitness, lo, hi, periodic, free, model, normals, us
     N = poses.shape[0]
     M = model.shape[0]
     V = intr.shape[0]
-    P_max = 1
-    typed = np.empty(V, np.bool_)  # per view, once: whether its points are typed (kernels.is_typed)
-    for k in range(V):
-        P_max = max(P_max, offsets[k + 1] - offsets[k])
-        typed[k] = is_typed(mz[k], pz[offsets[k]:offsets[k + 1]])
+    typed, P_max = typed_views(mz, pz, offsets)
     u = np.empty(M)
     v = np.empty(M)
     usable = np.empty(M, np.bool_)

@@ -18,9 +18,9 @@ import numba as nb
 import numpy as np
 
 from .kernel_abi import FASTMATH as _FASTMATH
-from .kernels import is_typed, nearest_row
+from .kernels import nearest_row
 from .projection import pose_jacobian, project_pose
-from .refine_kernel import solve_in_place, to_bounds
+from .refine_kernel import solve_in_place, to_bounds, typed_views
 
 
 @nb.njit(cache=True, fastmath=_FASTMATH, nogil=True)
@@ -92,11 +92,7 @@ def robust_irls(s, lo, hi, periodic, free, model, normals, use_normals, intr, cf
     """
     V = intr.shape[0]
     M = model.shape[0]
-    P_max = 1
-    typed = np.empty(V, np.bool_)
-    for k in range(V):
-        P_max = max(P_max, offsets[k + 1] - offsets[k])
-        typed[k] = is_typed(mz[k], pz[offsets[k]:offsets[k + 1]])
+    typed, P_max = typed_views(mz, pz, offsets)
     u = np.empty(M)
     v = np.empty(M)
     usable = np.empty(M, np.bool_)
