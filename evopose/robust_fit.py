@@ -115,14 +115,14 @@ def robust_fit(objective: PoseObjective, pose: np.ndarray,
     # longer weighs, more with few pairs: cutoff_sigmas); at the pose it settles on, the true pairs agree more
     # tightly, and least squares keeps those within the cut-off of their new scale
     taus = objective.taus
-    core = _irls(objective, start, matches, True, view_cutoffs(matches, n_free, taus), iterations)
+    core = irls_stage(objective, start, matches, True, view_cutoffs(matches, n_free, taus), iterations)
     matches = mutual_matches(objective, core)
-    fitted = _irls(objective, core, matches, False, view_cutoffs(matches, n_free, taus), iterations)
+    fitted = irls_stage(objective, core, matches, False, view_cutoffs(matches, n_free, taus), iterations)
     return fitted, mutual_matches(objective, fitted)
 
 
-def _irls(objective: PoseObjective, pose: np.ndarray, matches: Matches, tukey: bool, cutoffs: np.ndarray,
-          iterations: int) -> np.ndarray:
+def irls_stage(objective: PoseObjective, pose: np.ndarray, matches: Matches, tukey: bool, cutoffs: np.ndarray,
+               iterations: int = MAX_ITERATIONS) -> np.ndarray:
     """One stage of IRLS (the biweight with ``tukey``, else the trimmed square) at ``cutoffs`` (V,) pixels from
     ``pose`` (6,), whose pairs ``matches`` give eq. (4)'s normalised view weights: the compiled
     :func:`evopose.robust_kernel.robust_irls`. Returns the pose (6,)."""
@@ -143,4 +143,5 @@ def robust_pose(objective: PoseObjective, pose: np.ndarray, iterations: int = MA
     return robust_fit(objective, pose, iterations)[0]
 
 
-__all__ = ["MIN_SCALE_PX", "TUKEY_C", "cutoff_sigmas", "residual_scale", "robust_fit", "robust_pose", "view_cutoffs"]
+__all__ = ["MIN_SCALE_PX", "TUKEY_C", "cutoff_sigmas", "irls_stage", "residual_scale", "robust_fit", "robust_pose",
+           "view_cutoffs"]
