@@ -121,7 +121,8 @@ def main(argv: list[str] | None = None) -> int:
     todo = [(g, args.seed, i) for g in GROUPS for i in range(args.per_group)]
     with ProcessPoolExecutor(max_workers=args.jobs) as pool:
         records = [r for r in pool.map(one, todo, chunksize=4) if r is not None]
-    command = f"python -m benchmarks.bench_published_fit --per-group {args.per_group} --seed {args.seed} --jobs {args.jobs}"
+    command = (f"python -m benchmarks.bench_published_fit --per-group {args.per_group} --seed {args.seed} "
+               f"--jobs {args.jobs}")
     header = ["group", "problems (confident, right basin, the oracle too)", "oracle: rotation deg / position cm",
               *[f"{name}: rotation / position (x the oracle's)" for name in FITS]]
     body = (f"Command: `{command}` ({provenance()}; {(time.time() - t0) / 60:.1f} min, {args.jobs} processes).\n\n"

@@ -63,8 +63,9 @@ class Solution:
     seconds : float
     converged : bool
         The search stopped because it judged the pose good (consensus, stall, threshold or a confident verdict on a
-        common basin, not a budget running out), its match is good and no distinct pose it found fits about as well (runner-up margin at least
-        :attr:`evopose.trust.ConfidenceRules.converged_margin`). For :func:`track`: the fit held.
+        common basin, not a budget running out), its match is good and no distinct pose it found fits about as well
+        (runner-up margin at least :attr:`evopose.trust.ConfidenceRules.converged_margin`). For :func:`track`: the fit
+        held.
         Unlike ``confident``, a statement about the search, not calibrated against the truth.
     stop_reason : str
     history : list of float

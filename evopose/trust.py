@@ -33,9 +33,9 @@ from .covariance import CovarianceEstimate, covariance, deviation, mutual_matche
 from .fitness import POINT_NOISE_PX, PoseObjective
 from .uncertainty import TrackReference, mahalanobis, rotation_sigma, same_image, shared_pairs, sum_of_squares
 
-__all__ = ["CONFIRM_SIGMAS", "GOOD_REASONS", "MAX_CONFIDENT_ROTATION_SIGMA", "Confidence",
-           "ConfidenceRules", "Judged", "Published", "Standing", "Trust", "TrustLevel", "assess", "confirms", "converged",
-           "imprecise", "checked_in_time", "judge", "settled", "track_confidence"]
+__all__ = ["CONFIRM_SIGMAS", "GOOD_REASONS", "MAX_CONFIDENT_ROTATION_SIGMA", "Confidence", "ConfidenceRules", "Judged",
+           "Published", "Standing", "Trust", "TrustLevel", "assess", "confirms", "converged", "imprecise",
+           "checked_in_time", "judge", "settled", "track_confidence"]
 
 #: Stop reasons of a search that mean "the pose is good" (as opposed to a budget running out).
 GOOD_REASONS = ("good_fitness", "consensus", "stalled", "judged")
