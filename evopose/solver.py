@@ -178,7 +178,7 @@ def settles_search(judged: Solution) -> bool:
     the margin) may be beaten, and so may one of few matches or a loose fit (the paper's scale and the boxes: a
     wrong basin reached from 5-7 of the first 96 starts, left for the right one a few generations later). Chosen on
     bench_confidence's problems of seed 101, each search's verdict replayed at every generation (BENCHMARKS.md,
-    "A search judged while its best is a common basin")."""
+    "When a search may end on a verdict")."""
     confidence = judged.confidence
     if confidence is None or not confidence.confident:
         return False
