@@ -52,6 +52,8 @@ TITLES = {
     "photoreal_fleet_husky_looks": "The fleet on rendered datasets: the second robot at telephoto through three looks, "
                                    "side by side",
     "photoreal_fleet_husky": "The fleet on rendered datasets: the second robot (Husky-like UGV) at telephoto",
+    "photoreal_fleet_rover": "The fleet on rendered datasets: a robot no rule was chosen on (the orange rover)",
+    "photoreal_looks_rover": "Mark front-ends through camera looks: a robot no rule was chosen on (the orange rover)",
     "photoreal_fleet_context": "The fleet on rendered datasets: the telephoto context model as the default, side by "
                                "side",
     "frontend_speed": "Contrast front-end: time per camera image",
